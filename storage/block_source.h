@@ -1,0 +1,46 @@
+// What the block cache needs from a store: a thread-safe way to read one
+// verified block by (epoch, key). The page-file reader implements it; tests
+// implement it in memory.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+namespace octocosm {
+
+using Bytes = std::vector<std::uint8_t>;
+
+// Identifies a block across a whole store: the epoch (one page file each) and
+// the node key (opaque here; index/ gives it meaning).
+struct BlockId {
+  std::uint32_t epoch = 0;
+  std::uint64_t key = 0;
+
+  friend bool operator==(const BlockId&, const BlockId&) = default;
+};
+
+struct BlockIdHash {
+  std::size_t operator()(const BlockId& id) const noexcept {
+    // splitmix64 finaliser over key and epoch: keys are dense Morton codes, so
+    // a plain identity hash would cluster in the low bits.
+    std::uint64_t h = id.key ^ (static_cast<std::uint64_t>(id.epoch) << 58) ^ 0x9e3779b97f4a7c15ull;
+    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+    return static_cast<std::size_t>(h ^ (h >> 31));
+  }
+};
+
+class BlockSource {
+ public:
+  virtual ~BlockSource() = default;
+
+  // Reads one block, verifies it, and returns its bytes. Safe to call from
+  // many threads at once. Throws Error: kNotFound when there is no such block,
+  // kCorruption when the bytes fail verification, kIo when the OS fails.
+  // Corrupt bytes are never returned.
+  virtual Bytes ReadBlock(const BlockId& id) const = 0;
+};
+
+}  // namespace octocosm
