@@ -1,0 +1,254 @@
+#include "storage/block_cache.h"
+
+#include <cassert>
+#include <sstream>
+#include <utility>
+
+#include "storage/error.h"
+
+namespace octocosm {
+
+std::string CacheStats::ToString() const {
+  std::ostringstream out;
+  out << "cache: " << resident_bytes << "/" << capacity_bytes << " B in " << entries
+      << " blocks (pinned " << pinned_bytes << " B in " << pinned_entries << "), hits " << hits
+      << ", misses " << misses << ", reads " << source_reads << " (" << bytes_read << " B, "
+      << read_failures << " failed, " << reads_in_flight << " in flight), inserts " << inserts
+      << ", evictions " << evictions;
+  return out.str();
+}
+
+// ---------------------------------------------------------------------------
+// PinnedBlock
+
+PinnedBlock::PinnedBlock(BlockCache* cache, BlockCache::Entry* entry)
+    : cache_(cache), entry_(entry), bytes_(entry->bytes) {}
+
+PinnedBlock::PinnedBlock(PinnedBlock&& other) noexcept
+    : cache_(std::exchange(other.cache_, nullptr)),
+      entry_(std::exchange(other.entry_, nullptr)),
+      bytes_(std::move(other.bytes_)) {}
+
+PinnedBlock& PinnedBlock::operator=(PinnedBlock&& other) noexcept {
+  if (this != &other) {
+    Release();
+    cache_ = std::exchange(other.cache_, nullptr);
+    entry_ = std::exchange(other.entry_, nullptr);
+    bytes_ = std::move(other.bytes_);
+  }
+  return *this;
+}
+
+PinnedBlock::~PinnedBlock() { Release(); }
+
+const BlockId& PinnedBlock::id() const {
+  // The id of an entry never changes after it is created, so no lock.
+  return entry_->id;
+}
+
+void PinnedBlock::Release() {
+  if (cache_ == nullptr) return;
+  BlockCache* cache = std::exchange(cache_, nullptr);
+  BlockCache::Entry* entry = std::exchange(entry_, nullptr);
+  bytes_.reset();
+  cache->Unpin(entry);
+}
+
+// ---------------------------------------------------------------------------
+// BlockCache
+
+BlockCache::BlockCache(const BlockSource* source, std::size_t capacity_bytes)
+    : source_(source), capacity_bytes_(capacity_bytes) {
+  stats_.capacity_bytes = capacity_bytes;
+}
+
+BlockCache::~BlockCache() {
+  // A live handle here would later unpin into freed memory.
+  assert(in_use_.empty() && detached_.empty() && "a PinnedBlock outlived its BlockCache");
+  assert(flights_.empty() && "a Get() is still running on a destroyed BlockCache");
+}
+
+BlockCache::Entry* BlockCache::FindLocked(const BlockId& id) {
+  auto it = table_.find(id);
+  return it == table_.end() ? nullptr : it->second;
+}
+
+PinnedBlock BlockCache::PinLocked(Entry* entry) {
+  if (entry->pins++ == 0 && entry->where == Where::kLru) {
+    in_use_.splice(in_use_.end(), lru_, entry->self);
+    entry->where = Where::kInUse;
+    stats_.pinned_bytes += entry->charge;
+    ++stats_.pinned_entries;
+  }
+  return PinnedBlock(this, entry);
+}
+
+// Makes a new entry findable with `pins` handles already counted for it
+// (pins >= 1, so the new entry itself is never the one evicted), replacing any
+// entry of the same id, then evicts down to the budget.
+BlockCache::Entry* BlockCache::InsertPinnedLocked(const BlockId& id,
+                                                  std::shared_ptr<const Bytes> bytes,
+                                                  std::uint32_t pins) {
+  assert(pins > 0);
+  if (Entry* old = FindLocked(id)) RemoveFromCacheLocked(old);
+
+  const std::size_t charge = ChargeFor(bytes->size());
+  auto position =
+      in_use_.insert(in_use_.end(), Entry{id, {}, std::move(bytes), charge, pins, Where::kInUse});
+  position->self = position;
+  table_.emplace(id, &*position);
+  stats_.resident_bytes += charge;
+  stats_.pinned_bytes += charge;
+  ++stats_.entries;
+  ++stats_.pinned_entries;
+  ++stats_.inserts;
+  EvictLocked();
+  return &*position;
+}
+
+// Makes the entry unfindable and uncharged: freed now if unpinned, otherwise
+// moved to detached_ until its last handle goes.
+void BlockCache::RemoveFromCacheLocked(Entry* entry) {
+  table_.erase(entry->id);
+  stats_.resident_bytes -= entry->charge;
+  --stats_.entries;
+  if (entry->where == Where::kLru) {
+    lru_.erase(entry->self);
+  } else {
+    assert(entry->where == Where::kInUse);
+    stats_.pinned_bytes -= entry->charge;
+    --stats_.pinned_entries;
+    detached_.splice(detached_.end(), in_use_, entry->self);
+    entry->where = Where::kDetached;
+  }
+}
+
+void BlockCache::EvictLocked() {
+  while (stats_.resident_bytes > capacity_bytes_ && !lru_.empty()) {
+    RemoveFromCacheLocked(&lru_.front());
+    ++stats_.evictions;
+  }
+}
+
+void BlockCache::Unpin(Entry* entry) {
+  std::lock_guard lock(mutex_);
+  assert(entry->pins > 0);
+  if (--entry->pins > 0) return;
+  switch (entry->where) {
+    case Where::kInUse:
+      lru_.splice(lru_.end(), in_use_, entry->self);
+      entry->where = Where::kLru;
+      stats_.pinned_bytes -= entry->charge;
+      --stats_.pinned_entries;
+      EvictLocked();
+      break;
+    case Where::kDetached:
+      detached_.erase(entry->self);
+      break;
+    case Where::kLru:
+      assert(false && "an unpinned entry was on the in-use side");
+      break;
+  }
+}
+
+PinnedBlock BlockCache::Get(const BlockId& id) {
+  std::shared_ptr<Flight> flight;
+  {
+    std::unique_lock lock(mutex_);
+    if (Entry* entry = FindLocked(id)) {
+      ++stats_.hits;
+      return PinLocked(entry);
+    }
+    ++stats_.misses;
+    if (auto running = flights_.find(id); running != flights_.end()) {
+      // Someone else is reading this block: wait for their result rather than
+      // read it twice. The reader pins the new entry once for every waiter.
+      std::shared_ptr<Flight> joined = running->second;
+      ++joined->waiters;
+      joined->done_cv.wait(lock, [&] { return joined->done; });
+      if (joined->error) std::rethrow_exception(joined->error);
+      return PinnedBlock(this, joined->entry);
+    }
+    if (source_ == nullptr) {
+      throw Error::InvalidArgument("block cache has no source to read a missing block from");
+    }
+    flight = std::make_shared<Flight>();
+    flights_.emplace(id, flight);
+    ++stats_.source_reads;
+    ++stats_.reads_in_flight;
+  }
+
+  std::shared_ptr<const Bytes> bytes;
+  std::exception_ptr error;
+  try {
+    bytes = std::make_shared<const Bytes>(source_->ReadBlock(id));
+  } catch (...) {
+    error = std::current_exception();
+  }
+
+  std::lock_guard lock(mutex_);
+  flights_.erase(id);
+  --stats_.reads_in_flight;
+  flight->done = true;
+  if (error) {
+    ++stats_.read_failures;
+    flight->error = error;
+    flight->done_cv.notify_all();
+    std::rethrow_exception(error);
+  }
+  stats_.bytes_read += bytes->size();
+  const auto pins = static_cast<std::uint32_t>(1 + flight->waiters);
+  flight->entry = InsertPinnedLocked(id, std::move(bytes), pins);
+  flight->done_cv.notify_all();
+  return PinnedBlock(this, flight->entry);
+}
+
+PinnedBlock BlockCache::TryGet(const BlockId& id) {
+  std::lock_guard lock(mutex_);
+  Entry* entry = FindLocked(id);
+  if (entry == nullptr) {
+    ++stats_.misses;
+    return {};
+  }
+  ++stats_.hits;
+  return PinLocked(entry);
+}
+
+bool BlockCache::Touch(const BlockId& id) {
+  std::lock_guard lock(mutex_);
+  Entry* entry = FindLocked(id);
+  if (entry == nullptr) return false;
+  if (entry->where == Where::kLru) lru_.splice(lru_.end(), lru_, entry->self);
+  return true;
+}
+
+bool BlockCache::Contains(const BlockId& id) const {
+  std::lock_guard lock(mutex_);
+  return table_.contains(id);
+}
+
+PinnedBlock BlockCache::Insert(const BlockId& id, Bytes bytes) {
+  auto shared = std::make_shared<const Bytes>(std::move(bytes));
+  std::lock_guard lock(mutex_);
+  return PinnedBlock(this, InsertPinnedLocked(id, std::move(shared), 1));
+}
+
+bool BlockCache::Erase(const BlockId& id) {
+  std::lock_guard lock(mutex_);
+  Entry* entry = FindLocked(id);
+  if (entry == nullptr) return false;
+  RemoveFromCacheLocked(entry);
+  return true;
+}
+
+void BlockCache::Clear() {
+  std::lock_guard lock(mutex_);
+  while (!table_.empty()) RemoveFromCacheLocked(table_.begin()->second);
+}
+
+CacheStats BlockCache::Stats() const {
+  std::lock_guard lock(mutex_);
+  return stats_;
+}
+
+}  // namespace octocosm

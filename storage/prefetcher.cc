@@ -1,0 +1,234 @@
+#include "storage/prefetcher.h"
+
+#include <sstream>
+#include <utility>
+
+namespace octocosm {
+
+namespace {
+
+std::string DescribeBlock(const BlockId& id) {
+  std::ostringstream out;
+  out << "block (epoch " << id.epoch << ", key 0x" << std::hex << id.key << ")";
+  return out.str();
+}
+
+}  // namespace
+
+std::string PrefetchStats::ToString() const {
+  std::ostringstream out;
+  out << "prefetch: " << workers << " workers, queue " << queue_depth << ", in flight "
+      << in_flight << ", hits " << hits << ", queued " << queued << ", completed " << completed
+      << ", found resident " << found_resident << ", failed " << failed << ", cancelled "
+      << cancelled;
+  if (callback_errors > 0) out << ", callback errors " << callback_errors;
+  return out.str();
+}
+
+Prefetcher::Prefetcher(BlockCache& cache) : Prefetcher(cache, Options{}) {}
+
+Prefetcher::Prefetcher(BlockCache& cache, Options options)
+    : cache_(cache), on_complete_(std::move(options.on_complete)) {
+  if (options.workers == 0) {
+    throw Error::InvalidArgument("prefetcher needs at least one worker thread");
+  }
+  stats_.workers = options.workers;
+  workers_.reserve(options.workers);
+  try {
+    for (std::size_t i = 0; i < options.workers; ++i) {
+      workers_.emplace_back([this] { WorkerLoop(); });
+    }
+  } catch (...) {
+    // The destructor does not run for a half-built object: stop the workers
+    // already started, or joining them would wait forever.
+    {
+      std::lock_guard lock(mutex_);
+      stopping_ = true;
+    }
+    work_cv_.notify_all();
+    workers_.clear();
+    throw;
+  }
+}
+
+Prefetcher::~Prefetcher() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+    stats_.cancelled += queue_.size();
+    queue_.clear();
+    pending_.clear();
+  }
+  work_cv_.notify_all();
+  idle_cv_.notify_all();
+  workers_.clear();  // joins; reads in flight finish first
+}
+
+void Prefetcher::QueueLocked(const BlockId& id, Priority priority) {
+  auto position = queue_.emplace(QueueKey{priority, next_sequence_++}, id).first;
+  pending_.insert_or_assign(id, position);
+}
+
+std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
+  // The first occurrence of a block fixes its rank.
+  std::vector<BlockId> unique;
+  unique.reserve(wanted.size());
+  std::unordered_set<BlockId, BlockIdHash> seen(wanted.size());
+  for (const BlockId& id : wanted) {
+    if (seen.insert(id).second) unique.push_back(id);
+  }
+
+  std::size_t depth = 0;
+  {
+    std::lock_guard lock(mutex_);
+    Queue old_queue = std::exchange(queue_, {});
+    auto old_pending = std::exchange(pending_, {});
+    std::size_t kept = 0;
+    // Walk from least to most important so that resident blocks are touched
+    // in that order and the most important ends up most recent in the LRU.
+    for (std::size_t rank = unique.size(); rank-- > 0;) {
+      const BlockId& id = unique[rank];
+      const auto priority = static_cast<Priority>(rank);
+      if (in_flight_.contains(id)) continue;
+      if (old_pending.contains(id)) {
+        ++kept;
+        QueueLocked(id, priority);
+      } else if (cache_.Touch(id)) {
+        ++stats_.hits;
+      } else {
+        ++stats_.queued;
+        QueueLocked(id, priority);
+      }
+    }
+    stats_.cancelled += old_pending.size() - kept;
+    depth = queue_.size();
+  }
+  if (depth > 0) work_cv_.notify_all();
+  idle_cv_.notify_all();  // cancellations may end a WaitFor() or Drain()
+  return depth;
+}
+
+bool Prefetcher::Add(const BlockId& id, Priority priority) {
+  {
+    std::lock_guard lock(mutex_);
+    if (in_flight_.contains(id)) return false;
+    if (auto it = pending_.find(id); it != pending_.end()) {
+      queue_.erase(it->second);
+      QueueLocked(id, priority);
+      return true;
+    }
+    if (cache_.Touch(id)) {
+      ++stats_.hits;
+      return false;
+    }
+    ++stats_.queued;
+    QueueLocked(id, priority);
+  }
+  work_cv_.notify_one();
+  return true;
+}
+
+bool Prefetcher::Cancel(const BlockId& id) {
+  {
+    std::lock_guard lock(mutex_);
+    auto it = pending_.find(id);
+    if (it == pending_.end()) return false;
+    queue_.erase(it->second);
+    pending_.erase(it);
+    ++stats_.cancelled;
+  }
+  idle_cv_.notify_all();
+  return true;
+}
+
+std::size_t Prefetcher::CancelAll() {
+  std::size_t dropped = 0;
+  {
+    std::lock_guard lock(mutex_);
+    dropped = queue_.size();
+    queue_.clear();
+    pending_.clear();
+    stats_.cancelled += dropped;
+  }
+  idle_cv_.notify_all();
+  return dropped;
+}
+
+void Prefetcher::WaitFor(const BlockId& id) {
+  std::unique_lock lock(mutex_);
+  idle_cv_.wait(lock, [&] { return !pending_.contains(id) && !in_flight_.contains(id); });
+}
+
+void Prefetcher::Drain() {
+  std::unique_lock lock(mutex_);
+  idle_cv_.wait(lock, [&] { return queue_.empty() && in_flight_.empty(); });
+}
+
+std::optional<Error> Prefetcher::LastError(const BlockId& id) const {
+  std::lock_guard lock(mutex_);
+  auto it = errors_.find(id);
+  if (it == errors_.end()) return std::nullopt;
+  return it->second;
+}
+
+PrefetchStats Prefetcher::Stats() const {
+  std::lock_guard lock(mutex_);
+  PrefetchStats snapshot = stats_;
+  snapshot.queue_depth = queue_.size();
+  snapshot.in_flight = in_flight_.size();
+  return snapshot;
+}
+
+void Prefetcher::WorkerLoop() {
+  std::unique_lock lock(mutex_);
+  while (true) {
+    work_cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+    if (stopping_) return;
+    const BlockId id = queue_.begin()->second;
+    queue_.erase(queue_.begin());
+    pending_.erase(id);
+    in_flight_.insert(id);
+    lock.unlock();
+
+    bool was_resident = false;
+    std::optional<Error> error;
+    try {
+      // The handle Get() returns is dropped at once: prefetched blocks wait
+      // in the cache unpinned.
+      was_resident = cache_.Touch(id);
+      if (!was_resident) cache_.Get(id);
+    } catch (const Error& e) {
+      error = e;
+    } catch (const std::exception& e) {
+      // A BlockSource should throw only Error; keep anything else (e.g.
+      // bad_alloc) from escaping the thread, which would terminate.
+      error = Error(ErrorKind::kIo, "prefetch of " + DescribeBlock(id) + " failed: " + e.what());
+    } catch (...) {
+      error = Error(ErrorKind::kIo, "prefetch of " + DescribeBlock(id) +
+                                        " failed with an exception that is not a std::exception");
+    }
+
+    bool callback_threw = false;
+    if (on_complete_) {
+      try {
+        on_complete_(id, error ? &*error : nullptr);
+      } catch (...) {
+        callback_threw = true;
+      }
+    }
+
+    lock.lock();
+    in_flight_.erase(id);
+    if (error) {
+      ++stats_.failed;
+      errors_.insert_or_assign(id, *error);
+    } else {
+      ++(was_resident ? stats_.found_resident : stats_.completed);
+      errors_.erase(id);
+    }
+    if (callback_threw) ++stats_.callback_errors;
+    idle_cv_.notify_all();
+  }
+}
+
+}  // namespace octocosm

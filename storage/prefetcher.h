@@ -1,0 +1,157 @@
+// Prefetcher: a pool of worker threads that read blocks into a BlockCache
+// ahead of need, most important first.
+//
+// The intended caller is a renderer that, each frame, knows the blocks it
+// wants in order of importance. It hands the whole list to Submit(), which
+// REPLACES the pending queue: blocks no longer wanted are cancelled if no
+// worker has started them, blocks still wanted are re-ranked, blocks already
+// resident are skipped (counted as hits), and blocks being read stay in
+// flight. Single requests can also be added with Add(), and withdrawn with
+// Cancel() / CancelAll().
+//
+// Priority. A lower Priority value is more important. Submit() ranks its list
+// 0, 1, 2, ... in list order; Add() takes an explicit value on the same scale.
+// Workers always take the pending request with the lowest value; equal values
+// are taken in the order they were queued.
+//
+// Completion. A worker reads through BlockCache::Get() (so a prefetch and a
+// foreground Get() of the same block share one read) and releases its handle
+// at once: finished blocks sit in the cache unpinned, subject to LRU eviction.
+// The caller notices them by polling BlockCache::TryGet(), by the optional
+// completion callback, or by WaitFor() / Drain().
+//
+// Errors. A failed read is never thrown from a worker: it is counted
+// (PrefetchStats::failed), passed to the callback, and remembered per block
+// until that block is later read successfully (LastError()).
+//
+// Concurrency. All public methods are thread-safe. Submit/Add/Cancel/
+// CancelAll/Stats/LastError never block on I/O; WaitFor() and Drain() block
+// until the named work is done. The destructor drops pending requests, waits
+// for reads already in flight to finish and joins the workers; the cache must
+// outlive the Prefetcher.
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include "storage/block_cache.h"
+#include "storage/block_source.h"
+#include "storage/error.h"
+
+namespace octocosm {
+
+struct PrefetchStats {
+  std::size_t workers = 0;
+  // Gauges.
+  std::size_t queue_depth = 0;  // pending requests no worker has started
+  std::size_t in_flight = 0;    // requests a worker is reading now
+  // Counters over the Prefetcher's lifetime. Every queued request ends in
+  // exactly one of completed, found_resident, failed, cancelled, so at any
+  // snapshot
+  //   queued == completed + found_resident + failed + cancelled + queue_depth + in_flight.
+  std::uint64_t hits = 0;            // requests not queued: resident when asked for
+  std::uint64_t queued = 0;          // requests put on the queue (re-ranking one does not count)
+  std::uint64_t completed = 0;       // read into the cache by a worker
+  std::uint64_t found_resident = 0;  // resident by the time a worker started them
+  std::uint64_t failed = 0;          // their read threw
+  std::uint64_t cancelled = 0;       // dropped before a worker started them
+  std::uint64_t callback_errors = 0;  // completion callbacks that threw (swallowed)
+
+  std::string ToString() const;
+};
+
+class Prefetcher {
+ public:
+  using Priority = std::int64_t;
+
+  // Called on a worker thread once per request a worker finishes
+  // (completed, found resident or failed; not for cancelled requests or for
+  // ones skipped at submission as resident). `error` is null on success. It runs before the
+  // request stops counting as in flight, so WaitFor()/Drain() return after
+  // it. It must not call WaitFor() or Drain() (it would wait for itself) and
+  // should not throw; an exception is swallowed and counted.
+  using CompletionCallback = std::function<void(const BlockId& id, const Error* error)>;
+
+  struct Options {
+    std::size_t workers = 2;  // at least 1
+    CompletionCallback on_complete;
+  };
+
+  // Throws InvalidArgument when options.workers is 0.
+  explicit Prefetcher(BlockCache& cache);
+  Prefetcher(BlockCache& cache, Options options);
+  Prefetcher(const Prefetcher&) = delete;
+  Prefetcher& operator=(const Prefetcher&) = delete;
+  ~Prefetcher();
+
+  // Replaces the pending queue with `wanted`, most important first (duplicates
+  // keep their first position). Returns how many requests are pending after
+  // the call.
+  std::size_t Submit(std::span<const BlockId> wanted);
+
+  // Queues one request, or re-ranks it if already pending. Returns false when
+  // nothing was queued because the block is resident or already in flight.
+  bool Add(const BlockId& id, Priority priority);
+
+  // Drops a pending request; returns whether one was pending. A request
+  // already in flight is not interrupted.
+  bool Cancel(const BlockId& id);
+
+  // Drops every pending request; returns how many there were.
+  std::size_t CancelAll();
+
+  // Blocks until `id` is neither pending nor in flight (at once if it never
+  // was requested).
+  void WaitFor(const BlockId& id);
+
+  // Blocks until the queue is empty and nothing is in flight. Requests added
+  // by other threads meanwhile are waited for too.
+  void Drain();
+
+  // The error of the block's most recent failed prefetch, if it has not been
+  // read successfully since.
+  std::optional<Error> LastError(const BlockId& id) const;
+
+  PrefetchStats Stats() const;
+
+ private:
+  struct QueueKey {
+    Priority priority;
+    std::uint64_t sequence;  // tie-break: first queued is taken first
+    friend auto operator<=>(const QueueKey&, const QueueKey&) = default;
+  };
+  using Queue = std::map<QueueKey, BlockId>;
+
+  void WorkerLoop();
+  // Puts `id` (not pending) on the queue; expects mutex_ held.
+  void QueueLocked(const BlockId& id, Priority priority);
+
+  BlockCache& cache_;
+  const CompletionCallback on_complete_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable work_cv_;  // a request was queued, or stopping_
+  std::condition_variable idle_cv_;  // a request left the queue or finished
+  bool stopping_ = false;                                              // guarded by mutex_
+  std::uint64_t next_sequence_ = 0;                                    // guarded by mutex_
+  Queue queue_;                                                        // guarded by mutex_
+  std::unordered_map<BlockId, Queue::iterator, BlockIdHash> pending_;  // guarded by mutex_
+  std::unordered_set<BlockId, BlockIdHash> in_flight_;                 // guarded by mutex_
+  std::unordered_map<BlockId, Error, BlockIdHash> errors_;             // guarded by mutex_
+  PrefetchStats stats_;                                                // guarded by mutex_
+  // Last member: destroyed (joined) first, while everything above is alive.
+  std::vector<std::jthread> workers_;
+};
+
+}  // namespace octocosm

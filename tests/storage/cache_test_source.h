@@ -1,0 +1,131 @@
+// An in-memory BlockSource for the cache and prefetcher tests. Block contents
+// are a pure function of the id, so any reader can check what it got. The
+// source counts and records reads, can fail chosen blocks, add a delay, and
+// hold reads at a closed gate so that a test can arrange concurrent misses
+// deterministically.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "storage/block_source.h"
+#include "storage/error.h"
+
+namespace octocosm::cachetest {
+
+class CacheTestSource : public BlockSource {
+ public:
+  explicit CacheTestSource(std::size_t default_size = 256) : default_size_(default_size) {}
+
+  static Bytes ContentOf(const BlockId& id, std::size_t size) {
+    Bytes bytes(size);
+    for (std::size_t i = 0; i < size; ++i) {
+      bytes[i] = static_cast<std::uint8_t>(id.key * 31 + id.epoch * 7 + i);
+    }
+    return bytes;
+  }
+  Bytes ContentOf(const BlockId& id) const { return ContentOf(id, SizeOf(id)); }
+
+  void SetSize(const BlockId& id, std::size_t size) {
+    std::lock_guard lock(mutex_);
+    sizes_[id] = size;
+  }
+  std::size_t SizeOf(const BlockId& id) const {
+    std::lock_guard lock(mutex_);
+    auto it = sizes_.find(id);
+    return it == sizes_.end() ? default_size_ : it->second;
+  }
+
+  // Reads of `id` throw `error` (after passing the gate) until ClearFailure.
+  void FailWith(const BlockId& id, const Error& error) {
+    std::lock_guard lock(mutex_);
+    failures_.insert_or_assign(id, error);
+  }
+  void ClearFailure(const BlockId& id) {
+    std::lock_guard lock(mutex_);
+    failures_.erase(id);
+  }
+
+  void SetDelay(std::chrono::microseconds delay) {
+    std::lock_guard lock(mutex_);
+    delay_ = delay;
+  }
+
+  // While the gate is closed, reads are recorded as started and then wait.
+  void CloseGate() {
+    std::lock_guard lock(mutex_);
+    gate_open_ = false;
+  }
+  void OpenGate() {
+    {
+      std::lock_guard lock(mutex_);
+      gate_open_ = true;
+    }
+    changed_.notify_all();
+  }
+
+  // Waits (up to a generous timeout, so a bug fails instead of hanging) until
+  // at least `count` reads have started; returns whether they did.
+  bool WaitForReadsStarted(std::size_t count) const {
+    std::unique_lock lock(mutex_);
+    return changed_.wait_for(lock, std::chrono::seconds(20),
+                             [&] { return order_.size() >= count; });
+  }
+
+  std::size_t ReadsOf(const BlockId& id) const {
+    std::lock_guard lock(mutex_);
+    auto it = reads_.find(id);
+    return it == reads_.end() ? 0 : it->second;
+  }
+  std::size_t TotalReads() const {
+    std::lock_guard lock(mutex_);
+    return order_.size();
+  }
+  // Ids in the order their reads started.
+  std::vector<BlockId> ReadOrder() const {
+    std::lock_guard lock(mutex_);
+    return order_;
+  }
+
+  Bytes ReadBlock(const BlockId& id) const override {
+    std::optional<Error> failure;
+    std::chrono::microseconds delay{};
+    std::size_t size = 0;
+    {
+      std::unique_lock lock(mutex_);
+      order_.push_back(id);
+      ++reads_[id];
+      changed_.notify_all();
+      changed_.wait(lock, [&] { return gate_open_; });
+      if (auto it = failures_.find(id); it != failures_.end()) failure = it->second;
+      delay = delay_;
+      auto size_it = sizes_.find(id);
+      size = size_it == sizes_.end() ? default_size_ : size_it->second;
+    }
+    if (delay.count() > 0) std::this_thread::sleep_for(delay);
+    if (failure) throw *failure;
+    return ContentOf(id, size);
+  }
+
+ private:
+  const std::size_t default_size_;
+  mutable std::mutex mutex_;
+  mutable std::condition_variable changed_;
+  std::unordered_map<BlockId, std::size_t, BlockIdHash> sizes_;
+  std::unordered_map<BlockId, Error, BlockIdHash> failures_;
+  std::chrono::microseconds delay_{0};
+  bool gate_open_ = true;
+  mutable std::vector<BlockId> order_;
+  mutable std::unordered_map<BlockId, std::size_t, BlockIdHash> reads_;
+};
+
+// A BlockId from a small integer, for readable tests.
+inline BlockId Block(std::uint64_t key, std::uint32_t epoch = 0) { return BlockId{epoch, key}; }
+
+}  // namespace octocosm::cachetest
