@@ -1,0 +1,201 @@
+#include "storage/file.h"
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <filesystem>
+#include <system_error>
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+// Appends are gathered into writes of this size: large enough that a page
+// file of small blocks costs few system calls, small enough not to matter.
+constexpr std::size_t kWriteBufferBytes = 1 << 20;
+
+// Linux caps one read/write at just under 2 GiB; stay well below.
+constexpr std::size_t kMaxIoBytes = std::size_t{1} << 30;
+
+}  // namespace
+
+UniqueFd& UniqueFd::operator=(UniqueFd&& other) noexcept {
+  if (this != &other) {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = other.Release();
+  }
+  return *this;
+}
+
+UniqueFd::~UniqueFd() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+RandomAccessFile RandomAccessFile::Open(const std::string& path) {
+  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    int error = errno;
+    if (error == ENOENT) throw Error::NotFound(path + ": no such file");
+    throw IoErrorFromErrno(path, "open", error);
+  }
+  return RandomAccessFile(path, UniqueFd(fd));
+}
+
+std::size_t RandomAccessFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const {
+  std::size_t done = 0;
+  while (done < out.size()) {
+    std::size_t want = std::min(out.size() - done, kMaxIoBytes);
+    ssize_t got = ::pread(fd_.get(), out.data() + done, want, static_cast<off_t>(offset + done));
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      throw IoErrorFromErrno(path_, "pread of " + std::to_string(out.size()) + " bytes at offset " +
+                                        std::to_string(offset),
+                             errno);
+    }
+    if (got == 0) break;  // end of file
+    done += static_cast<std::size_t>(got);
+  }
+  return done;
+}
+
+std::uint64_t RandomAccessFile::Size() const {
+  struct stat info {};
+  if (::fstat(fd_.get(), &info) != 0) throw IoErrorFromErrno(path_, "fstat", errno);
+  return static_cast<std::uint64_t>(info.st_size);
+}
+
+void RandomAccessFile::Advise(int advice, const char* name) const {
+  // posix_fadvise returns the error number instead of setting errno.
+  int error = ::posix_fadvise(fd_.get(), 0, 0, advice);
+  if (error != 0) throw IoErrorFromErrno(path_, std::string("posix_fadvise(") + name + ")", error);
+}
+
+void RandomAccessFile::DropFromPageCache() const { Advise(POSIX_FADV_DONTNEED, "DONTNEED"); }
+void RandomAccessFile::AdviseSequential() const { Advise(POSIX_FADV_SEQUENTIAL, "SEQUENTIAL"); }
+void RandomAccessFile::AdviseRandom() const { Advise(POSIX_FADV_RANDOM, "RANDOM"); }
+
+WritableFile WritableFile::Create(const std::string& path) {
+  int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw IoErrorFromErrno(path, "create", errno);
+  return WritableFile(path, UniqueFd(fd));
+}
+
+void WritableFile::WriteFully(std::uint64_t offset, const std::uint8_t* data, std::size_t size) {
+  std::size_t done = 0;
+  while (done < size) {
+    std::size_t want = std::min(size - done, kMaxIoBytes);
+    ssize_t wrote = ::pwrite(fd_.get(), data + done, want, static_cast<off_t>(offset + done));
+    if (wrote < 0) {
+      if (errno == EINTR) continue;
+      throw IoErrorFromErrno(path_, "pwrite of " + std::to_string(size) + " bytes at offset " +
+                                        std::to_string(offset),
+                             errno);
+    }
+    done += static_cast<std::size_t>(wrote);
+  }
+}
+
+void WritableFile::Flush() {
+  if (buffer_.empty()) return;
+  WriteFully(flushed_, buffer_.data(), buffer_.size());
+  flushed_ += buffer_.size();
+  buffer_.clear();
+}
+
+void WritableFile::Append(std::span<const std::uint8_t> bytes) {
+  if (buffer_.size() + bytes.size() > kWriteBufferBytes) Flush();
+  if (bytes.size() >= kWriteBufferBytes) {
+    // Large blocks go straight to the file rather than through the buffer.
+    WriteFully(flushed_, bytes.data(), bytes.size());
+    flushed_ += bytes.size();
+  } else {
+    buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+  }
+  size_ += bytes.size();
+}
+
+void WritableFile::AppendZeros(std::uint64_t count) {
+  static const std::vector<std::uint8_t> zeros(64 * 1024, 0);
+  while (count > 0) {
+    std::size_t now = static_cast<std::size_t>(std::min<std::uint64_t>(count, zeros.size()));
+    Append(std::span<const std::uint8_t>(zeros.data(), now));
+    count -= now;
+  }
+}
+
+void WritableFile::WriteAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) {
+  Flush();
+  WriteFully(offset, bytes.data(), bytes.size());
+  size_ = std::max(size_, offset + bytes.size());
+  flushed_ = std::max(flushed_, offset + bytes.size());
+}
+
+void WritableFile::Sync() {
+  Flush();
+  if (::fsync(fd_.get()) != 0) throw IoErrorFromErrno(path_, "fsync", errno);
+}
+
+void WritableFile::Close() {
+  Flush();
+  int fd = fd_.Release();
+  if (fd >= 0 && ::close(fd) != 0) throw IoErrorFromErrno(path_, "close", errno);
+}
+
+void RenameFile(const std::string& from, const std::string& to) {
+  if (::rename(from.c_str(), to.c_str()) != 0) {
+    throw IoErrorFromErrno(from, "rename to " + to, errno);
+  }
+}
+
+void SyncDirectory(const std::string& directory) {
+  int fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) throw IoErrorFromErrno(directory, "open directory", errno);
+  UniqueFd owned(fd);
+  if (::fsync(owned.get()) != 0) throw IoErrorFromErrno(directory, "fsync directory", errno);
+}
+
+void CreateDirectories(const std::string& directory) {
+  std::error_code error;
+  std::filesystem::create_directories(directory, error);
+  if (error) throw Error::Io(directory, "create directory failed: " + error.message());
+}
+
+void RemoveFileQuietly(const std::string& path) noexcept { ::unlink(path.c_str()); }
+
+bool PathExists(const std::string& path) {
+  struct stat info {};
+  return ::stat(path.c_str(), &info) == 0;
+}
+
+bool IsDirectory(const std::string& path) {
+  struct stat info {};
+  return ::stat(path.c_str(), &info) == 0 && S_ISDIR(info.st_mode);
+}
+
+std::vector<std::string> ListDirectory(const std::string& directory) {
+  DIR* dir = ::opendir(directory.c_str());
+  if (dir == nullptr) throw IoErrorFromErrno(directory, "opendir", errno);
+  std::vector<std::string> names;
+  errno = 0;
+  while (const dirent* entry = ::readdir(dir)) {
+    std::string name = entry->d_name;
+    if (name != "." && name != "..") names.push_back(std::move(name));
+  }
+  int error = errno;
+  ::closedir(dir);
+  if (error != 0) throw IoErrorFromErrno(directory, "readdir", error);
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::string JoinPath(const std::string& directory, const std::string& name) {
+  if (directory.empty() || directory.back() == '/') return directory + name;
+  return directory + "/" + name;
+}
+
+}  // namespace octocosm

@@ -1,0 +1,126 @@
+// The storage layer's one seam to the operating system: files read with
+// positioned reads, files written sequentially, and the directory operations
+// a crash-safe commit needs (rename, directory fsync).
+//
+// Every failure of a system call becomes Error kIo naming the path and the
+// call. Deciding whether a short read means corruption is left to the caller,
+// which knows how long the file should be.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace octocosm {
+
+// Owns a file descriptor; closes it on destruction.
+class UniqueFd {
+ public:
+  UniqueFd() = default;
+  explicit UniqueFd(int fd) : fd_(fd) {}
+  UniqueFd(UniqueFd&& other) noexcept : fd_(other.Release()) {}
+  UniqueFd& operator=(UniqueFd&& other) noexcept;
+  UniqueFd(const UniqueFd&) = delete;
+  UniqueFd& operator=(const UniqueFd&) = delete;
+  ~UniqueFd();
+
+  int get() const { return fd_; }
+  bool valid() const { return fd_ >= 0; }
+  int Release() {
+    int fd = fd_;
+    fd_ = -1;
+    return fd;
+  }
+
+ private:
+  int fd_ = -1;
+};
+
+// A read-only file read with pread: no shared file offset, so one object may
+// serve any number of threads at once.
+class RandomAccessFile {
+ public:
+  // Throws kNotFound if the file does not exist, kIo on other failures.
+  static RandomAccessFile Open(const std::string& path);
+
+  // Reads up to out.size() bytes at `offset`; fewer only where the file ends.
+  // Returns the number of bytes read. Retries interrupted and partial reads.
+  std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const;
+
+  // The current size of the file (fstat).
+  std::uint64_t Size() const;
+
+  // Asks the kernel to drop this file's cached pages (POSIX_FADV_DONTNEED),
+  // so the next reads are cold. Only clean pages can be dropped, which is all
+  // of them for a file this process only reads.
+  void DropFromPageCache() const;
+  // Hints that the file will be read front to back (larger read-ahead).
+  void AdviseSequential() const;
+  // Hints that reads are scattered (no read-ahead): the default for a store.
+  void AdviseRandom() const;
+
+  const std::string& path() const { return path_; }
+
+ private:
+  RandomAccessFile(std::string path, UniqueFd fd) : path_(std::move(path)), fd_(std::move(fd)) {}
+  void Advise(int advice, const char* name) const;
+
+  std::string path_;
+  UniqueFd fd_;
+};
+
+// A file written front to back through a buffer, with one positioned write
+// for patching a header at the end. Create truncates an existing file.
+class WritableFile {
+ public:
+  static WritableFile Create(const std::string& path);
+
+  WritableFile(WritableFile&&) noexcept = default;
+  WritableFile& operator=(WritableFile&&) noexcept = default;
+  // Closes the descriptor if Close() was not called; errors are dropped there,
+  // so callers that care call Close().
+  ~WritableFile() = default;
+
+  void Append(std::span<const std::uint8_t> bytes);
+  void AppendZeros(std::uint64_t count);
+  // Writes at an absolute offset (after flushing what was appended).
+  void WriteAt(std::uint64_t offset, std::span<const std::uint8_t> bytes);
+  // Flushes the buffer and fsyncs the file.
+  void Sync();
+  // Flushes and closes; reports a failed close (NFS reports write errors there).
+  void Close();
+
+  // Bytes appended so far: the file size once flushed.
+  std::uint64_t size() const { return size_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  WritableFile(std::string path, UniqueFd fd) : path_(std::move(path)), fd_(std::move(fd)) {}
+  void Flush();
+  void WriteFully(std::uint64_t offset, const std::uint8_t* data, std::size_t size);
+
+  std::string path_;
+  UniqueFd fd_;
+  std::vector<std::uint8_t> buffer_;
+  std::uint64_t flushed_ = 0;  // file offset where buffer_ starts
+  std::uint64_t size_ = 0;
+};
+
+// rename(2): atomically replaces `to` on the same file system.
+void RenameFile(const std::string& from, const std::string& to);
+// fsync on the directory, so that renames and creations in it are durable.
+void SyncDirectory(const std::string& directory);
+// Creates the directory (and missing parents); fine if it exists already.
+void CreateDirectories(const std::string& directory);
+// Removes a file; a missing file is not an error. Never throws: used during
+// clean-up, where the first error is the one to report.
+void RemoveFileQuietly(const std::string& path) noexcept;
+bool PathExists(const std::string& path);
+bool IsDirectory(const std::string& path);
+// Names (not paths) of the entries in a directory, sorted.
+std::vector<std::string> ListDirectory(const std::string& directory);
+// `directory` + "/" + `name`.
+std::string JoinPath(const std::string& directory, const std::string& name);
+
+}  // namespace octocosm

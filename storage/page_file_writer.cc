@@ -1,0 +1,107 @@
+#include "storage/page_file_writer.h"
+
+#include <algorithm>
+#include <filesystem>
+
+#include "storage/block_index_builder.h"
+#include "storage/checksum.h"
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+std::string DirectoryOf(const std::string& path) {
+  std::string parent = std::filesystem::path(path).parent_path().string();
+  return parent.empty() ? "." : parent;
+}
+
+}  // namespace
+
+PageFileWriter::PageFileWriter(std::string path, std::uint32_t page_size, std::uint64_t store_id,
+                               std::uint32_t epoch)
+    : path_(std::move(path)), page_size_(page_size), store_id_(store_id), epoch_(epoch) {
+  if (!IsValidPageSize(page_size)) {
+    throw Error::InvalidArgument("page size " + std::to_string(page_size) +
+                                 " is not a power of two in [4096, 16777216]");
+  }
+  file_.emplace(WritableFile::Create(temporary_path()));
+  // The header page is reserved now and written last, once the index
+  // location is known: a file whose header is still zero has no magic and can
+  // never be mistaken for a finished one.
+  file_->AppendZeros(page_size_);
+}
+
+PageFileWriter::~PageFileWriter() {
+  if (file_) {
+    file_.reset();
+    RemoveFileQuietly(temporary_path());
+  }
+}
+
+void PageFileWriter::RequireOpen(const char* operation) const {
+  if (!file_) throw Error::InvalidArgument(std::string(operation) + " on finished page file " + path_);
+}
+
+void PageFileWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count) {
+  RequireOpen("AddBlock");
+  std::optional<std::uint32_t> pages = PagesForBytes(bytes.size(), page_size_);
+  if (!pages) {
+    throw Error::InvalidArgument("block " + Hex64(key) + " of " + std::to_string(bytes.size()) +
+                                 " bytes needs more than 2^32 pages of " + std::to_string(page_size_));
+  }
+  if (!keys_.insert(key).second) {
+    throw Error::InvalidArgument("duplicate key: block " + Hex64(key) + " was already added to epoch " +
+                                 std::to_string(epoch_) + " (" + path_ + ")");
+  }
+  IndexEntry entry;
+  entry.key = key;
+  entry.first_page = bytes.empty() ? 0 : next_page_;
+  entry.byte_length = bytes.size();
+  entry.point_count = point_count;
+  entry.checksum = Checksum64(bytes);
+  entry.page_count = *pages;
+  try {
+    file_->Append(bytes);
+    file_->AppendZeros(std::uint64_t{*pages} * page_size_ - bytes.size());
+  } catch (...) {
+    keys_.erase(key);
+    throw;
+  }
+  next_page_ += *pages;
+  entries_.push_back(entry);
+}
+
+PageFileWriter::Summary PageFileWriter::Finish() {
+  RequireOpen("Finish");
+  std::vector<IndexEntry> sorted = entries_;
+  std::sort(sorted.begin(), sorted.end(), [](const IndexEntry& a, const IndexEntry& b) { return a.key < b.key; });
+
+  const std::uint64_t index_first_page = next_page_;
+  IndexLayout layout = BuildBlockIndex(sorted, index_first_page, page_size_,
+                                       [&](std::uint64_t page_number, std::span<const std::uint8_t> page) {
+                                         // Pages are appended in order, so each lands at its number.
+                                         if (file_->size() != page_number * page_size_) {
+                                           throw Error::InvalidArgument("index page out of place (bug)");
+                                         }
+                                         file_->Append(page);
+                                       });
+  PageFileHeader header;
+  header.page_size = page_size_;
+  header.store_id = store_id_;
+  header.epoch = epoch_;
+  header.block_count = sorted.size();
+  header.total_page_count = index_first_page + layout.page_count;
+  header.index = layout;
+  auto encoded = header.Encode();
+  file_->WriteAt(0, encoded);
+  file_->Sync();
+  const std::uint64_t size = file_->size();
+  file_->Close();
+  RenameFile(temporary_path(), path_);
+  file_.reset();
+  finished_size_ = size;
+  SyncDirectory(DirectoryOf(path_));
+  return Summary{sorted.size(), size};
+}
+
+}  // namespace octocosm

@@ -1,0 +1,65 @@
+// Writes one page file (docs/FORMAT.md section 2): blocks appended in the
+// caller's order, each on its own run of pages, then the bulk-loaded index,
+// then the header. Crash-safe: everything goes to `<path>.tmp`, which is
+// fsynced and renamed to `<path>` only by Finish(), followed by an fsync of
+// the directory. A writer destroyed before Finish() removes its .tmp file.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+#include "storage/block_index_format.h"
+#include "storage/file.h"
+#include "storage/page_file_format.h"
+
+namespace octocosm {
+
+class PageFileWriter {
+ public:
+  struct Summary {
+    std::uint64_t block_count = 0;
+    std::uint64_t file_size = 0;
+  };
+
+  // Creates `path`.tmp. `page_size` must be a power of two in [4 KiB, 16 MiB]
+  // (kInvalidArgument otherwise).
+  PageFileWriter(std::string path, std::uint32_t page_size, std::uint64_t store_id, std::uint32_t epoch);
+  PageFileWriter(const PageFileWriter&) = delete;
+  PageFileWriter& operator=(const PageFileWriter&) = delete;
+  ~PageFileWriter();
+
+  // Appends one block. Keys may come in any order; a key added twice is
+  // kInvalidArgument (and the writer stays usable). `point_count` is stored
+  // in the index for the caller's use.
+  void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
+
+  // Writes the index and header, makes the file durable and gives it its
+  // final name. The writer cannot be used afterwards.
+  Summary Finish();
+
+  // Bytes written to the file so far (data pages with padding, header page,
+  // and after Finish the index pages).
+  std::uint64_t bytes_written() const { return file_ ? file_->size() : finished_size_; }
+  std::uint64_t block_count() const { return entries_.size(); }
+  const std::string& path() const { return path_; }
+  std::string temporary_path() const { return path_ + ".tmp"; }
+
+ private:
+  void RequireOpen(const char* operation) const;
+
+  const std::string path_;
+  const std::uint32_t page_size_;
+  const std::uint64_t store_id_;
+  const std::uint32_t epoch_;
+  std::optional<WritableFile> file_;  // empty once finished
+  std::uint64_t finished_size_ = 0;
+  std::uint64_t next_page_ = 1;       // page 0 is the header
+  std::vector<IndexEntry> entries_;   // in the order added
+  std::unordered_set<std::uint64_t> keys_;
+};
+
+}  // namespace octocosm

@@ -1,0 +1,152 @@
+#include "storage/store_reader.h"
+
+#include <fstream>
+#include <sstream>
+
+#include "storage/checksum.h"
+#include "storage/error.h"
+#include "storage/file.h"
+
+namespace octocosm {
+namespace {
+
+bool EndsWith(const std::string& text, const std::string& suffix) {
+  return text.size() >= suffix.size() && text.compare(text.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// The directory-level checks of docs/FORMAT.md 1.2 (step 1): an interrupted
+// write must never open, and must say so rather than "file not found".
+void CheckStoreDirectory(const std::string& directory) {
+  if (!IsDirectory(directory)) {
+    throw Error::NotFound(directory + ": no such store directory");
+  }
+  std::vector<std::string> names = ListDirectory(directory);
+  bool has_manifest = false;
+  bool has_page_files = false;
+  for (const std::string& name : names) {
+    if (EndsWith(name, kTemporarySuffix)) {
+      throw Error::Corruption(JoinPath(directory, name),
+                              "leftover temporary file: a write of this store was interrupted; "
+                              "the store is not valid (re-create it)");
+    }
+    if (name == kManifestFileName) has_manifest = true;
+    if (EndsWith(name, ".pages")) has_page_files = true;
+  }
+  if (!has_manifest) {
+    if (has_page_files) {
+      throw Error::Corruption(directory, "no manifest.json: the store was not finished (interrupted write?)");
+    }
+    throw Error::NotFound(directory + ": no manifest.json: not an octocosm store");
+  }
+}
+
+std::string ReadWholeFile(const std::string& path) {
+  RandomAccessFile file = RandomAccessFile::Open(path);
+  std::string text(static_cast<std::size_t>(file.Size()), '\0');
+  std::size_t got = file.ReadAt(0, std::span<std::uint8_t>(reinterpret_cast<std::uint8_t*>(text.data()), text.size()));
+  text.resize(got);
+  return text;
+}
+
+void CheckAgainstManifest(const PageFileReader& file, const EpochInfo& info, const Manifest& manifest,
+                          const std::string& manifest_path) {
+  const PageFileHeader& header = file.header();
+  auto disagree = [&](const std::string& field, const std::string& manifest_value, const std::string& file_value) {
+    return Error::Corruption(file.path(), "manifest disagrees with page file: " + manifest_path + " says epoch " +
+                                              std::to_string(info.epoch) + " has " + field + " " + manifest_value +
+                                              ", the page file has " + file_value);
+  };
+  if (header.store_id != manifest.store_id) {
+    throw disagree("store id", Hex64(manifest.store_id), Hex64(header.store_id) + " (a file from another store?)");
+  }
+  if (header.epoch != info.epoch) {
+    throw disagree("epoch number", std::to_string(info.epoch), std::to_string(header.epoch));
+  }
+  if (header.page_size != manifest.page_size) {
+    throw disagree("page size", std::to_string(manifest.page_size), std::to_string(header.page_size));
+  }
+  if (header.block_count != info.block_count) {
+    throw disagree("block count", std::to_string(info.block_count), std::to_string(header.block_count));
+  }
+  if (header.file_size() != info.file_size) {
+    throw disagree("file size", std::to_string(info.file_size), std::to_string(header.file_size()));
+  }
+}
+
+}  // namespace
+
+StoreReader StoreReader::Open(const std::string& directory, StoreReaderOptions options) {
+  CheckStoreDirectory(directory);
+  const std::string manifest_path = JoinPath(directory, kManifestFileName);
+  std::string text = ReadWholeFile(manifest_path);
+  Manifest manifest = Manifest::Parse(text, manifest_path);
+  nlohmann::json manifest_json = nlohmann::json::parse(text);  // valid: Parse succeeded
+
+  std::vector<std::unique_ptr<PageFileReader>> page_files;
+  for (const EpochInfo& info : manifest.epochs) {
+    const std::string path = JoinPath(directory, info.file);
+    if (!PathExists(path)) {
+      throw Error::Corruption(path, "missing page file: " + manifest_path + " lists it for epoch " +
+                                        std::to_string(info.epoch));
+    }
+    // The page file checks its own size against its header; the manifest's
+    // file_size is then checked against the header, so any truncation or
+    // growth is reported with the file it concerns.
+    auto reader = PageFileReader::Open(path, PageFileReader::Options{options.index_cache_pages_per_epoch});
+    CheckAgainstManifest(*reader, info, manifest, manifest_path);
+    page_files.push_back(std::move(reader));
+  }
+  return StoreReader(directory, std::move(manifest_json), std::move(manifest), std::move(page_files));
+}
+
+StoreReader::StoreReader(std::string directory, nlohmann::json manifest_json, Manifest manifest,
+                         std::vector<std::unique_ptr<PageFileReader>> page_files)
+    : directory_(std::move(directory)),
+      manifest_json_(std::move(manifest_json)),
+      manifest_(std::move(manifest)),
+      page_files_(std::move(page_files)) {}
+
+const PageFileReader& StoreReader::page_file(std::uint32_t epoch) const {
+  if (epoch >= page_files_.size()) {
+    throw Error::NotFound("epoch " + std::to_string(epoch) + " in store " + directory_ + ", which has " +
+                          std::to_string(page_files_.size()) + " epochs");
+  }
+  return *page_files_[epoch];
+}
+
+std::uint64_t StoreReader::block_count(std::uint32_t epoch) const { return page_file(epoch).block_count(); }
+
+std::optional<IndexEntry> StoreReader::Lookup(const BlockId& id) const { return page_file(id.epoch).Lookup(id.key); }
+
+void StoreReader::Scan(std::uint32_t epoch, std::uint64_t lo, std::uint64_t hi,
+                       const std::function<bool(const IndexEntry&)>& visit) const {
+  page_file(epoch).Scan(lo, hi, visit);
+}
+
+Bytes StoreReader::ReadBlock(const BlockId& id) const { return page_file(id.epoch).ReadBlock(id.key); }
+
+std::size_t StoreReader::ReadBlockInto(const BlockId& id, std::span<std::uint8_t> out) const {
+  const PageFileReader& file = page_file(id.epoch);
+  std::optional<IndexEntry> entry = file.Lookup(id.key);
+  if (!entry) {
+    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
+  }
+  file.ReadBlockInto(*entry, out);
+  return static_cast<std::size_t>(entry->byte_length);
+}
+
+void StoreReader::DropCaches() const {
+  for (const auto& file : page_files_) file->DropCaches();
+}
+
+void StoreReader::AdviseSequential() const {
+  for (const auto& file : page_files_) file->AdviseSequential();
+}
+
+ReaderStats StoreReader::stats() const {
+  ReaderStats total;
+  for (const auto& file : page_files_) total += file->stats();
+  return total;
+}
+
+}  // namespace octocosm
