@@ -1,0 +1,538 @@
+#include "index/block_codec.h"
+
+#include <xxhash.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <string>
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+// Little-endian field access through bytes, so the format does not depend on
+// the host's byte order.
+void PutU16(std::uint8_t* out, std::uint16_t v) {
+  out[0] = static_cast<std::uint8_t>(v);
+  out[1] = static_cast<std::uint8_t>(v >> 8);
+}
+void PutU32(std::uint8_t* out, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) out[i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+void PutU64(std::uint8_t* out, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) out[i] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+void PutF32(std::uint8_t* out, float v) { PutU32(out, std::bit_cast<std::uint32_t>(v)); }
+void PutF64(std::uint8_t* out, double v) { PutU64(out, std::bit_cast<std::uint64_t>(v)); }
+std::uint16_t GetU16(const std::uint8_t* in) { return static_cast<std::uint16_t>(in[0] | (in[1] << 8)); }
+std::uint32_t GetU32(const std::uint8_t* in) {
+  std::uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = (v << 8) | in[i];
+  return v;
+}
+std::uint64_t GetU64(const std::uint8_t* in) {
+  std::uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | in[i];
+  return v;
+}
+float GetF32(const std::uint8_t* in) { return std::bit_cast<float>(GetU32(in)); }
+double GetF64(const std::uint8_t* in) { return std::bit_cast<double>(GetU64(in)); }
+
+std::uint64_t Checksum(const std::uint8_t* data, std::size_t size) { return XXH3_64bits(data, size); }
+
+constexpr std::uint8_t kEncodingV1 = 1;
+constexpr std::uint8_t kMaxColumnId = 7;
+
+bool IsRequired(ColumnId id) {
+  return id == ColumnId::kPosition || id == ColumnId::kWeight || id == ColumnId::kSmoothing || id == ColumnId::kType;
+}
+
+std::uint64_t BytesPerPoint(ColumnId id) {
+  switch (id) {
+    case ColumnId::kPosition: return 6;
+    case ColumnId::kWeight: return 4;
+    case ColumnId::kSmoothing: return 2;
+    case ColumnId::kVelocity: return 6;
+    case ColumnId::kId: return 8;
+    case ColumnId::kType: return 1;
+    case ColumnId::kDisplacement: return 6;
+  }
+  return 0;
+}
+
+std::string ColumnWhat(ColumnId id, const std::string& what) {
+  return std::string("column '") + ColumnName(id) + "': " + what;
+}
+
+// ---- Encoding ---------------------------------------------------------------
+
+void CheckLength(const char* name, std::size_t actual, std::size_t expected) {
+  if (actual != expected) {
+    throw Error::InvalidArgument(std::string("EncodeBlock: column ") + name + " has " + std::to_string(actual) +
+                                 " values, expected " + std::to_string(expected));
+  }
+}
+
+void EncodePositions(const NodePoints& points, NodeKey key, const Cube& cube, std::uint8_t* out) {
+  const int level = key.level();
+  const CellCoord cell = key.cell();
+  const std::array<std::uint64_t, 3> base = {std::uint64_t{cell.x} << 16, std::uint64_t{cell.y} << 16,
+                                             std::uint64_t{cell.z} << 16};
+  int octant = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    while (i >= points.octant_offsets[octant + 1]) ++octant;
+    const double* p = &points.position[3 * i];
+    const auto g = cube.GridCoords(p, level + 16);
+    int point_octant = 0;
+    for (int a = 0; a < 3; ++a) {
+      if ((g[a] >> 16) != (base[a] >> 16)) {
+        throw Error::InvalidArgument("EncodeBlock: point " + std::to_string(i) + " (" + std::to_string(p[0]) + ", " +
+                                     std::to_string(p[1]) + ", " + std::to_string(p[2]) + ") lies outside node " +
+                                     key.Path());
+      }
+      const auto q = static_cast<std::uint16_t>(g[a] - base[a]);
+      PutU16(out + 6 * i + 2 * a, q);
+      point_octant |= (q >> 15) << a;
+    }
+    if (point_octant != octant) {
+      throw Error::InvalidArgument("EncodeBlock: point " + std::to_string(i) + " of node " + key.Path() +
+                                   " lies in child octant " + std::to_string(point_octant) +
+                                   " but octant_offsets put it in octant " + std::to_string(octant) +
+                                   " (use OrderByOctant)");
+    }
+  }
+}
+
+// Largest-remainder apportionment of K units in proportion to the weights:
+// each point gets floor(K * w / W) units, and the units left over go one each
+// to the points with the largest fractional parts, so the units sum to K
+// exactly. Returns the unit (W / K).
+double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
+  const std::size_t n = weight.size();
+  if (n == 0) return 0;
+  long double total = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!std::isfinite(weight[i]) || weight[i] < 0) {
+      throw Error::InvalidArgument("EncodeBlock: weight " + std::to_string(i) + " is " + std::to_string(weight[i]) +
+                                   ", must be finite and >= 0");
+    }
+    total += weight[i];
+  }
+  if (!(total > 0) || !std::isfinite(static_cast<double>(total))) {
+    throw Error::InvalidArgument("EncodeBlock: the weights sum to " + std::to_string(static_cast<double>(total)) +
+                                 ", must be finite and > 0");
+  }
+  const long double k = static_cast<long double>(kWeightTotalUnits);
+  std::vector<std::uint64_t> units(n);
+  std::vector<long double> remainder(n);
+  std::int64_t assigned = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const long double ideal = std::min(k, weight[i] / total * k);
+    const long double whole = std::floor(ideal);
+    units[i] = static_cast<std::uint64_t>(whole);
+    remainder[i] = ideal - whole;
+    assigned += static_cast<std::int64_t>(units[i]);
+  }
+  std::int64_t deficit = static_cast<std::int64_t>(kWeightTotalUnits) - assigned;
+  if (deficit != 0) {
+    // Ties go to the lower index, so the result does not depend on the sort.
+    std::vector<std::uint32_t> order(n);
+    std::iota(order.begin(), order.end(), 0u);
+    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+      return remainder[a] != remainder[b] ? remainder[a] > remainder[b] : a < b;
+    });
+    // Rounding can leave the floors a unit or so above K as well as below.
+    for (std::size_t j = 0; deficit > 0; j = (j + 1) % n, --deficit) ++units[order[j]];
+    for (std::size_t j = n - 1; deficit < 0; j = (j + n - 1) % n) {
+      if (units[order[j]] > 0) {
+        --units[order[j]];
+        ++deficit;
+      }
+    }
+  }
+  for (std::size_t i = 0; i < n; ++i) PutU32(out + 4 * i, static_cast<std::uint32_t>(units[i]));
+  return static_cast<double>(total / k);
+}
+
+void EncodeSmoothing(const std::vector<double>& smoothing, double node_size, std::uint8_t* out) {
+  for (std::size_t i = 0; i < smoothing.size(); ++i) {
+    const double h = smoothing[i];
+    if (!std::isfinite(h) || h < 0) {
+      throw Error::InvalidArgument("EncodeBlock: smoothing length " + std::to_string(i) + " is " + std::to_string(h) +
+                                   ", must be finite and >= 0");
+    }
+    const double code = std::round((std::log2(h / node_size) - kSmoothingLog2Min) * kSmoothingPerOctave);
+    std::uint16_t q = 0;
+    if (code >= 65535) {
+      q = 65535;
+    } else if (code > 0) {  // also false for -inf (h == 0)
+      q = static_cast<std::uint16_t>(code);
+    }
+    PutU16(out + 2 * i, q);
+  }
+}
+
+// Quantizes 3-vectors between per-component min and max; writes min, max to params.
+void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint8_t* out, std::uint8_t* params) {
+  const std::size_t n = values.size() / 3;
+  std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    if (!std::isfinite(values[i])) {
+      throw Error::InvalidArgument(std::string("EncodeBlock: ") + name + " of point " + std::to_string(i / 3) +
+                                   " is not finite");
+    }
+    const std::size_t a = i % 3;
+    if (i < 3 || values[i] < lo[a]) lo[a] = values[i];
+    if (i < 3 || values[i] > hi[a]) hi[a] = values[i];
+  }
+  for (int a = 0; a < 3; ++a) {
+    PutF32(params + 4 * a, lo[a]);
+    PutF32(params + 12 + 4 * a, hi[a]);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      const double range = static_cast<double>(hi[a]) - lo[a];
+      std::uint16_t q = 0;
+      if (range > 0) {
+        const double code = std::round((values[3 * i + a] - static_cast<double>(lo[a])) / range * 65535.0);
+        q = static_cast<std::uint16_t>(std::clamp(code, 0.0, 65535.0));
+      }
+      PutU16(out + 6 * i + 2 * a, q);
+    }
+  }
+}
+
+// ---- Decoding ---------------------------------------------------------------
+
+void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
+                   const std::string& where, std::vector<float>& out) {
+  std::array<double, 3> lo{}, step{};
+  for (int a = 0; a < 3; ++a) {
+    const float min = GetF32(column.params.data() + 4 * a);
+    const float max = GetF32(column.params.data() + 12 + 4 * a);
+    if (!std::isfinite(min) || !std::isfinite(max) || !(min <= max)) {
+      throw Error::Corruption(where, ColumnWhat(column.id, "range of component " + std::to_string(a) + " is [" +
+                                                               std::to_string(min) + ", " + std::to_string(max) +
+                                                               "], expected finite min <= max"));
+    }
+    lo[a] = min;
+    step[a] = (static_cast<double>(max) - min) / 65535.0;
+  }
+  out.resize(3 * std::size_t{n});
+  for (std::size_t i = 0; i < 3 * std::size_t{n}; ++i) {
+    out[i] = static_cast<float>(lo[i % 3] + GetU16(bytes.data() + 2 * i) * step[i % 3]);
+  }
+}
+
+}  // namespace
+
+const char* ColumnName(ColumnId id) {
+  switch (id) {
+    case ColumnId::kPosition: return "position";
+    case ColumnId::kWeight: return "weight";
+    case ColumnId::kSmoothing: return "smoothing";
+    case ColumnId::kVelocity: return "velocity";
+    case ColumnId::kId: return "id";
+    case ColumnId::kType: return "type";
+    case ColumnId::kDisplacement: return "displacement";
+  }
+  return "unknown";
+}
+
+const BlockColumn* BlockHeader::Find(ColumnId id) const {
+  for (const BlockColumn& c : columns) {
+    if (c.id == id) return &c;
+  }
+  return nullptr;
+}
+
+Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
+  const std::size_t n = points.size();
+  if (n > std::numeric_limits<std::uint32_t>::max()) {
+    throw Error::InvalidArgument("EncodeBlock: node " + key.Path() + " has " + std::to_string(n) +
+                                 " points, more than a block holds (2^32 - 1)");
+  }
+  CheckLength("position", points.position.size(), 3 * n);
+  CheckLength("smoothing", points.smoothing.size(), n);
+  CheckLength("type", points.type.size(), n);
+  if (!points.velocity.empty()) CheckLength("velocity", points.velocity.size(), 3 * n);
+  if (!points.id.empty()) CheckLength("id", points.id.size(), n);
+  if (!points.displacement.empty()) CheckLength("displacement", points.displacement.size(), 3 * n);
+  const auto& off = points.octant_offsets;
+  if (off[0] != 0 || off[8] != n || !std::is_sorted(off.begin(), off.end())) {
+    throw Error::InvalidArgument("EncodeBlock: octant_offsets of node " + key.Path() +
+                                 " are not a partition of the points (use OrderByOctant)");
+  }
+
+  std::vector<ColumnId> ids = {ColumnId::kPosition, ColumnId::kWeight, ColumnId::kSmoothing};
+  if (!points.velocity.empty()) ids.push_back(ColumnId::kVelocity);
+  if (!points.id.empty()) ids.push_back(ColumnId::kId);
+  ids.push_back(ColumnId::kType);
+  if (!points.displacement.empty()) ids.push_back(ColumnId::kDisplacement);
+
+  const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * ids.size() + 8;
+  std::size_t block_size = header_size;
+  for (const ColumnId id : ids) block_size += BytesPerPoint(id) * n;
+  Bytes block(block_size, 0);
+  std::uint8_t* b = block.data();
+
+  PutU32(b + 0, kBlockMagic);
+  PutU16(b + 4, kBlockVersion);
+  PutU16(b + 6, static_cast<std::uint16_t>(header_size));
+  PutU64(b + 8, block_size);
+  PutU64(b + 16, key.value());
+  PutU32(b + 24, static_cast<std::uint32_t>(n));
+  PutU16(b + 28, static_cast<std::uint16_t>(ids.size()));
+  for (int o = 0; o < 9; ++o) PutU32(b + 32 + 4 * o, off[o]);
+
+  std::size_t offset = header_size;
+  const double node_size = cube.NodeSize(key.level());
+  for (std::size_t c = 0; c < ids.size(); ++c) {
+    const ColumnId id = ids[c];
+    std::uint8_t* entry = b + kBlockFixedHeaderSize + kBlockDirectoryEntrySize * c;
+    std::uint8_t* params = entry + 32;
+    std::uint8_t* out = b + offset;
+    const std::size_t length = BytesPerPoint(id) * n;
+    switch (id) {
+      case ColumnId::kPosition: EncodePositions(points, key, cube, out); break;
+      case ColumnId::kWeight:
+        PutF64(params, EncodeWeights(points.weight, out));
+        PutU64(params + 8, kWeightTotalUnits);
+        break;
+      case ColumnId::kSmoothing:
+        EncodeSmoothing(points.smoothing, node_size, out);
+        PutF32(params, kSmoothingLog2Min);
+        PutF32(params + 4, kSmoothingPerOctave);
+        break;
+      case ColumnId::kVelocity: EncodeRanged3("velocity", points.velocity, out, params); break;
+      case ColumnId::kId:
+        for (std::size_t i = 0; i < n; ++i) PutU64(out + 8 * i, points.id[i]);
+        break;
+      case ColumnId::kType:
+        if (n > 0) std::memcpy(out, points.type.data(), n);
+        break;
+      case ColumnId::kDisplacement: EncodeRanged3("displacement", points.displacement, out, params); break;
+    }
+    entry[0] = static_cast<std::uint8_t>(id);
+    entry[1] = kEncodingV1;
+    PutU64(entry + 8, offset);
+    PutU64(entry + 16, length);
+    PutU64(entry + 24, Checksum(out, length));
+    offset += length;
+  }
+  PutU64(b + header_size - 8, Checksum(b, header_size - 8));
+  return block;
+}
+
+std::size_t DecodeBlockHeaderSize(std::span<const std::uint8_t> prefix, const std::string& where) {
+  if (prefix.size() < kBlockFixedHeaderSize) {
+    throw Error::Corruption(where, "block truncated: " + std::to_string(prefix.size()) +
+                                       " bytes, the fixed header alone needs " +
+                                       std::to_string(kBlockFixedHeaderSize));
+  }
+  const std::uint32_t magic = GetU32(prefix.data());
+  if (magic != kBlockMagic) {
+    throw Error::Corruption(where, "bad block magic " + std::to_string(magic) + ", expected " +
+                                       std::to_string(kBlockMagic) + " (\"OCBK\")");
+  }
+  const std::size_t header_size = GetU16(prefix.data() + 6);
+  if (header_size < kBlockFixedHeaderSize + kBlockDirectoryEntrySize + 8 || header_size > kBlockMaxHeaderSize ||
+      (header_size - kBlockFixedHeaderSize - 8) % kBlockDirectoryEntrySize != 0) {
+    throw Error::Corruption(where, "impossible block header size " + std::to_string(header_size));
+  }
+  return header_size;
+}
+
+BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key, const std::string& where) {
+  const std::size_t header_size = DecodeBlockHeaderSize(prefix, where);
+  if (prefix.size() < header_size) {
+    throw Error::Corruption(where, "block truncated: " + std::to_string(prefix.size()) + " bytes, the header needs " +
+                                       std::to_string(header_size));
+  }
+  const std::uint8_t* b = prefix.data();
+  // Verified before anything else is believed, so every later check sees the
+  // bytes the writer wrote, and a flipped version reads as corruption.
+  if (GetU64(b + header_size - 8) != Checksum(b, header_size - 8)) {
+    throw Error::Corruption(where, "block header checksum mismatch");
+  }
+  const std::uint16_t version = GetU16(b + 4);
+  if (version != kBlockVersion) {
+    throw Error::NotSupported(where, "block format version " + std::to_string(version) + ", this build reads " +
+                                         std::to_string(kBlockVersion));
+  }
+  BlockHeader header;
+  header.header_size = header_size;
+  header.block_size = GetU64(b + 8);
+  header.key = NodeKey::FromValue(GetU64(b + 16));
+  header.point_count = GetU32(b + 24);
+  const std::size_t column_count = GetU16(b + 28);
+  if (header.key != key) {
+    throw Error::Corruption(where, "block holds node " +
+                                       (header.key.IsValid() ? header.key.Path() : std::to_string(header.key.value())) +
+                                       ", expected " + key.Path());
+  }
+  if (header_size != kBlockFixedHeaderSize + kBlockDirectoryEntrySize * column_count + 8) {
+    throw Error::Corruption(where, "header size " + std::to_string(header_size) + " does not fit " +
+                                       std::to_string(column_count) + " columns");
+  }
+  if (GetU16(b + 30) != 0 || GetU32(b + 68) != 0) throw Error::Corruption(where, "reserved header bits set");
+  for (int o = 0; o < 9; ++o) header.octant_offsets[o] = GetU32(b + 32 + 4 * o);
+  const auto& off = header.octant_offsets;
+  if (off[0] != 0 || off[8] != header.point_count || !std::is_sorted(off.begin(), off.end())) {
+    throw Error::Corruption(where, "octant offsets are not a partition of the " +
+                                       std::to_string(header.point_count) + " points");
+  }
+
+  std::uint64_t expected_offset = header_size;
+  ColumnSet seen = 0;
+  for (std::size_t c = 0; c < column_count; ++c) {
+    const std::uint8_t* entry = b + kBlockFixedHeaderSize + kBlockDirectoryEntrySize * c;
+    const std::uint8_t raw_id = entry[0];
+    if (raw_id == 0 || raw_id > kMaxColumnId) {
+      throw Error::Corruption(where, "directory entry " + std::to_string(c) + " has unknown column id " +
+                                         std::to_string(raw_id));
+    }
+    BlockColumn column;
+    column.id = static_cast<ColumnId>(raw_id);
+    if (seen & ColumnBit(column.id)) throw Error::Corruption(where, ColumnWhat(column.id, "listed twice"));
+    seen |= ColumnBit(column.id);
+    if (entry[1] != kEncodingV1) {
+      throw Error::Corruption(where, ColumnWhat(column.id, "unknown encoding " + std::to_string(entry[1])));
+    }
+    if (GetU16(entry + 2) != 0 || GetU32(entry + 4) != 0) {
+      throw Error::Corruption(where, ColumnWhat(column.id, "reserved bits set"));
+    }
+    column.offset = GetU64(entry + 8);
+    column.length = GetU64(entry + 16);
+    column.checksum = GetU64(entry + 24);
+    std::memcpy(column.params.data(), entry + 32, column.params.size());
+    if (column.offset != expected_offset) {
+      throw Error::Corruption(where, ColumnWhat(column.id, "starts at byte " + std::to_string(column.offset) +
+                                                               ", expected " + std::to_string(expected_offset)));
+    }
+    const std::uint64_t expected_length = BytesPerPoint(column.id) * header.point_count;
+    if (column.length != expected_length) {
+      throw Error::Corruption(where, ColumnWhat(column.id, std::to_string(column.length) + " bytes for " +
+                                                               std::to_string(header.point_count) + " points, expected " +
+                                                               std::to_string(expected_length)));
+    }
+    expected_offset += column.length;
+    header.columns.push_back(column);
+  }
+  if (header.block_size != expected_offset) {
+    throw Error::Corruption(where, "block size " + std::to_string(header.block_size) + " but the columns end at " +
+                                       std::to_string(expected_offset));
+  }
+  for (std::uint8_t raw_id = 1; raw_id <= kMaxColumnId; ++raw_id) {
+    const auto id = static_cast<ColumnId>(raw_id);
+    if (IsRequired(id) && !(seen & ColumnBit(id))) throw Error::Corruption(where, ColumnWhat(id, "required but missing"));
+  }
+  return header;
+}
+
+void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::uint8_t> bytes, const Cube& cube,
+                  const std::string& where, NodePoints& out) {
+  const BlockColumn* column = header.Find(id);
+  if (column == nullptr) {
+    throw Error::InvalidArgument(where + ": block has no column '" + ColumnName(id) + "' to decode");
+  }
+  if (bytes.size() != column->length) {
+    throw Error::Corruption(where, ColumnWhat(id, "have " + std::to_string(bytes.size()) +
+                                                      " bytes, the directory says " + std::to_string(column->length)));
+  }
+  if (Checksum(bytes.data(), bytes.size()) != column->checksum) {
+    throw Error::Corruption(where, ColumnWhat(id, "checksum mismatch"));
+  }
+  out.octant_offsets = header.octant_offsets;
+  const std::uint32_t n = header.point_count;
+  const std::uint8_t* in = bytes.data();
+  const std::uint8_t* params = column->params.data();
+  switch (id) {
+    case ColumnId::kPosition: {
+      const NodeCube node = cube.NodeCubeOf(header.key);
+      const double quantum = node.size / 65536.0;
+      out.position.resize(3 * std::size_t{n});
+      int octant = 0;
+      for (std::uint32_t i = 0; i < n; ++i) {
+        while (i >= header.octant_offsets[octant + 1]) ++octant;
+        int point_octant = 0;
+        for (int a = 0; a < 3; ++a) {
+          const std::uint16_t q = GetU16(in + 6 * std::size_t{i} + 2 * a);
+          point_octant |= (q >> 15) << a;
+          out.position[3 * std::size_t{i} + a] = node.origin[a] + (q + 0.5) * quantum;
+        }
+        if (point_octant != octant) {
+          throw Error::Corruption(where, ColumnWhat(id, "point " + std::to_string(i) + " lies in octant " +
+                                                            std::to_string(point_octant) +
+                                                            " but the octant offsets say " + std::to_string(octant)));
+        }
+      }
+      break;
+    }
+    case ColumnId::kWeight: {
+      const double unit = GetF64(params);
+      const std::uint64_t total_units = GetU64(params + 8);
+      if (!std::isfinite(unit) || unit < 0 || total_units > std::numeric_limits<std::uint32_t>::max()) {
+        throw Error::Corruption(where, ColumnWhat(id, "bad parameters unit " + std::to_string(unit) + ", K " +
+                                                          std::to_string(total_units)));
+      }
+      out.weight.resize(n);
+      std::uint64_t sum = 0;
+      for (std::uint32_t i = 0; i < n; ++i) {
+        const std::uint32_t units = GetU32(in + 4 * std::size_t{i});
+        sum += units;
+        out.weight[i] = units * unit;
+      }
+      if (sum != (n > 0 ? total_units : 0)) {
+        throw Error::Corruption(where, ColumnWhat(id, "units sum to " + std::to_string(sum) + ", expected " +
+                                                          std::to_string(total_units)));
+      }
+      break;
+    }
+    case ColumnId::kSmoothing: {
+      const float log2_min = GetF32(params);
+      const float per_octave = GetF32(params + 4);
+      if (!std::isfinite(log2_min) || !std::isfinite(per_octave) || !(per_octave > 0)) {
+        throw Error::Corruption(where, ColumnWhat(id, "bad parameters log2_min " + std::to_string(log2_min) +
+                                                          ", per_octave " + std::to_string(per_octave)));
+      }
+      const double node_size = cube.NodeSize(header.key.level());
+      out.smoothing.resize(n);
+      for (std::uint32_t i = 0; i < n; ++i) {
+        out.smoothing[i] =
+            node_size * std::exp2(static_cast<double>(log2_min) + GetU16(in + 2 * std::size_t{i}) / double{per_octave});
+      }
+      break;
+    }
+    case ColumnId::kVelocity: DecodeRanged3(*column, n, bytes, where, out.velocity); break;
+    case ColumnId::kId:
+      out.id.resize(n);
+      for (std::uint32_t i = 0; i < n; ++i) out.id[i] = GetU64(in + 8 * std::size_t{i});
+      break;
+    case ColumnId::kType: out.type.assign(in, in + n); break;
+    case ColumnId::kDisplacement: DecodeRanged3(*column, n, bytes, where, out.displacement); break;
+  }
+}
+
+DecodedBlock DecodeBlock(std::span<const std::uint8_t> block, ColumnSet wanted, NodeKey key, const Cube& cube,
+                         const std::string& where) {
+  DecodedBlock decoded;
+  decoded.header = DecodeBlockHeader(block, key, where);
+  if (block.size() != decoded.header.block_size) {
+    throw Error::Corruption(where, "block is " + std::to_string(block.size()) + " bytes, its header says " +
+                                       std::to_string(decoded.header.block_size));
+  }
+  decoded.points.octant_offsets = decoded.header.octant_offsets;
+  for (const BlockColumn& column : decoded.header.columns) {
+    if (!(wanted & ColumnBit(column.id))) continue;
+    DecodeColumn(decoded.header, column.id, block.subspan(column.offset, column.length), cube, where, decoded.points);
+  }
+  return decoded;
+}
+
+}  // namespace octocosm

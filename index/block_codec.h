@@ -1,0 +1,169 @@
+// Block codec: the points of one octree node <-> the bytes of one block.
+//
+// A block is a header, a column directory and the columns, each column
+// checksummed on its own, so that a reader can fetch the header and then only
+// the columns it needs (ranged reads) and still verify every byte it uses.
+// All integers are little endian; f32/f64 are IEEE-754 bit patterns stored as
+// u32/u64. XXH3-64 is XXH3_64bits from libxxhash (seed 0).
+//
+// Block layout, version 1 (offsets in bytes from the start of the block):
+//
+//   fixed header (72 bytes)
+//     0  u32  magic 0x4B42434F ("OCBK" in file order)
+//     4  u16  version = 1
+//     6  u16  header_size = 80 + 56 * column_count (fixed header + directory + header checksum)
+//     8  u64  block_size: total bytes of the block
+//    16  u64  node key (index/morton.h); must be the key the block is read as
+//    24  u32  point count n
+//    28  u16  column count c (1..16)
+//    30  u16  flags = 0 (reserved)
+//    32  9 x u32 octant offsets: points of child octant o are [off[o], off[o+1]);
+//             off[0] = 0, non-decreasing, off[8] = n
+//    68  u32  reserved = 0
+//   column directory: c entries of 56 bytes, at 72 + 56 * i
+//     0  u8   column id (table below); each id at most once
+//     1  u8   encoding = 1 (the only encoding of each column in version 1)
+//     2  u16  reserved = 0
+//     4  u32  reserved = 0
+//     8  u64  offset of the column's bytes from the start of the block
+//    16  u64  length of the column's bytes
+//    24  u64  XXH3-64 of the column's bytes
+//    32  24 bytes of decode parameters (table below; unused bytes are 0)
+//   header checksum: u64 XXH3-64 of bytes [0, header_size - 8), at header_size - 8
+//   columns: in directory order, contiguous: the first starts at header_size,
+//            each starts where the previous ends, the last ends at block_size.
+//
+// Columns (n = point count; s = node edge, o = node lower corner, both from
+// the dataset cube and the node key, see index/cube.h):
+//   id name          bytes   required  encoding / parameters
+//   1  position      6n      yes       3 x u16 per point (x,y,z). q = the point's coordinate on
+//                                      the 2^(L+16) grid of the cube minus 65536 * cell, i.e.
+//                                      floor((x - o) / s * 65536) clamped to [0, 65535]; decoded
+//                                      as o + (q + 0.5) * s / 65536, so |error| <= s / 131072 per
+//                                      axis (half a quantum) and the decoded point is in the node
+//                                      cube. The top bit of q on each axis is the child octant, and
+//                                      must agree with the octant offsets. No parameters.
+//   2  weight        4n      yes       u32 integer units per point summing exactly to K (0 if n = 0);
+//                                      weight = units * unit. Params: f64 unit, u64 K. The writer
+//                                      uses K = 2^32 - 2^20 and unit = (sum of weights) / K and
+//                                      chooses the integers by the largest-remainder method, so the
+//                                      decoded weights sum to the node mass to a few ulps and each
+//                                      is within one unit (2.3e-10 of the node mass) of its value.
+//   3  smoothing     2n      yes       u16 code per point: h = s * 2^(log2_min + code / per_octave).
+//                                      Params: f32 log2_min, f32 per_octave. The writer uses
+//                                      log2_min = -24 and per_octave = 2048 (h from s * 2^-24 to
+//                                      s * 2^8), a relative precision of 2^(1/4096) - 1 = 1.7e-4.
+//   4  velocity      6n      no        3 x u16 per point; v = min + q * (max - min) / 65535 per
+//                                      component. Params: f32 min[3], f32 max[3] (min <= max,
+//                                      finite). |error| <= (max - min) / 131070.
+//   5  id            8n      no        u64 per point.
+//   6  type          n       yes       u8 per point (GADGET particle type).
+//   7  displacement  6n      no        like velocity: the minimal-image offset to the next epoch.
+//
+// Decoding is safe for untrusted bytes: every offset, length, count and
+// parameter is checked, and any mismatch throws Error::Corruption naming the
+// caller's `where` (e.g. file and block key), the column and what was wrong.
+// A version other than 1 throws Error::NotSupported.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "index/cube.h"
+#include "index/morton.h"
+#include "index/node_points.h"
+#include "storage/block_source.h"
+
+namespace octocosm {
+
+enum class ColumnId : std::uint8_t {
+  kPosition = 1,
+  kWeight = 2,
+  kSmoothing = 3,
+  kVelocity = 4,
+  kId = 5,
+  kType = 6,
+  kDisplacement = 7,
+};
+
+// A set of columns, one bit per ColumnId.
+using ColumnSet = std::uint32_t;
+constexpr ColumnSet ColumnBit(ColumnId id) { return ColumnSet{1} << static_cast<unsigned>(id); }
+inline constexpr ColumnSet kAllColumns = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                                         ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kVelocity) |
+                                         ColumnBit(ColumnId::kId) | ColumnBit(ColumnId::kType) |
+                                         ColumnBit(ColumnId::kDisplacement);
+
+const char* ColumnName(ColumnId id);
+
+inline constexpr std::uint32_t kBlockMagic = 0x4B42434F;
+inline constexpr std::uint16_t kBlockVersion = 1;
+inline constexpr std::size_t kBlockFixedHeaderSize = 72;
+inline constexpr std::size_t kBlockDirectoryEntrySize = 56;
+inline constexpr std::size_t kBlockMaxColumns = 16;
+inline constexpr std::size_t kBlockMaxHeaderSize = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * kBlockMaxColumns + 8;
+inline constexpr std::uint64_t kWeightTotalUnits = (std::uint64_t{1} << 32) - (std::uint64_t{1} << 20);
+inline constexpr float kSmoothingLog2Min = -24;
+inline constexpr float kSmoothingPerOctave = 2048;
+
+struct BlockColumn {
+  ColumnId id{};
+  std::uint64_t offset = 0;  // from the start of the block
+  std::uint64_t length = 0;
+  std::uint64_t checksum = 0;
+  std::array<std::uint8_t, 24> params{};
+};
+
+struct BlockHeader {
+  NodeKey key;
+  std::uint32_t point_count = 0;
+  std::array<std::uint32_t, 9> octant_offsets{};
+  std::size_t header_size = 0;
+  std::uint64_t block_size = 0;
+  std::vector<BlockColumn> columns;  // directory order
+
+  // The directory entry of `id`, or nullptr when the block has no such column.
+  const BlockColumn* Find(ColumnId id) const;
+};
+
+// Encodes `points` as the block of node `key`. Optional columns are written
+// when non-empty. Throws Error::InvalidArgument when the points do not fit
+// the contract: a column of the wrong length, a point outside the node cube,
+// points not grouped by child octant as octant_offsets says (see
+// OrderByOctant), a weight that is not finite and >= 0 (or all zero with
+// points present), a non-finite velocity or displacement, or more than
+// 2^32 - 1 points.
+Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube);
+
+// Reads the size of the header from the first kBlockFixedHeaderSize bytes of
+// a block (or more), so that a ranged reader knows how much to fetch. Throws
+// Error::Corruption on a short prefix, a bad magic or an impossible size.
+std::size_t DecodeBlockHeaderSize(std::span<const std::uint8_t> prefix, const std::string& where);
+
+// Parses and verifies the header and directory from a prefix of the block of
+// at least header_size bytes (the whole block also works). `key` is the node
+// the caller expects the block to hold.
+BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key, const std::string& where);
+
+// Decodes one column from its bytes alone (bytes [offset, offset + length)
+// of the block, as the header's directory says) into `out`, checking its
+// checksum and contents. `out.octant_offsets` is set from the header.
+void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::uint8_t> column_bytes,
+                  const Cube& cube, const std::string& where, NodePoints& out);
+
+struct DecodedBlock {
+  BlockHeader header;  // header.point_count is the number of points, whichever columns were decoded
+  NodePoints points;   // columns not decoded are empty
+};
+
+// Decodes the columns in `wanted` from a whole block. Wanted optional columns
+// that the block lacks come back empty; a missing required column is corrupt.
+// Columns not wanted are neither verified nor decoded.
+DecodedBlock DecodeBlock(std::span<const std::uint8_t> block, ColumnSet wanted, NodeKey key, const Cube& cube,
+                       const std::string& where);
+
+}  // namespace octocosm

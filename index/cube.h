@@ -1,0 +1,85 @@
+// The dataset cube and the geometry of node cubes inside it.
+//
+// The octree divides one axis-aligned cube, the dataset cube (origin, edge
+// `size`), into 2^L x 2^L x 2^L cells at level L; node key (L, cell) covers
+//
+//   [origin + cell * size / 2^L, origin + (cell + 1) * size / 2^L)   per axis.
+//
+// Every placement of a point (its cell at a level, its child octant, its
+// quantized position inside a node block, its fine density cell) goes through
+// one function, GridCoords, so that they can never disagree with each other:
+//
+//   t    = (x - origin) / size                  the point's unit coordinate
+//   t    = t - floor(t)                         only in a periodic cube
+//   grid = clamp(floor(t * 2^bits), 0, 2^bits - 1)
+//
+// Multiplying by 2^bits is exact in binary floating point, so the grid
+// coordinate at `bits` is exactly the grid coordinate at `bits + k` shifted
+// right by k: a point's cell at level L is the prefix of its cell at every
+// deeper level, and a node's children partition its points exactly, even for
+// points on a cell face.
+//
+// Edges, stated once:
+//  - A point on the upper face (x == origin + size) goes to the last cell.
+//  - In a non-periodic cube a point outside the cube (by a rounding error,
+//    say) goes to the nearest edge cell; callers are expected to choose a cube
+//    that contains their points (FromBounds does).
+//  - In a periodic cube (a simulation box of edge `size`) points are first
+//    wrapped into [origin, origin + size): x == origin + size maps to the first
+//    cell, x == origin - 1e-20 to the last.
+//  - NaN goes to cell 0 (never an out-of-range index); the subtree builder
+//    rejects non-finite positions before they get here.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "index/morton.h"
+
+namespace octocosm {
+
+// The cube of one node, in absolute coordinates.
+struct NodeCube {
+  std::array<double, 3> origin{};
+  double size = 0;
+};
+
+struct Cube {
+  std::array<double, 3> origin{0, 0, 0};
+  double size = 1;
+  bool periodic = false;
+
+  // The most bits GridCoords accepts: t * 2^bits must stay an exact integer
+  // below 2^53. Level 21 plus the 16 bits of a quantized position is 37.
+  static constexpr int kMaxGridBits = 48;
+
+  // The cube whose lower corner is `lo` and whose edge is the largest extent
+  // of the box [lo, hi], enlarged by a small margin so that `hi` lies strictly
+  // inside (t < 1 on every axis). When all points coincide the edge is a tiny
+  // non-zero size. Not periodic. Throws Error::InvalidArgument when a bound is
+  // not finite or hi < lo on some axis.
+  static Cube FromBounds(const std::array<double, 3>& lo, const std::array<double, 3>& hi);
+
+  // Throws Error::InvalidArgument unless origin is finite and size is finite and > 0.
+  void Validate() const;
+
+  // Edge of a node at `level` (exact: size * 2^-level).
+  double NodeSize(int level) const;
+  NodeCube NodeCubeOf(NodeKey key) const;
+
+  // The point's coordinates on a 2^bits grid over the cube, as described
+  // above. Precondition: 0 <= bits <= kMaxGridBits. Never out of range.
+  std::array<std::uint64_t, 3> GridCoords(const double* point, int bits) const;
+  // The point's cell at `level` (0..kMaxLevel).
+  CellCoord CellOf(const double* point, int level) const;
+  // The key of the node at `level` that holds the point.
+  NodeKey LeafKey(const double* point, int level) const;
+  // Which child of the node at `level` holds the point: the low bits of its
+  // cell at level + 1 (x0 | y0 << 1 | z0 << 2). Valid also at kMaxLevel (the
+  // octant inside a deepest node, used to order its points).
+  int ChildOctant(const double* point, int level) const;
+  // Whether the point belongs to `key` (its cell at key.level() is key.cell()).
+  bool Holds(NodeKey key, const double* point) const;
+};
+
+}  // namespace octocosm

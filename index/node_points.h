@@ -1,0 +1,40 @@
+// The points of one octree node, in memory: what the subtree builder hands
+// to its sink, what EncodeBlock writes and what DecodeBlock returns.
+//
+// Columns are separate (structure of arrays). Points are ordered by the child
+// octant that holds them (Cube::ChildOctant at the node's level), and
+// octant_offsets records the ranges: the points of octant o are
+// [octant_offsets[o], octant_offsets[o + 1]), octant_offsets[8] == size().
+// A renderer that refines a node into some of its children can thus draw the
+// parent's points of the other octants only.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "index/cube.h"
+#include "index/morton.h"
+
+namespace octocosm {
+
+struct NodePoints {
+  std::vector<double> position;        // x,y,z interleaved, 3 * size(); absolute coordinates
+  std::vector<double> weight;          // size(); the mass each point stands for; they sum to the subtree mass
+  std::vector<double> smoothing;       // size(); smoothing length h, absolute units
+  std::vector<float> velocity;         // 3 * size(), or empty
+  std::vector<std::uint64_t> id;       // size(), or empty
+  std::vector<std::uint8_t> type;      // size()
+  std::vector<float> displacement;     // 3 * size(), or empty: minimal-image offset to the next epoch
+  std::array<std::uint32_t, 9> octant_offsets{};
+
+  std::size_t size() const { return weight.size(); }
+};
+
+// Reorders `points` (every non-empty column together, stably) so that they
+// are grouped by the child octant of `key` that holds them, and fills
+// octant_offsets. Precondition: every point lies in `key` (Cube::Holds).
+void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube);
+
+}  // namespace octocosm

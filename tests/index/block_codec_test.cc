@@ -1,0 +1,437 @@
+// Block codec: round trips over every column combination and size, the
+// quantization bounds at every depth, exact weight sums, ranged decoding,
+// the documented byte layout, and corruption sweeps (every byte flip, every
+// truncation, structural fuzzing behind valid checksums) that must end in an
+// Error or identical data, never undefined behaviour (run under ASan/UBSan).
+#include "index/block_codec.h"
+
+#include <gtest/gtest.h>
+#include <xxhash.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <random>
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+constexpr ColumnSet kVelocityBit = ColumnBit(ColumnId::kVelocity);
+constexpr ColumnSet kIdBit = ColumnBit(ColumnId::kId);
+constexpr ColumnSet kDisplacementBit = ColumnBit(ColumnId::kDisplacement);
+
+// n random points inside node `key`, optional columns as `optional` says.
+NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const Cube& cube, ColumnSet optional) {
+  const NodeCube node = cube.NodeCubeOf(key);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::lognormal_distribution<double> mass(0, 2);
+  std::normal_distribution<float> vel(0, 300);
+  NodePoints p;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (;;) {
+      double x[3];
+      for (int a = 0; a < 3; ++a) x[a] = node.origin[a] + unit(rng) * node.size;
+      if (!cube.Holds(key, x)) continue;  // rounding at the upper faces
+      p.position.insert(p.position.end(), x, x + 3);
+      break;
+    }
+    p.weight.push_back(mass(rng));
+    p.smoothing.push_back(node.size * std::exp2(-16 * unit(rng)));
+    p.type.push_back(static_cast<std::uint8_t>(rng() % 6));
+    if (optional & kVelocityBit) {
+      for (int a = 0; a < 3; ++a) p.velocity.push_back(vel(rng));
+    }
+    if (optional & kIdBit) p.id.push_back(rng());
+    if (optional & kDisplacementBit) {
+      for (int a = 0; a < 3; ++a) p.displacement.push_back(static_cast<float>(unit(rng) - 0.5) * 0.01f);
+    }
+  }
+  OrderByOctant(p, key, cube);
+  return p;
+}
+
+long double Sum(const std::vector<double>& v) {
+  long double s = 0;
+  for (double x : v) s += x;
+  return s;
+}
+
+double Ulp(double x) { return std::nextafter(std::fabs(x), INFINITY) - std::fabs(x); }
+
+// Checks `decoded` against the `original` points within the documented bounds.
+void ExpectMatches(const NodePoints& original, const NodePoints& decoded, NodeKey key, const Cube& cube) {
+  const std::size_t n = original.size();
+  const NodeCube node = cube.NodeCubeOf(key);
+  ASSERT_EQ(decoded.octant_offsets, original.octant_offsets);
+  ASSERT_EQ(decoded.position.size(), 3 * n);
+  const double half_quantum = node.size / 131072;
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    const int a = static_cast<int>(i % 3);
+    const double slack = 2 * Ulp(std::fabs(node.origin[a]) + node.size);
+    double error = decoded.position[i] - original.position[i];
+    if (cube.periodic) error -= cube.size * std::round(error / cube.size);  // the point was wrapped into the box
+    ASSERT_LE(std::fabs(error), half_quantum * (1 + 1e-9) + slack) << i;
+    ASSERT_GE(decoded.position[i], node.origin[a]);
+    ASSERT_LE(decoded.position[i], node.origin[a] + node.size);
+  }
+  ASSERT_EQ(decoded.weight.size(), n);
+  if (n > 0) {
+    const long double mass = Sum(original.weight);
+    EXPECT_NEAR(static_cast<double>(Sum(decoded.weight) / mass), 1.0, 1e-12);
+    const double unit = static_cast<double>(mass) / static_cast<double>(kWeightTotalUnits);
+    for (std::size_t i = 0; i < n; ++i) ASSERT_LE(std::fabs(decoded.weight[i] - original.weight[i]), unit * 1.000001);
+  }
+  ASSERT_EQ(decoded.smoothing.size(), n);
+  for (std::size_t i = 0; i < n; ++i) {
+    // Half a step of 2^(1/2048) in log space.
+    const double ratio = decoded.smoothing[i] / original.smoothing[i];
+    ASSERT_LE(std::fabs(std::log2(ratio)), 1.0 / 4096 + 1e-12) << i;
+  }
+  EXPECT_EQ(decoded.type, original.type);
+  EXPECT_EQ(decoded.id, original.id);
+  for (const auto* pair : {&original.velocity, &original.displacement}) {
+    const auto& orig = *pair;
+    const auto& got = pair == &original.velocity ? decoded.velocity : decoded.displacement;
+    ASSERT_EQ(got.size(), orig.size());
+    for (int a = 0; a < 3 && !orig.empty(); ++a) {
+      float lo = orig[a], hi = orig[a];
+      for (std::size_t i = a; i < orig.size(); i += 3) lo = std::min(lo, orig[i]), hi = std::max(hi, orig[i]);
+      const double bound = (static_cast<double>(hi) - lo) / 131070 * (1 + 1e-6) + 4.0 * std::max(-lo, hi) * 0x1p-23;
+      for (std::size_t i = a; i < orig.size(); i += 3) ASSERT_LE(std::fabs(got[i] - orig[i]), bound);
+    }
+  }
+}
+
+bool SamePoints(const NodePoints& a, const NodePoints& b) {
+  return a.position == b.position && a.weight == b.weight && a.smoothing == b.smoothing && a.velocity == b.velocity &&
+         a.id == b.id && a.type == b.type && a.displacement == b.displacement && a.octant_offsets == b.octant_offsets;
+}
+
+const Cube kCube{{-3.25, 12.0, 1000.0}, 77.5, false};
+
+TEST(BlockCodec, RoundTripsEveryColumnCombinationAndSize) {
+  std::mt19937_64 rng(1);
+  const NodeKey key = NodeKey::FromPath("r30");
+  for (ColumnSet optional = 0; optional < 8; ++optional) {
+    const ColumnSet bits = ((optional & 1) ? kVelocityBit : 0) | ((optional & 2) ? kIdBit : 0) |
+                           ((optional & 4) ? kDisplacementBit : 0);
+    for (std::size_t n : {0, 1, 2, 9, 20000}) {
+      SCOPED_TRACE("optional " + std::to_string(optional) + " n " + std::to_string(n));
+      const NodePoints points = RandomPoints(rng, n, key, kCube, bits);
+      const Bytes block = EncodeBlock(points, key, kCube);
+      const DecodedBlock decoded = DecodeBlock(block, kAllColumns, key, kCube, "test block");
+      EXPECT_EQ(decoded.header.point_count, n);
+      EXPECT_EQ(decoded.header.block_size, block.size());
+      ExpectMatches(points, decoded.points, key, kCube);
+    }
+  }
+}
+
+TEST(BlockCodec, PositionErrorIsAtMostHalfAQuantumAtEveryDepth) {
+  std::mt19937_64 rng(2);
+  for (const Cube& cube : {kCube, Cube{{1e9, -1e9, 1e9}, 1.0, false}, Cube{{0, 0, 0}, 1e-6, true}}) {
+    for (int level = 0; level <= kMaxLevel; ++level) {
+      const std::uint32_t cells = 1u << level;
+      const NodeKey key = NodeKey::FromCell(
+          level, {static_cast<std::uint32_t>(rng() % cells), static_cast<std::uint32_t>(rng() % cells), cells - 1});
+      NodePoints points = RandomPoints(rng, 500, key, cube, 0);
+      // Points on the node's lower and upper faces too.
+      const NodeCube node = cube.NodeCubeOf(key);
+      for (int k = 0; k < 2; ++k) {
+        const double face = k == 0 ? node.origin[2] : cube.origin[2] + cube.size;  // the cube's own upper face
+        double x[3] = {node.origin[0], node.origin[1] + node.size / 3, face};
+        // The periodic upper face wraps to the bottom cell, and a computed
+        // node face can round into the neighbour: such points are not this node's.
+        if (!cube.Holds(key, x)) continue;
+        points.position.insert(points.position.end(), x, x + 3);
+        points.weight.push_back(1);
+        points.smoothing.push_back(node.size);
+        points.type.push_back(0);
+      }
+      OrderByOctant(points, key, cube);
+      const Bytes block = EncodeBlock(points, key, cube);
+      const NodePoints decoded = DecodeBlock(block, kAllColumns, key, cube, "depth test").points;
+      SCOPED_TRACE("level " + std::to_string(level));
+      ExpectMatches(points, decoded, key, cube);
+    }
+  }
+}
+
+TEST(BlockCodec, WeightsSumExactlyInIntegerUnits) {
+  std::mt19937_64 rng(3);
+  const NodeKey key = NodeKey::FromPath("r7");
+  for (int trial = 0; trial < 50; ++trial) {
+    NodePoints points = RandomPoints(rng, 1 + rng() % 3000, key, kCube, 0);
+    // Weights over 40 orders of magnitude: many round to zero units, the sum must not move.
+    std::uniform_real_distribution<double> exponent(-20, 20);
+    for (double& w : points.weight) w = std::pow(10.0, exponent(rng));
+    const Bytes block = EncodeBlock(points, key, kCube);
+    const BlockHeader header = DecodeBlockHeader(block, key, "w");
+    const BlockColumn* column = header.Find(ColumnId::kWeight);
+    ASSERT_NE(column, nullptr);
+    std::uint64_t units = 0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      std::uint32_t u;
+      std::memcpy(&u, block.data() + column->offset + 4 * i, 4);  // test host is little endian
+      units += u;
+    }
+    EXPECT_EQ(units, kWeightTotalUnits);
+    const NodePoints decoded = DecodeBlock(block, ColumnBit(ColumnId::kWeight), key, kCube, "w").points;
+    EXPECT_NEAR(static_cast<double>(Sum(decoded.weight) / Sum(points.weight)), 1.0, 1e-12);
+  }
+}
+
+TEST(BlockCodec, RangedDecodeEqualsFullDecode) {
+  std::mt19937_64 rng(4);
+  const NodeKey key = NodeKey::FromPath("r0123");
+  const NodePoints points = RandomPoints(rng, 777, key, kCube, kAllColumns);
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const NodePoints full = DecodeBlock(block, kAllColumns, key, kCube, "full").points;
+
+  // A reader that fetches only what it needs, each piece into its own buffer.
+  const Bytes fixed(block.begin(), block.begin() + kBlockFixedHeaderSize);
+  const std::size_t header_size = DecodeBlockHeaderSize(fixed, "ranged");
+  const Bytes prefix(block.begin(), block.begin() + static_cast<std::ptrdiff_t>(header_size));
+  const BlockHeader header = DecodeBlockHeader(prefix, key, "ranged");
+  EXPECT_EQ(header.columns.size(), 7u);
+  for (ColumnSet wanted = 1; wanted < (1u << 7); wanted += 5) {
+    NodePoints ranged;
+    for (int raw = 1; raw <= 7; ++raw) {
+      const auto id = static_cast<ColumnId>(raw);
+      if (!(wanted & (1u << (raw - 1)))) continue;
+      const BlockColumn* c = header.Find(id);
+      ASSERT_NE(c, nullptr);
+      const Bytes bytes(block.begin() + static_cast<std::ptrdiff_t>(c->offset),
+                        block.begin() + static_cast<std::ptrdiff_t>(c->offset + c->length));
+      DecodeColumn(header, id, bytes, kCube, "ranged", ranged);
+    }
+    const NodePoints subset = DecodeBlock(block, wanted << 1, key, kCube, "subset").points;
+    EXPECT_TRUE(SamePoints(ranged, subset)) << wanted;
+    if (wanted & 1) {
+      EXPECT_EQ(ranged.position, full.position);
+    }
+    if (wanted & (1u << 4)) {
+      EXPECT_EQ(ranged.id, full.id);
+    }
+  }
+}
+
+// The layout documented at the top of block_codec.h, read back field by field.
+TEST(BlockCodec, BytesFollowTheDocumentedLayout) {
+  const NodeKey key = NodeKey::FromPath("r5");  // cell (1, 0, 1) at level 1
+  const Cube cube{{0, 0, 0}, 2, false};
+  NodePoints p;
+  p.position = {1.5, 0.25, 1.0, 1.0 + 0.5 / 65536, 0.75, 1.75};
+  p.weight = {1, 3};
+  p.smoothing = {1.0, 0.5};
+  p.type = {4, 1};
+  p.id = {0x0102030405060708ull, 42};
+  OrderByOctant(p, key, cube);
+  // Point 0 has the top bit of x only (octant 1), point 1 those of y and z (octant 6).
+  ASSERT_EQ(p.octant_offsets, (std::array<std::uint32_t, 9>{0, 0, 1, 1, 1, 1, 1, 2, 2}));
+  const Bytes b = EncodeBlock(p, key, cube);
+  auto u16 = [&](std::size_t at) { return static_cast<unsigned>(b[at] | b[at + 1] << 8); };
+  auto u32 = [&](std::size_t at) { return u16(at) | (static_cast<std::uint32_t>(u16(at + 2)) << 16); };
+  auto u64 = [&](std::size_t at) { return u32(at) | (static_cast<std::uint64_t>(u32(at + 4)) << 32); };
+  EXPECT_EQ(std::string(b.begin(), b.begin() + 4), "OCBK");
+  EXPECT_EQ(u16(4), 1u);
+  const std::size_t header_size = 72 + 56 * 5 + 8;
+  EXPECT_EQ(u16(6), header_size);
+  EXPECT_EQ(u64(8), b.size());
+  EXPECT_EQ(u64(16), key.value());
+  EXPECT_EQ(u32(24), 2u);
+  EXPECT_EQ(u16(28), 5u);
+  EXPECT_EQ(u32(32 + 4 * 1), 0u);  // octant 1 starts at point 0
+  EXPECT_EQ(u32(32 + 4 * 2), 1u);  // and ends at point 1
+  EXPECT_EQ(u64(header_size - 8), XXH3_64bits(b.data(), header_size - 8));
+  // Directory: position, weight, smoothing, id, type, contiguous.
+  const int ids[5] = {1, 2, 3, 5, 6};
+  const std::size_t widths[5] = {6, 4, 2, 8, 1};
+  std::size_t offset = header_size;
+  for (int c = 0; c < 5; ++c) {
+    const std::size_t e = 72 + 56 * c;
+    EXPECT_EQ(b[e], ids[c]);
+    EXPECT_EQ(b[e + 1], 1);
+    EXPECT_EQ(u64(e + 8), offset);
+    EXPECT_EQ(u64(e + 16), 2 * widths[c]);
+    EXPECT_EQ(u64(e + 24), XXH3_64bits(b.data() + offset, 2 * widths[c]));
+    offset += 2 * widths[c];
+  }
+  EXPECT_EQ(offset, b.size());
+  // Position of point 0 (in octant 0): node origin (1, 0, 1), edge 1.
+  const std::size_t pos = header_size;
+  EXPECT_EQ(u16(pos + 0), 32768u);  // x = 1.5: the top bit, octant 1
+  EXPECT_EQ(u16(pos + 2), 16384u);  // y = 0.25
+  EXPECT_EQ(u16(pos + 4), 0u);      // z = 1.0, on the node's lower face
+  EXPECT_EQ(u16(pos + 6), 0u);      // x = 1 + half a quantum still rounds down
+  // Weights 1 : 3 of K units; unit = 4 / K.
+  EXPECT_EQ(u32(pos + 12), kWeightTotalUnits / 4);
+  EXPECT_EQ(u32(pos + 16), kWeightTotalUnits / 4 * 3);
+  double unit;
+  const std::uint64_t unit_bits = u64(72 + 56 + 32);
+  std::memcpy(&unit, &unit_bits, 8);
+  EXPECT_DOUBLE_EQ(unit, 4.0 / static_cast<double>(kWeightTotalUnits));
+  // Smoothing: h = s * 2^(-24 + code / 2048); h = s -> 24 * 2048.
+  EXPECT_EQ(u16(pos + 20), 24u * 2048);
+  EXPECT_EQ(u16(pos + 22), 23u * 2048);
+  EXPECT_EQ(u64(pos + 24), 0x0102030405060708ull);
+  EXPECT_EQ(b[pos + 40], 4);
+}
+
+void ExpectCorruptOrSame(const Bytes& block, NodeKey key, ColumnSet wanted, const NodePoints& expected,
+                         const std::string& what) {
+  try {
+    const NodePoints got = DecodeBlock(block, wanted, key, kCube, "fuzz").points;
+    EXPECT_TRUE(SamePoints(got, expected)) << what;
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << what << ": " << e.what();
+    EXPECT_NE(std::string(e.what()).find("fuzz"), std::string::npos);
+  }
+}
+
+TEST(BlockCodec, EverySingleByteFlipIsCaughtOrHarmless) {
+  std::mt19937_64 rng(5);
+  const NodeKey key = NodeKey::FromPath("r44");
+  const NodePoints points = RandomPoints(rng, 6, key, kCube, kAllColumns);
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const NodePoints all = DecodeBlock(block, kAllColumns, key, kCube, "fuzz").points;
+  const ColumnSet some = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kId);
+  const NodePoints partial = DecodeBlock(block, some, key, kCube, "fuzz").points;
+  for (std::size_t at = 0; at < block.size(); ++at) {
+    for (const int flip : {0x01, 0x10, 0x80, 0xff}) {
+      Bytes bad = block;
+      bad[at] = static_cast<std::uint8_t>(bad[at] ^ flip);
+      ExpectCorruptOrSame(bad, key, kAllColumns, all, "byte " + std::to_string(at));
+      ExpectCorruptOrSame(bad, key, some, partial, "byte " + std::to_string(at) + " partial");
+    }
+  }
+}
+
+TEST(BlockCodec, EveryTruncationIsCorruption) {
+  std::mt19937_64 rng(6);
+  const NodeKey key = NodeKey::FromPath("r1");
+  const Bytes block = EncodeBlock(RandomPoints(rng, 5, key, kCube, kIdBit), key, kCube);
+  for (std::size_t size = 0; size < block.size(); ++size) {
+    const Bytes cut(block.begin(), block.begin() + static_cast<std::ptrdiff_t>(size));  // exact-size buffer for ASan
+    try {
+      DecodeBlock(cut, kAllColumns, key, kCube, "cut");
+      ADD_FAILURE() << "truncation to " << size << " bytes decoded";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << size;
+    }
+  }
+}
+
+// Rewrites every checksum so that corrupted structure gets past them.
+void FixChecksums(Bytes& b) {
+  if (b.size() < kBlockFixedHeaderSize) return;
+  const std::size_t header_size = static_cast<std::size_t>(b[6] | b[7] << 8);
+  if (header_size < 8 || header_size > b.size()) return;
+  const std::size_t columns = (header_size - 8 - kBlockFixedHeaderSize) / kBlockDirectoryEntrySize;
+  for (std::size_t c = 0; c < columns && kBlockFixedHeaderSize + 56 * (c + 1) <= header_size - 8; ++c) {
+    std::uint8_t* e = b.data() + kBlockFixedHeaderSize + 56 * c;
+    std::uint64_t offset = 0, length = 0;
+    for (int i = 7; i >= 0; --i) offset = offset << 8 | e[8 + i], length = length << 8 | e[16 + i];
+    if (offset > b.size() || length > b.size() - offset) continue;
+    const std::uint64_t sum = XXH3_64bits(b.data() + offset, length);
+    for (int i = 0; i < 8; ++i) e[24 + i] = static_cast<std::uint8_t>(sum >> (8 * i));
+  }
+  const std::uint64_t sum = XXH3_64bits(b.data(), header_size - 8);
+  for (int i = 0; i < 8; ++i) b[header_size - 8 + i] = static_cast<std::uint8_t>(sum >> (8 * i));
+}
+
+TEST(BlockCodec, StructuralFuzzBehindValidChecksumsNeverMisbehaves) {
+  std::mt19937_64 rng(7);
+  const NodeKey key = NodeKey::FromPath("r26");
+  const Bytes block = EncodeBlock(RandomPoints(rng, 4, key, kCube, kAllColumns), key, kCube);
+  int decoded = 0, corrupt = 0, unsupported = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    Bytes bad = block;
+    const int flips = 1 + static_cast<int>(rng() % 3);
+    for (int f = 0; f < flips; ++f) {
+      // Mostly the header and directory, where the structure lives.
+      const std::size_t at = rng() % 4 ? rng() % std::min<std::size_t>(bad.size(), 480) : rng() % bad.size();
+      bad[at] = static_cast<std::uint8_t>(rng());
+    }
+    if (rng() % 8 == 0) bad.resize(rng() % bad.size());
+    FixChecksums(bad);
+    try {
+      const DecodedBlock d = DecodeBlock(bad, kAllColumns, key, kCube, "fuzz");
+      for (double x : d.points.position) ASSERT_TRUE(std::isfinite(x));
+      ++decoded;
+    } catch (const Error& e) {
+      ASSERT_TRUE(e.kind() == ErrorKind::kCorruption || e.kind() == ErrorKind::kNotSupported) << e.what();
+      (e.kind() == ErrorKind::kCorruption ? corrupt : unsupported)++;
+    }
+  }
+  EXPECT_GT(corrupt, 1000);
+  EXPECT_GT(unsupported, 10);  // a rewritten version field
+  EXPECT_GT(decoded, 10);      // a changed parameter or value decodes to other data
+}
+
+TEST(BlockCodec, WrongKeyAndVersionAreReported) {
+  std::mt19937_64 rng(8);
+  const NodeKey key = NodeKey::FromPath("r3");
+  Bytes block = EncodeBlock(RandomPoints(rng, 3, key, kCube, 0), key, kCube);
+  try {
+    DecodeBlock(block, kAllColumns, NodeKey::FromPath("r4"), kCube, "file.ocp block r4");
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kCorruption);
+    EXPECT_NE(std::string(e.what()).find("file.ocp block r4"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("r3"), std::string::npos);
+  }
+  block[4] = 2;
+  FixChecksums(block);
+  try {
+    DecodeBlock(block, kAllColumns, key, kCube, "v2");
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kNotSupported);
+  }
+}
+
+TEST(BlockCodec, EncodeRejectsPointsThatBreakTheContract) {
+  std::mt19937_64 rng(9);
+  const NodeKey key = NodeKey::FromPath("r12");
+  const NodePoints good = RandomPoints(rng, 40, key, kCube, kVelocityBit);
+  auto expect_invalid = [&](NodePoints p, const char* what) {
+    try {
+      EncodeBlock(p, key, kCube);
+      ADD_FAILURE() << what;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument) << what;
+    }
+  };
+  NodePoints p = good;
+  p.position[0] = kCube.origin[0] + kCube.size * 0.99;  // another node
+  expect_invalid(p, "outside");
+  p = good;
+  p.octant_offsets[8] = 39;
+  expect_invalid(p, "offsets");
+  p = good;
+  if (p.octant_offsets[1] > 0 && p.octant_offsets[1] < p.size()) {
+    ++p.octant_offsets[1];
+    expect_invalid(p, "offsets disagree with positions");
+  }
+  p = good;
+  p.weight[3] = std::nan("");
+  expect_invalid(p, "nan weight");
+  p = good;
+  p.weight[3] = -1;
+  expect_invalid(p, "negative weight");
+  p = good;
+  p.velocity[5] = INFINITY;
+  expect_invalid(p, "inf velocity");
+  p = good;
+  p.smoothing.pop_back();
+  expect_invalid(p, "short column");
+  p = good;
+  p.smoothing[0] = std::nan("");
+  expect_invalid(p, "nan smoothing");
+}
+
+}  // namespace
+}  // namespace octocosm
