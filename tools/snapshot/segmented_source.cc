@@ -1,0 +1,102 @@
+#include "tools/snapshot/segmented_source.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "storage/error.h"
+
+namespace octocosm {
+
+SegmentedSource::SegmentedSource(std::size_t chunk_particles) : chunk_particles_(chunk_particles) {
+  if (chunk_particles_ == 0) throw Error::InvalidArgument("chunk_particles must be at least 1");
+}
+
+bool SegmentedSource::Next(ParticleChunk& chunk) {
+  chunk.clear();
+  while (chunk.size() < chunk_particles_ && segment_index_ < segments_.size()) {
+    const Segment& segment = segments_[segment_index_];
+    std::uint64_t left = segment.count - segment_offset_;
+    if (left == 0) {
+      ++segment_index_;
+      segment_offset_ = 0;
+      continue;
+    }
+    auto count = static_cast<std::size_t>(std::min<std::uint64_t>(left, chunk_particles_ - chunk.size()));
+    std::size_t first = chunk.size();
+    AppendRange(segment, segment_offset_, count, chunk);
+    CheckFinite(segment, segment_offset_, chunk, first);
+    segment_offset_ += count;
+  }
+  return chunk.size() > 0;
+}
+
+void SegmentedSource::Rewind() {
+  segment_index_ = 0;
+  segment_offset_ = 0;
+  OnRewind();
+}
+
+std::string SegmentedSource::DescribeParticle(const Segment& segment, std::uint64_t index) const {
+  return "type " + std::to_string(segment.type) + " particle " + std::to_string(index);
+}
+
+void SegmentedSource::CountSegments(std::size_t type_count) {
+  header_.count_per_type.assign(type_count, 0);
+  header_.total_count = 0;
+  for (const Segment& segment : segments_) {
+    header_.count_per_type.at(static_cast<std::size_t>(segment.type)) += segment.count;
+    header_.total_count += segment.count;
+  }
+}
+
+void SegmentedSource::CheckFinite(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
+                                  std::size_t first) const {
+  for (std::size_t i = first; i < chunk.size(); ++i) {
+    const double* p = &chunk.position[3 * i];
+    if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) continue;
+    std::ostringstream message;
+    message << DescribeParticle(segment, begin + (i - first));
+    if (chunk.has_id()) message << " (ID " << chunk.id[i] << ")";
+    message << " has a non-finite coordinate (" << p[0] << ", " << p[1] << ", " << p[2]
+            << "); positions must be finite numbers";
+    throw Error::BadInput(header_.files.at(segment.file), message.str());
+  }
+}
+
+bool IsTypeSelected(const std::vector<int>& selected, int type) {
+  return selected.empty() || std::find(selected.begin(), selected.end(), type) != selected.end();
+}
+
+std::vector<std::uint64_t> ReconcileTypeTotals(const std::string& path, const std::vector<std::uint64_t>& low,
+                                               const std::vector<std::uint64_t>& high,
+                                               const std::vector<std::uint64_t>& file_sums,
+                                               nlohmann::json& extra) {
+  auto is_zero = [](std::uint64_t v) { return v == 0; };
+  if (std::all_of(low.begin(), low.end(), is_zero) && std::all_of(high.begin(), high.end(), is_zero)) {
+    if (std::any_of(file_sums.begin(), file_sums.end(), [](std::uint64_t v) { return v != 0; })) {
+      extra["totals_from_file_counts"] = true;
+    }
+    return file_sums;
+  }
+  std::vector<std::uint64_t> totals(file_sums.size(), 0);
+  for (std::size_t type = 0; type < file_sums.size(); ++type) {
+    std::uint64_t low_word = type < low.size() ? low[type] : 0;
+    std::uint64_t high_word = type < high.size() ? high[type] : 0;
+    std::uint64_t combined = low_word + (high_word << 32);
+    if (combined == file_sums[type]) {
+      totals[type] = combined;
+    } else if (low_word == file_sums[type]) {
+      totals[type] = low_word;
+      extra["ignored_total_high_words"][std::to_string(type)] = high_word;
+    } else {
+      throw Error::BadInput(path, "counts do not add up: the header total for type " + std::to_string(type) +
+                                      " is " + std::to_string(combined) + " (high word " +
+                                      std::to_string(high_word) + ") but the files hold " +
+                                      std::to_string(file_sums[type]) + " particles of that type");
+    }
+  }
+  return totals;
+}
+
+}  // namespace octocosm

@@ -1,0 +1,121 @@
+// Streaming readers for N-body snapshots: the input side of `octocosm ingest`.
+//
+// OpenSnapshot() detects the format of a snapshot (GADGET format 1 or 2 in
+// either byte order, HDF5 in the GADGET-4 / AREPO / SWIFT layout, or, when
+// asked for explicitly, raw binary records and CSV), finds every file of a
+// multi-file snapshot, checks the headers against each other, and returns a
+// ParticleSource that hands out the particles in ParticleChunk batches.
+//
+// Memory is bounded by ReadOptions::chunk_particles whatever the size of the
+// input: nothing reads a whole file. A source can be rewound, because the
+// octree builder makes at least two passes (bounds and counts, then
+// distribution). docs/INPUT_FORMATS.md describes what is read and how each
+// quirk of real files is handled.
+//
+// Errors: malformed input throws Error::BadInput naming the file, the block or
+// dataset, and what was expected; a file that cannot be opened or read throws
+// Error::Io or Error::NotFound; impossible options throw
+// Error::InvalidArgument. Nothing here exits or aborts.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "index/particle_chunk.h"
+
+namespace octocosm {
+
+// What the manifest records about an input snapshot.
+struct SnapshotHeader {
+  std::string format;              // "gadget1", "gadget2", "hdf5-gadget", "hdf5-swift", "raw", "csv"
+  std::vector<std::string> files;  // every file read, in reading order
+  double time = 0;                 // scale factor a in cosmological runs, else simulation time
+  double redshift = 0;             // from the header, or 1/a - 1 when cosmological and absent
+  double box_size = 0;             // 0 = not periodic / unknown
+  // Particles per type over all files, after type selection (unselected types
+  // count 0). Its length is the number of types of the format (6 for GADGET,
+  // NTYPES for HDF5, 1 for raw and CSV).
+  std::vector<std::uint64_t> count_per_type;
+  std::uint64_t total_count = 0;  // sum of count_per_type
+  bool has_velocity = false;      // chunks carry velocities
+  bool has_id = false;            // chunks carry IDs
+  bool cosmological = false;      // comoving integration (then time is the scale factor)
+  double omega0 = 0, omega_lambda = 0, hubble_param = 0;  // 0 when unknown
+  nlohmann::json extra = nlohmann::json::object();  // mass table, flags, units, quirks found
+};
+
+// The record layout of a raw binary file; see RawLayout::Parse for the grammar.
+struct RawColumn {
+  enum class Field { kX, kY, kZ, kVx, kVy, kVz, kMass, kId, kSkip };
+  enum class Scalar { kF32, kF64, kU32, kU64, kI32, kI64 };
+  Field field;
+  Scalar scalar;
+  std::size_t offset = 0;  // byte offset inside a record
+};
+
+struct RawLayout {
+  std::vector<RawColumn> columns;  // one per scalar value in a record
+  std::size_t record_bytes = 0;
+  bool big_endian = false;
+  std::string text;  // the layout string it was parsed from
+
+  bool empty() const { return columns.empty(); }
+  bool has(RawColumn::Field field) const;
+
+  // Parses a layout string (the grammar is in docs/INPUT_FORMATS.md):
+  //   layout  := [ "<" | ">" ] column { "," column }      ">" = big endian
+  //   column  := name [ ":" scalar [ "x" count ] ]
+  //   name    := x | y | z | vx | vy | vz | mass | id | skip | xyz | vel | pos
+  //   scalar  := f32 | f64 | u32 | u64 | i32 | i64
+  // A scalar applies to its column and to the untyped columns right before it,
+  // so "x,y,z:f32" declares three float32 columns. "xyz"/"pos" and "vel" expand
+  // to three columns; "skip:f32x2" skips 8 bytes. x, y and z are required;
+  // vx, vy, vz come all three or not at all. Throws Error::InvalidArgument.
+  static RawLayout Parse(std::string_view text);
+};
+
+struct CsvOptions {
+  // Field separator: ',' or ' ' (any run of spaces and tabs). 0 = detect from
+  // the header row (comma if it has one, else whitespace).
+  char delimiter = 0;
+};
+
+struct ReadOptions {
+  // "auto" detects GADGET and HDF5 from the bytes, and CSV from a ".csv"
+  // name; "gadget", "hdf5", "raw" (needs `raw`) and "csv" force a format.
+  std::string format = "auto";
+  std::vector<int> types;  // particle types to read; empty = all
+  std::size_t chunk_particles = std::size_t{1} << 20;
+  bool read_velocity = true;
+  bool read_id = true;
+  RawLayout raw;
+  CsvOptions csv;
+  double box_size_override = -1;  // >= 0 replaces the header's box size (e.g. 0-box ICs)
+};
+
+// A rewindable stream of particle batches. Not thread-safe; one source per
+// thread. (HDF5 sources also share the non-thread-safe HDF5 library, so
+// several HDF5 sources must not be read concurrently.)
+class ParticleSource {
+ public:
+  virtual ~ParticleSource() = default;
+  virtual const SnapshotHeader& header() const = 0;
+  // Replaces the contents of `chunk` with the next 1 to chunk_particles
+  // particles; returns false (and leaves `chunk` empty) at the end.
+  virtual bool Next(ParticleChunk& chunk) = 0;
+  // Starts again from the first particle.
+  virtual void Rewind() = 0;
+};
+
+// Opens a snapshot. `path` is a single file, any one file of a multi-file set
+// (snap.1, snap.2.hdf5), or the base name of a set (snap -> snap.0, snap.1, ...
+// or snap.0.hdf5, ...).
+std::unique_ptr<ParticleSource> OpenSnapshot(const std::string& path, const ReadOptions& options);
+
+}  // namespace octocosm
