@@ -29,7 +29,8 @@
 // never held while reading from the source. Get() blocks the caller for the
 // duration of a source read (its own, or one already in flight for the same
 // block: concurrent misses for one block read it once, and all waiters get the
-// same bytes or the same exception). Other methods do not block on I/O.
+// same bytes or an Error of the same kind and message). Other methods do not
+// block on I/O.
 //
 // Ownership. The cache does not own the source, which must outlive it. Every
 // PinnedBlock must be released (destroyed or Release()d) before the cache is
@@ -44,10 +45,12 @@
 #include <list>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <unordered_map>
 
 #include "storage/block_source.h"
+#include "storage/error.h"
 
 namespace octocosm {
 
@@ -94,8 +97,9 @@ class BlockCache {
   // Returns the block pinned: from memory on a hit, otherwise read through the
   // source on this thread (or by waiting for a read of the same block already
   // in flight on another thread). Blocks for the read. A source error is
-  // rethrown to the reader and every waiter (the same exception object) and
-  // nothing is cached for the block; a later Get() tries again.
+  // thrown to the reader and to every waiter (each its own copy of the same
+  // Error: kind and message) and nothing is cached for the block; a later
+  // Get() tries again.
   PinnedBlock Get(const BlockId& id);
 
   // Non-blocking: returns the block pinned if it is resident, else an empty
@@ -144,7 +148,11 @@ class BlockCache {
   // A read in progress; waiters sleep on `done_cv` until `done`.
   struct Flight {
     bool done = false;
-    std::exception_ptr error;
+    // The failure, if the read failed: an Error is kept by value and thrown
+    // afresh to each waiter (see ThreadOwnCopy in the .cc); anything else
+    // (e.g. bad_alloc) is kept as thrown.
+    std::optional<Error> error;
+    std::exception_ptr other_error;
     std::size_t waiters = 0;           // Get() calls sleeping on this flight
     Entry* entry = nullptr;             // set once done without error
     std::condition_variable done_cv;

@@ -16,6 +16,7 @@ namespace {
 
 using cachetest::Block;
 using cachetest::CacheTestSource;
+using cachetest::OpenGateOnExit;
 
 constexpr std::size_t Charge(std::size_t size) { return BlockCache::ChargeFor(size); }
 
@@ -167,6 +168,7 @@ TEST(BlockCacheTest, ConcurrentMissesOfOneBlockReadItOnce) {
   for (int t = 0; t < kThreads; ++t) {
     threads.emplace_back([&, t] { results[t] = cache.Get(Block(42)); });
   }
+  OpenGateOnExit open_on_failure(source);
   // One reader reaches the source; the others must be waiting on it, which
   // shows as a miss each, before the read is let through.
   ASSERT_TRUE(source.WaitForReadsStarted(1));
@@ -217,6 +219,7 @@ TEST(BlockCacheTest, SourceErrorReachesEveryWaiterAndIsNotCached) {
       }
     });
   }
+  OpenGateOnExit open_on_failure(source);
   ASSERT_TRUE(source.WaitForReadsStarted(1));
   for (int spins = 0; cache.Stats().misses < kThreads && spins < 20'000; ++spins) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1));

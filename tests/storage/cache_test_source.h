@@ -125,6 +125,25 @@ class CacheTestSource : public BlockSource {
   mutable std::unordered_map<BlockId, std::size_t, BlockIdHash> reads_;
 };
 
+// Opens the gate when it goes out of scope. Declared after the threads or
+// Prefetcher that may be stuck at the gate, it runs before they are joined, so
+// a failed assertion ends the test instead of hanging it.
+class OpenGateOnExit {
+ public:
+  explicit OpenGateOnExit(CacheTestSource& source) : source_(source) {}
+  OpenGateOnExit(const OpenGateOnExit&) = delete;
+  OpenGateOnExit& operator=(const OpenGateOnExit&) = delete;
+  ~OpenGateOnExit() {
+    if (armed_) source_.OpenGate();
+  }
+  // For a test that hands the opening to someone else once set up.
+  void Dismiss() { armed_ = false; }
+
+ private:
+  CacheTestSource& source_;
+  bool armed_ = true;
+};
+
 // A BlockId from a small integer, for readable tests.
 inline BlockId Block(std::uint64_t key, std::uint32_t epoch = 0) { return BlockId{epoch, key}; }
 
