@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# One-step set-up for a fresh Debian 12 machine: installs what octocosm needs
+# (apt-get), builds it, and then either runs the demo job or the whole test
+# suite. Idempotent: packages already present are not fetched again.
+#
+#   tools/bootstrap.sh demo   # install, build, run the main job on an embedded default
+#   tools/bootstrap.sh test   # install, build (plain + ASan/UBSan), run every test
+set -euo pipefail
+
+mode="${1:-demo}"
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+jobs="$(nproc 2>/dev/null || echo 2)"
+
+packages=(
+  build-essential cmake pkg-config git
+  libhdf5-dev libzstd-dev libxxhash-dev libfftw3-dev
+  libcli11-dev nlohmann-json3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+)
+
+install_packages() {
+  local missing=()
+  for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if ((${#missing[@]} == 0)); then
+    echo "bootstrap: all ${#packages[@]} packages present"
+    return
+  fi
+  echo "bootstrap: installing ${missing[*]}"
+  local sudo=""
+  if [ "$(id -u)" != 0 ]; then sudo="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $sudo apt-get update -qq
+  $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+build() {  # build DIR [cmake args...]
+  local dir="$1"; shift
+  cmake -S "$root" -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo "$@" >/dev/null
+  cmake --build "$dir" -j"$jobs"
+}
+
+install_packages
+case "$mode" in
+  demo)
+    build "$root/build"
+    "$root/tools/demo.sh" "$root/build"
+    ;;
+  test)
+    build "$root/build"
+    (cd "$root/build" && ctest --output-on-failure -j"$jobs")
+    # The same suite once more under AddressSanitizer + UndefinedBehaviorSanitizer.
+    build "$root/build-asan" -DOCTOCOSM_SANITIZE=ON -DOCTOCOSM_BUILD_BENCH=OFF
+    (cd "$root/build-asan" && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+       ctest --output-on-failure -j"$jobs")
+    ;;
+  *)
+    echo "usage: $0 demo|test" >&2
+    exit 2
+    ;;
+esac
