@@ -188,6 +188,11 @@ IndexPage DecodeIndexPage(std::span<const std::uint8_t> page, const IndexPageExp
   IndexPage result;
   result.page_number = expect.page_number;
   result.level = expect.level;
+  if (leaf) {
+    result.leaf_entries.reserve(count);
+  } else {
+    result.interior_entries.reserve(count);
+  }
   const std::uint8_t* entries = in + kIndexPageHeaderSize;
   std::uint64_t previous_key = 0;
   for (std::uint32_t i = 0; i < count; ++i) {
