@@ -367,6 +367,31 @@ TEST_F(SharedDataTest, TruncatedGadgetFilesFailCleanly) {
                    {DataFile("gadget2_format2_multifile/test_g2_snap.1")}, 4099);
 }
 
+TEST_F(SharedDataTest, DamagedGadgetHeaderBytesFailCleanly) {
+  // Every byte of the header record (and the first POS marker) set to 0xff or
+  // 0x7f in turn: the read must succeed or fail with BadInput, never crash.
+  ScratchDir dir;
+  std::ifstream in(DataFile("gadget2_ics/gassphere_littleendian.dat"), std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string path = dir.File("damaged.dat");
+  for (std::size_t at = 0; at < 268; ++at) {
+    for (char value : {'\xff', '\x7f'}) {
+      std::string damaged = bytes;
+      damaged[at] = value;
+      {
+        std::ofstream out(path, std::ios::binary | std::ios::trunc);
+        out.write(damaged.data(), static_cast<std::streamsize>(damaged.size()));
+      }
+      try {
+        auto source = OpenSnapshot(path, {});
+        ReadAll(*source);
+      } catch (const Error& error) {
+        ASSERT_EQ(error.kind(), ErrorKind::kBadInput) << "byte " << at << ": " << error.what();
+      }
+    }
+  }
+}
+
 TEST_F(SharedDataTest, TruncatedHdf5FilesFailCleanly) {
   SweepTruncations(DataFile("gadget4_hdf5_galaxy_collision_timeseries/snapshot_003.hdf5"), {}, 84731);
 }

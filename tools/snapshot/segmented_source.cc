@@ -7,6 +7,11 @@
 #include "storage/error.h"
 
 namespace octocosm {
+namespace {
+
+constexpr std::uint64_t kMaxParticlesPerRead = 1 << 16;
+
+}  // namespace
 
 SegmentedSource::SegmentedSource(std::size_t chunk_particles) : chunk_particles_(chunk_particles) {
   if (chunk_particles_ == 0) throw Error::InvalidArgument("chunk_particles must be at least 1");
@@ -22,7 +27,10 @@ bool SegmentedSource::Next(ParticleChunk& chunk) {
       segment_offset_ = 0;
       continue;
     }
-    auto count = static_cast<std::size_t>(std::min<std::uint64_t>(left, chunk_particles_ - chunk.size()));
+    // Reading in pieces of at most kMaxParticlesPerRead bounds the byte buffer
+    // of a format (24 bytes a particle) whatever the chunk size.
+    auto count = static_cast<std::size_t>(
+        std::min<std::uint64_t>({left, chunk_particles_ - chunk.size(), kMaxParticlesPerRead}));
     std::size_t first = chunk.size();
     AppendRange(segment, segment_offset_, count, chunk);
     CheckFinite(segment, segment_offset_, chunk, first);
