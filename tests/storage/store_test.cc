@@ -174,6 +174,17 @@ TEST(StoreWriter, RejectsMisuse) {
   StoreReader::Open(dir.path());  // untouched
 }
 
+TEST(StoreWriter, OperatingSystemFailuresAreIoErrors) {
+  ScratchDirectory dir;
+  std::ofstream(dir.File("plain-file")) << "x";
+  // A directory cannot be created under a regular file.
+  ExpectError(ErrorKind::kIo, [&] { StoreWriter(dir.File("plain-file/store"), kDataset, kSchema); });
+  // The store directory vanishes under an open writer.
+  StoreWriter writer(dir.File("store"), kDataset, kSchema);
+  std::filesystem::remove_all(dir.File("store"));
+  ExpectError(ErrorKind::kIo, [&] { writer.BeginEpoch(0, 0); });
+}
+
 // ---------------------------------------------------------------------------
 // Interrupted writes never open.
 
