@@ -61,40 +61,59 @@ void PmGravity::SolvePoisson() {
 void PmGravity::InterpolateGradient(std::span<const double> positions, double scale, std::span<double> out) const {
   const int n = grid_.n();
   const std::size_t un = static_cast<std::size_t>(n);
+  const std::size_t padded = grid_.padded();
+  const double* phi = grid_.real();
   const double cells_per_length = n / box_;
   // -grad over 12 dx, dx = box / n.
   const double difference_scale = -scale * cells_per_length / 12.0;
   const std::size_t count = positions.size() / 3;
-  auto wrap = [un](std::size_t i, long offset) {
-    return static_cast<std::size_t>((static_cast<long>(i) + offset + 2 * static_cast<long>(un)) % static_cast<long>(un));
+  // Offsets are within -2..+3 of an index in [0, n): one add or subtract
+  // wraps them, much cheaper than a division. Grids of 2 or 3 cells need a
+  // second pass.
+  const long ln = static_cast<long>(un);
+  auto wrap = [ln](std::size_t i, long offset) {
+    long index = static_cast<long>(i) + offset;
+    while (index < 0) index += ln;
+    while (index >= ln) index -= ln;
+    return static_cast<std::size_t>(index);
   };
   ParallelFor(count, threads_, [&](std::size_t begin, std::size_t end) {
     for (std::size_t p = begin; p < end; ++p) {
       const CicAxis axes[3] = {CicAlongAxis(positions[3 * p] * cells_per_length, n),
                                CicAlongAxis(positions[3 * p + 1] * cells_per_length, n),
                                CicAlongAxis(positions[3 * p + 2] * cells_per_length, n)};
-      // Neighbour indices -2..+3 around the lower point along each axis.
-      std::size_t around[3][6];
-      double weight[3][2];
-      for (int d = 0; d < 3; ++d) {
-        for (int o = 0; o < 6; ++o) around[d][o] = wrap(axes[d].lower, o - 2);
-        weight[d][0] = 1.0 - axes[d].upper_weight;
-        weight[d][1] = axes[d].upper_weight;
+      // Grid indices at offsets -2..+3 from the lower CIC point along each
+      // axis: the 4-point stencils of both CIC points need all six.
+      std::size_t ix[6], iy[6], iz[6];
+      for (int o = 0; o < 6; ++o) {
+        ix[o] = wrap(axes[0].lower, o - 2);
+        iy[o] = wrap(axes[1].lower, o - 2);
+        iz[o] = wrap(axes[2].lower, o - 2);
       }
-      auto phi = [&](std::size_t i, std::size_t j, std::size_t k) { return grid_.Real(i, j, k); };
+      // Rows (x, y) the stencils touch: the cross of x offsets 0..5 with y
+      // offsets 2..3 and of x offsets 2..3 with y offsets 0..5.
+      const double* row[6][6] = {};
+      for (int a = 0; a < 6; ++a) {
+        for (int b = 0; b < 6; ++b) {
+          if ((a == 2 || a == 3) || (b == 2 || b == 3)) row[a][b] = phi + (ix[a] * un + iy[b]) * padded;
+        }
+      }
+      const double wx[2] = {1.0 - axes[0].upper_weight, axes[0].upper_weight};
+      const double wy[2] = {1.0 - axes[1].upper_weight, axes[1].upper_weight};
+      const double wz[2] = {1.0 - axes[2].upper_weight, axes[2].upper_weight};
       double force[3] = {0.0, 0.0, 0.0};
       for (int a = 0; a < 2; ++a) {
         for (int b = 0; b < 2; ++b) {
+          const int x0 = a + 2, y0 = b + 2;  // this node's offsets in ix, iy
           for (int c = 0; c < 2; ++c) {
-            const double w = weight[0][a] * weight[1][b] * weight[2][c];
-            // Centre index of this node in `around` is 2 + offset.
-            const std::size_t* ax = around[0] + a;
-            const std::size_t* ay = around[1] + b;
-            const std::size_t* az = around[2] + c;
-            const std::size_t i = ax[2], j = ay[2], k = az[2];
-            const double gx = 8.0 * (phi(ax[3], j, k) - phi(ax[1], j, k)) - (phi(ax[4], j, k) - phi(ax[0], j, k));
-            const double gy = 8.0 * (phi(i, ay[3], k) - phi(i, ay[1], k)) - (phi(i, ay[4], k) - phi(i, ay[0], k));
-            const double gz = 8.0 * (phi(i, j, az[3]) - phi(i, j, az[1])) - (phi(i, j, az[4]) - phi(i, j, az[0]));
+            const int z0 = c + 2;
+            const std::size_t k = iz[z0];
+            const double w = wx[a] * wy[b] * wz[c];
+            const double gx = 8.0 * (row[x0 + 1][y0][k] - row[x0 - 1][y0][k]) - (row[x0 + 2][y0][k] - row[x0 - 2][y0][k]);
+            const double gy = 8.0 * (row[x0][y0 + 1][k] - row[x0][y0 - 1][k]) - (row[x0][y0 + 2][k] - row[x0][y0 - 2][k]);
+            const double* centre = row[x0][y0];
+            const double gz =
+                8.0 * (centre[iz[z0 + 1]] - centre[iz[z0 - 1]]) - (centre[iz[z0 + 2]] - centre[iz[z0 - 2]]);
             force[0] += w * gx;
             force[1] += w * gy;
             force[2] += w * gz;
