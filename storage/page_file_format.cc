@@ -1,7 +1,6 @@
 #include "storage/page_file_format.h"
 
 #include <algorithm>
-#include <cstring>
 
 #include "storage/block_index_format.h"
 #include "storage/checksum.h"

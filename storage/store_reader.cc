@@ -1,7 +1,5 @@
 #include "storage/store_reader.h"
 
-#include <fstream>
-#include <sstream>
 
 #include "storage/checksum.h"
 #include "storage/error.h"
