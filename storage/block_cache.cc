@@ -95,31 +95,45 @@ PinnedBlock BlockCache::PinLocked(Entry* entry) {
 
 // Makes a new entry findable with `pins` handles already counted for it
 // (pins >= 1, so the new entry itself is never the one evicted), replacing any
-// entry of the same id, then evicts down to the budget.
+// entry of the same id, then evicts down to the budget. Both allocations come
+// before any change, so a bad_alloc leaves the cache as it was.
 BlockCache::Entry* BlockCache::InsertPinnedLocked(const BlockId& id,
                                                   std::shared_ptr<const Bytes> bytes,
                                                   std::uint32_t pins) {
   assert(pins > 0);
-  if (Entry* old = FindLocked(id)) RemoveFromCacheLocked(old);
-
   const std::size_t charge = ChargeFor(bytes->size());
   auto position =
       in_use_.insert(in_use_.end(), Entry{id, {}, std::move(bytes), charge, pins, Where::kInUse});
   position->self = position;
-  table_.emplace(id, &*position);
+  Entry* entry = &*position;
+  std::pair<Table::iterator, bool> slot;
+  try {
+    slot = table_.try_emplace(id, entry);
+  } catch (...) {
+    in_use_.erase(position);
+    throw;
+  }
+  if (!slot.second) {
+    UnchargeLocked(slot.first->second);
+    slot.first->second = entry;
+  }
   stats_.resident_bytes += charge;
   stats_.pinned_bytes += charge;
   ++stats_.entries;
   ++stats_.pinned_entries;
   ++stats_.inserts;
   EvictLocked();
-  return &*position;
+  return entry;
 }
 
-// Makes the entry unfindable and uncharged: freed now if unpinned, otherwise
-// moved to detached_ until its last handle goes.
 void BlockCache::RemoveFromCacheLocked(Entry* entry) {
   table_.erase(entry->id);
+  UnchargeLocked(entry);
+}
+
+// Takes an entry whose table slot is gone or reused off the budget: freed now
+// if unpinned, otherwise moved to detached_ until its last handle goes.
+void BlockCache::UnchargeLocked(Entry* entry) {
   stats_.resident_bytes -= entry->charge;
   --stats_.entries;
   if (entry->where == Where::kLru) {
@@ -217,7 +231,13 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
   }
   stats_.bytes_read += bytes->size();
   const auto pins = static_cast<std::uint32_t>(1 + flight->waiters);
-  flight->entry = InsertPinnedLocked(id, std::move(bytes), pins);
+  try {
+    flight->entry = InsertPinnedLocked(id, std::move(bytes), pins);
+  } catch (...) {
+    flight->other_error = std::current_exception();
+    flight->done_cv.notify_all();
+    throw;
+  }
   flight->done_cv.notify_all();
   return PinnedBlock(this, flight->entry);
 }

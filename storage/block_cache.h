@@ -164,7 +164,9 @@ class BlockCache {
   Entry* InsertPinnedLocked(const BlockId& id, std::shared_ptr<const Bytes> bytes,
                             std::uint32_t pins);
   void RemoveFromCacheLocked(Entry* entry);
+  void UnchargeLocked(Entry* entry);
   void EvictLocked();
+  // Called by PinnedBlock::Release(); takes mutex_.
   void Unpin(Entry* entry);
 
   const BlockSource* const source_;
@@ -174,7 +176,8 @@ class BlockCache {
   EntryList lru_;        // guarded by mutex_; unpinned, least recent first
   EntryList in_use_;     // guarded by mutex_; pinned
   EntryList detached_;   // guarded by mutex_; pinned but erased
-  std::unordered_map<BlockId, Entry*, BlockIdHash> table_;  // guarded by mutex_
+  using Table = std::unordered_map<BlockId, Entry*, BlockIdHash>;
+  Table table_;  // guarded by mutex_
   std::unordered_map<BlockId, std::shared_ptr<Flight>, BlockIdHash> flights_;  // guarded by mutex_
   CacheStats stats_;  // guarded by mutex_; counters and gauges kept up to date in place
 };

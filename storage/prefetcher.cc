@@ -75,37 +75,40 @@ void Prefetcher::QueueLocked(const BlockId& id, Priority priority) {
 }
 
 std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
-  // The first occurrence of a block fixes its rank.
-  std::vector<BlockId> unique;
-  unique.reserve(wanted.size());
-  std::unordered_set<BlockId, BlockIdHash> seen(wanted.size());
-  for (const BlockId& id : wanted) {
-    if (seen.insert(id).second) unique.push_back(id);
-  }
-
   std::size_t depth = 0;
   {
     std::lock_guard lock(mutex_);
-    Queue old_queue = std::exchange(queue_, {});
-    auto old_pending = std::exchange(pending_, {});
-    std::size_t kept = 0;
-    // Walk from least to most important so that resident blocks are touched
-    // in that order and the most important ends up most recent in the LRU.
-    for (std::size_t rank = unique.size(); rank-- > 0;) {
-      const BlockId& id = unique[rank];
-      const auto priority = static_cast<Priority>(rank);
-      if (in_flight_.contains(id)) continue;
-      if (old_pending.contains(id)) {
-        ++kept;
-        QueueLocked(id, priority);
+    // The new queue is built in `next`, reusing the nodes of requests that
+    // stay wanted, so a frame that re-asks for mostly the same blocks
+    // allocates only for the new ones. Whatever is left in queue_ afterwards
+    // is no longer wanted.
+    Queue next;
+    const std::uint64_t first_sequence_of_this_call = next_sequence_;
+    std::unordered_set<BlockId, BlockIdHash> resident;  // so a duplicate is one hit
+    // Walk from least to most important: resident blocks are touched in that
+    // order, so the most important ends up most recent in the LRU; and a block
+    // listed twice is re-ranked to its first position when that is reached.
+    for (std::size_t rank = wanted.size(); rank-- > 0;) {
+      const BlockId& id = wanted[rank];
+      const QueueKey key{static_cast<Priority>(rank), next_sequence_++};
+      if (auto it = pending_.find(id); it != pending_.end()) {
+        const bool placed_by_this_call = it->second->first.sequence >= first_sequence_of_this_call;
+        auto node = (placed_by_this_call ? next : queue_).extract(it->second);
+        node.key() = key;
+        it->second = next.insert(std::move(node)).position;
+      } else if (in_flight_.contains(id) || resident.contains(id)) {
+        continue;
       } else if (cache_.Touch(id)) {
+        resident.insert(id);
         ++stats_.hits;
       } else {
         ++stats_.queued;
-        QueueLocked(id, priority);
+        pending_.emplace(id, next.emplace(key, id).first);
       }
     }
-    stats_.cancelled += old_pending.size() - kept;
+    for (const auto& [key, id] : queue_) pending_.erase(id);
+    stats_.cancelled += queue_.size();
+    queue_ = std::move(next);
     depth = queue_.size();
   }
   if (depth > 0) work_cv_.notify_all();

@@ -70,6 +70,25 @@ TEST(PrefetcherTest, DuplicatesInAListKeepTheirFirstPosition) {
   EXPECT_EQ(prefetcher.Submit(wanted), 3u);
   prefetcher.Drain();
   EXPECT_EQ(source.ReadOrder(), Blocks({5, 6, 7}));
+
+  // Resident duplicates are one hit each block, not each mention.
+  EXPECT_EQ(prefetcher.Submit(Blocks({5, 8, 5, 6, 6})), 1u);
+  prefetcher.Drain();
+  EXPECT_EQ(prefetcher.Stats().hits, 2u);
+
+  // Duplicates of blocks already pending keep their first position too.
+  {
+    OpenGateOnExit open_on_failure(source);
+    source.CloseGate();
+    prefetcher.Submit(Blocks({1, 2}));
+    ASSERT_TRUE(source.WaitForReadsStarted(5));  // 5, 6, 7, 8, then 1 at the gate
+    EXPECT_EQ(prefetcher.Submit(Blocks({3, 2, 4, 2, 3, 1})), 3u);
+  }
+  prefetcher.Drain();
+  EXPECT_EQ(source.ReadOrder(), Blocks({5, 6, 7, 8, 1, 3, 2, 4}));
+  const PrefetchStats stats = prefetcher.Stats();
+  EXPECT_EQ(stats.cancelled, 0u);
+  ExpectAccountingBalances(stats);
 }
 
 TEST(PrefetcherTest, ResubmittingReranksAndCancelsWhatIsNoLongerWanted) {
