@@ -1,0 +1,255 @@
+#include "index/subtree_builder.h"
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <map>
+#include <string>
+#include <utility>
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+void CheckOptions(const SubtreeOptions& options, NodeKey region) {
+  if (options.capacity == 0) throw Error::InvalidArgument("subtree builder: capacity must be at least 1");
+  if (options.max_level < 0 || options.max_level > kMaxLevel) {
+    throw Error::InvalidArgument("subtree builder: max_level " + std::to_string(options.max_level) +
+                                 " must be in 0.." + std::to_string(kMaxLevel));
+  }
+  if (!region.IsValid() || region.level() > options.max_level) {
+    throw Error::InvalidArgument("subtree builder: region key " + std::to_string(region.value()) +
+                                 " is not a valid node at or above max_level " + std::to_string(options.max_level));
+  }
+}
+
+void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube) {
+  const std::size_t n = particles.size();
+  if (particles.position.size() != 3 * n || particles.type.size() != n ||
+      (particles.has_velocity() && particles.velocity.size() != 3 * n) ||
+      (particles.has_id() && particles.id.size() != n)) {
+    throw Error::InvalidArgument("subtree builder: particle columns of region " + region.Path() +
+                                 " have inconsistent lengths for " + std::to_string(n) + " particles");
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const double* p = &particles.position[3 * i];
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+      throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " of region " + region.Path() +
+                                   " has a non-finite position");
+    }
+    if (!cube.Holds(region, p)) {
+      throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " at (" + std::to_string(p[0]) +
+                                   ", " + std::to_string(p[1]) + ", " + std::to_string(p[2]) +
+                                   ") lies outside region " + region.Path());
+    }
+    if (!(particles.mass[i] > 0) || !std::isfinite(particles.mass[i])) {
+      throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " of region " + region.Path() +
+                                   " has mass " + std::to_string(particles.mass[i]) + ", must be finite and > 0");
+    }
+  }
+}
+
+void SwapParticles(ParticleChunk& c, std::size_t i, std::size_t j) {
+  for (int a = 0; a < 3; ++a) std::swap(c.position[3 * i + a], c.position[3 * j + a]);
+  std::swap(c.mass[i], c.mass[j]);
+  std::swap(c.type[i], c.type[j]);
+  if (c.has_velocity()) {
+    for (int a = 0; a < 3; ++a) std::swap(c.velocity[3 * i + a], c.velocity[3 * j + a]);
+  }
+  if (c.has_id()) std::swap(c.id[i], c.id[j]);
+}
+
+// Groups particles [begin, end) by their child octant at `level`, in place
+// (American flag sort: each particle is swapped straight into its octant's
+// next free slot). Returns the absolute boundaries of the eight groups.
+std::array<std::size_t, 9> PartitionByOctant(ParticleChunk& c, std::size_t begin, std::size_t end, int level,
+                                             const Cube& cube) {
+  std::vector<std::uint8_t> octant(end - begin);
+  std::array<std::size_t, 9> bounds{};
+  for (std::size_t i = begin; i < end; ++i) {
+    octant[i - begin] = static_cast<std::uint8_t>(cube.ChildOctant(&c.position[3 * i], level));
+    ++bounds[octant[i - begin] + 1];
+  }
+  bounds[0] = begin;
+  for (int o = 0; o < 8; ++o) bounds[o + 1] += bounds[o];
+  std::array<std::size_t, 9> next = bounds;
+  for (int o = 0; o < 8; ++o) {
+    while (next[o] < bounds[o + 1]) {
+      const std::size_t i = next[o];
+      const int target = octant[i - begin];
+      if (target == o) {
+        ++next[o];
+        continue;
+      }
+      const std::size_t j = next[target]++;
+      SwapParticles(c, i, j);
+      std::swap(octant[i - begin], octant[j - begin]);
+    }
+  }
+  return bounds;
+}
+
+NodePoints MakeLeaf(ParticleChunk& c, std::size_t begin, std::size_t end, NodeKey key, const Cube& cube,
+                    const SubtreeOptions& options) {
+  const auto bounds = PartitionByOctant(c, begin, end, key.level(), cube);
+  NodePoints leaf;
+  leaf.position.assign(c.position.begin() + 3 * begin, c.position.begin() + 3 * end);
+  leaf.weight.assign(c.mass.begin() + begin, c.mass.begin() + end);
+  leaf.type.assign(c.type.begin() + begin, c.type.begin() + end);
+  if (c.has_velocity()) leaf.velocity.assign(c.velocity.begin() + 3 * begin, c.velocity.begin() + 3 * end);
+  if (c.has_id()) leaf.id.assign(c.id.begin() + begin, c.id.begin() + end);
+  for (int o = 0; o < 9; ++o) leaf.octant_offsets[o] = static_cast<std::uint32_t>(bounds[o] - begin);
+  leaf.smoothing = LeafSmoothingLengths(leaf.position, leaf.weight, key, cube, options.sampler);
+  return leaf;
+}
+
+// The node `key` sampled from its children's points (children[o] is the
+// child in octant o, possibly empty).
+NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
+                        const SubtreeOptions& options) {
+  std::size_t total = 0;
+  int first = -1;
+  for (int o = 0; o < 8; ++o) {
+    if (children[o].size() == 0) continue;
+    total += children[o].size();
+    if (first < 0) first = o;
+    const NodePoints& a = children[first];
+    const NodePoints& b = children[o];
+    if (a.velocity.empty() != b.velocity.empty() || a.id.empty() != b.id.empty() ||
+        a.displacement.empty() != b.displacement.empty()) {
+      throw Error::InvalidArgument("subtree builder: children of node " + key.Path() +
+                                   " disagree on whether points carry velocities, IDs and displacements");
+    }
+  }
+  const bool has_velocity = first >= 0 && !children[first].velocity.empty();
+  const bool has_id = first >= 0 && !children[first].id.empty();
+  const bool has_displacement = first >= 0 && !children[first].displacement.empty();
+
+  NodePoints population;
+  population.position.reserve(3 * total);
+  population.weight.reserve(total);
+  population.type.reserve(total);
+  std::vector<std::uint64_t> sampling_id;
+  sampling_id.reserve(total);
+  std::array<std::size_t, 9> child_begin{};
+  for (int o = 0; o < 8; ++o) {
+    const NodePoints& child = children[o];
+    child_begin[o] = population.size();
+    population.position.insert(population.position.end(), child.position.begin(), child.position.end());
+    population.weight.insert(population.weight.end(), child.weight.begin(), child.weight.end());
+    population.type.insert(population.type.end(), child.type.begin(), child.type.end());
+    if (has_velocity) population.velocity.insert(population.velocity.end(), child.velocity.begin(), child.velocity.end());
+    if (has_displacement) {
+      population.displacement.insert(population.displacement.end(), child.displacement.begin(),
+                                     child.displacement.end());
+    }
+    if (has_id) {
+      population.id.insert(population.id.end(), child.id.begin(), child.id.end());
+      sampling_id.insert(sampling_id.end(), child.id.begin(), child.id.end());
+    } else {
+      for (std::size_t i = 0; i < child.size(); ++i) sampling_id.push_back(SamplingId(&child.position[3 * i]));
+    }
+  }
+  child_begin[8] = population.size();
+
+  const Sample sample =
+      SampleNode(population.position, population.weight, sampling_id, key, cube, options.capacity, options.sampler);
+  NodePoints node;
+  const std::size_t kept = sample.kept.size();
+  node.position.reserve(3 * kept);
+  node.type.reserve(kept);
+  node.weight = sample.weight;
+  node.smoothing = sample.smoothing;
+  int octant = 0;
+  for (std::size_t j = 0; j < kept; ++j) {
+    const std::uint32_t i = sample.kept[j];
+    // Kept indices ascend and the population is grouped by octant, so the
+    // node's points stay grouped by octant too.
+    while (i >= child_begin[octant + 1]) node.octant_offsets[++octant] = static_cast<std::uint32_t>(j);
+    for (int a = 0; a < 3; ++a) node.position.push_back(population.position[3 * i + a]);
+    node.type.push_back(population.type[i]);
+    if (has_velocity) {
+      for (int a = 0; a < 3; ++a) node.velocity.push_back(population.velocity[3 * i + a]);
+    }
+    if (has_id) node.id.push_back(population.id[i]);
+    if (has_displacement) {
+      for (int a = 0; a < 3; ++a) node.displacement.push_back(population.displacement[3 * i + a]);
+    }
+  }
+  while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(kept);
+  return node;
+}
+
+NodePoints BuildNode(ParticleChunk& c, std::size_t begin, std::size_t end, NodeKey key, const Cube& cube,
+                     const SubtreeOptions& options, const NodeSink& sink) {
+  NodePoints node;
+  if (end - begin <= options.capacity || key.level() >= options.max_level) {
+    node = MakeLeaf(c, begin, end, key, cube, options);
+  } else {
+    const auto bounds = PartitionByOctant(c, begin, end, key.level(), cube);
+    std::array<NodePoints, 8> children;
+    for (int o = 0; o < 8; ++o) {
+      if (bounds[o] < bounds[o + 1]) {
+        children[o] = BuildNode(c, bounds[o], bounds[o + 1], key.Child(o), cube, options, sink);
+      }
+    }
+    node = SampleParent(key, children, cube, options);
+  }
+  sink(key, NodePoints(node));
+  return node;
+}
+
+}  // namespace
+
+NodePoints BuildSubtree(ParticleChunk& particles, NodeKey region, const Cube& cube, const SubtreeOptions& options,
+                        const NodeSink& sink) {
+  cube.Validate();
+  CheckOptions(options, region);
+  CheckParticles(particles, region, cube);
+  if (particles.size() == 0) return {};
+  return BuildNode(particles, 0, particles.size(), region, cube, options, sink);
+}
+
+NodePoints BuildTopLevels(std::vector<RegionRoot> regions, const Cube& cube, const SubtreeOptions& options,
+                          const NodeSink& sink) {
+  cube.Validate();
+  std::erase_if(regions, [](const RegionRoot& r) { return r.points.size() == 0; });
+  for (const RegionRoot& r : regions) CheckOptions(options, r.key);
+  std::sort(regions.begin(), regions.end(),
+            [](const RegionRoot& a, const RegionRoot& b) { return PreorderLess{}(a.key, b.key); });
+  // In depth-first order a node's descendants follow it directly, so any
+  // overlap shows up between neighbours.
+  for (std::size_t i = 1; i < regions.size(); ++i) {
+    if (regions[i - 1].key.IsAncestorOrSelf(regions[i].key)) {
+      throw Error::InvalidArgument("BuildTopLevels: region " + regions[i - 1].key.Path() + " overlaps region " +
+                                   regions[i].key.Path());
+    }
+  }
+
+  // Keys in numeric order are level-major, so the deepest pending nodes are
+  // always at the end of the map.
+  std::map<NodeKey, NodePoints> pending;
+  for (RegionRoot& r : regions) pending.emplace(r.key, std::move(r.points));
+  while (!pending.empty()) {
+    const int level = std::prev(pending.end())->first.level();
+    if (level == 0) return std::move(pending.begin()->second);
+    auto it = pending.lower_bound(NodeKey::FromValue(std::uint64_t{1} << (3 * level)));
+    std::vector<std::pair<NodeKey, NodePoints>> parents;
+    while (it != pending.end()) {
+      const NodeKey parent = it->first.Parent();
+      std::array<NodePoints, 8> children;
+      for (; it != pending.end() && it->first.Parent() == parent; ++it) {
+        children[it->first.OctantInParent()] = std::move(it->second);
+      }
+      NodePoints node = SampleParent(parent, children, cube, options);
+      sink(parent, NodePoints(node));
+      parents.emplace_back(parent, std::move(node));
+    }
+    pending.erase(pending.lower_bound(NodeKey::FromValue(std::uint64_t{1} << (3 * level))), pending.end());
+    for (auto& [key, node] : parents) pending.emplace(key, std::move(node));
+  }
+  return {};
+}
+
+}  // namespace octocosm

@@ -1,0 +1,76 @@
+// In-memory, bottom-up construction of the octree below one region, and of
+// the levels above a set of such regions.
+//
+// BuildSubtree takes the particles of one region (a node key; the chunks of
+// the out-of-core pipeline) and builds its subtree:
+//  - a node with at most `capacity` particles, or at max_level, is a leaf and
+//    keeps all of them, each with weight = its mass;
+//  - any other node is split into its eight octants (empty octants get no
+//    node), the children are built first, and the node's population is the
+//    union of its children's kept points with their weights, sampled down to
+//    `capacity` points by SampleNode (index/sampler.h).
+// So every particle ends in exactly one leaf, every node holds at most
+// `capacity` points except a leaf at max_level (particles that still
+// coincide there stay together: the one documented exception), and the
+// weights of every node sum to the mass of its subtree.
+//
+// Each node is handed to `sink` as soon as it is complete, children before
+// their parent (post-order), with its points ordered by child octant and
+// octant_offsets filled (ready for EncodeBlock). The sink is called on the
+// calling thread only, so it needs no locking of its own; distinct calls of
+// BuildSubtree share nothing and may run on different threads.
+//
+// Memory: the particles are partitioned in place, octant by octant
+// (an American-flag sort one level per recursion step), so the extra memory
+// is one byte per particle of the node being split plus at most 9 * capacity
+// points per level of the recursion.
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <vector>
+
+#include "index/cube.h"
+#include "index/morton.h"
+#include "index/node_points.h"
+#include "index/particle_chunk.h"
+#include "index/sampler.h"
+
+namespace octocosm {
+
+struct SubtreeOptions {
+  std::size_t capacity = 16000;  // most points per node (>= 1)
+  int max_level = kMaxLevel;     // deepest level; leaves there may exceed capacity
+  SamplerOptions sampler;
+};
+
+using NodeSink = std::function<void(NodeKey, NodePoints&&)>;
+
+// Builds the subtree of `region` from `particles`, which must all lie in the
+// region (Cube::Holds) with finite positions and finite masses > 0; columns
+// present in `particles` (velocity, id) are carried into every node: a kept
+// point keeps its particle's values. The
+// particles are reordered in place. Returns the region's own node (the same
+// points the sink received for it), for BuildTopLevels; an empty input
+// returns an empty node and calls no sink. Throws Error::InvalidArgument on
+// input that breaks these rules (naming the first offending particle) or on
+// bad options.
+NodePoints BuildSubtree(ParticleChunk& particles, NodeKey region, const Cube& cube, const SubtreeOptions& options,
+                        const NodeSink& sink);
+
+struct RegionRoot {
+  NodeKey key;
+  NodePoints points;  // as returned by BuildSubtree
+};
+
+// Builds the nodes above a set of disjoint regions (no key an ancestor of
+// another), up to the root: each parent's population is the union of its
+// children's points, sampled as in BuildSubtree. Passes each new node to
+// `sink`, deepest first, but not the regions themselves (BuildSubtree did).
+// Returns the root node (the only region's node when that region is the
+// root; empty when there are no points at all). Throws
+// Error::InvalidArgument when regions overlap or repeat.
+NodePoints BuildTopLevels(std::vector<RegionRoot> regions, const Cube& cube, const SubtreeOptions& options,
+                          const NodeSink& sink);
+
+}  // namespace octocosm

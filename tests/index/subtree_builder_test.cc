@@ -1,0 +1,411 @@
+// Subtree builder: the invariants of the tree it emits (every particle in
+// exactly one leaf, exact mass in every node, capacity, octant order, kept
+// points drawn from the children), termination on coincident points, and
+// BuildTopLevels agreeing with one build over the whole cube.
+#include "index/subtree_builder.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+#include <set>
+
+#include "index/block_codec.h"
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+const Cube kCube{{-50, -50, -50}, 100, false};
+
+// Clumps of various sizes on a uniform background; IDs are 10 * i + 3,
+// velocities a function of the ID so that carried columns can be checked.
+ParticleChunk Clumpy(std::mt19937_64& rng, std::size_t n, bool with_ids = true, bool with_velocity = true) {
+  ParticleChunk c;
+  std::uniform_real_distribution<double> u(-50, 50);
+  std::lognormal_distribution<double> mass(0, 1);
+  std::vector<std::array<double, 4>> clumps;  // centre, width
+  for (int k = 0; k < 6; ++k) clumps.push_back({u(rng) * 0.8, u(rng) * 0.8, u(rng) * 0.8, std::exp2(-static_cast<double>(k)) * 3});
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t k = rng() % 10;
+    for (int a = 0; a < 3; ++a) {
+      double x = k < clumps.size() ? std::normal_distribution<double>(clumps[k][a], clumps[k][3])(rng) : u(rng);
+      c.position.push_back(std::clamp(x, -50.0, 49.999));
+    }
+    c.mass.push_back(mass(rng));
+    c.type.push_back(static_cast<std::uint8_t>(i % 3));
+    const std::uint64_t id = 10 * i + 3;
+    if (with_ids) c.id.push_back(id);
+    if (with_velocity) {
+      for (int a = 0; a < 3; ++a) c.velocity.push_back(static_cast<float>(id % 1000) + static_cast<float>(a));
+    }
+  }
+  return c;
+}
+
+struct Tree {
+  std::map<NodeKey, NodePoints> nodes;
+  std::vector<NodeKey> order;  // sink call order
+  NodeSink Sink() {
+    return [this](NodeKey key, NodePoints&& points) {
+      EXPECT_FALSE(nodes.count(key)) << "node " << key.Path() << " emitted twice";
+      order.push_back(key);
+      nodes[key] = std::move(points);
+    };
+  }
+  bool IsLeaf(NodeKey key) const {
+    if (key.level() == kMaxLevel) return true;
+    for (int o = 0; o < 8; ++o) {
+      if (nodes.count(key.Child(o))) return false;
+    }
+    return true;
+  }
+};
+
+long double Sum(const std::vector<double>& v) {
+  long double s = 0;
+  for (double x : v) s += x;
+  return s;
+}
+
+// Checks every invariant of a built tree against its input particles.
+void CheckTree(const Tree& tree, const ParticleChunk& input, NodeKey region, const SubtreeOptions& options) {
+  ASSERT_FALSE(tree.nodes.empty());
+  // Exactly one leaf per particle: by ID.
+  std::multiset<std::uint64_t> leaf_ids;
+  std::map<NodeKey, long double> leaf_mass;
+  for (const auto& [key, points] : tree.nodes) {
+    ASSERT_TRUE(region.IsAncestorOrSelf(key));
+    if (tree.IsLeaf(key)) {
+      leaf_ids.insert(points.id.begin(), points.id.end());
+      leaf_mass[key] = Sum(points.weight);
+    }
+  }
+  const std::multiset<std::uint64_t> input_ids(input.id.begin(), input.id.end());
+  EXPECT_TRUE(leaf_ids == input_ids) << leaf_ids.size() << " leaf points for " << input_ids.size() << " particles";
+  long double input_mass = 0;
+  std::map<std::uint64_t, double> mass_of;
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    input_mass += input.mass[i];
+    mass_of[input.id[i]] = input.mass[i];
+  }
+
+  std::set<NodeKey> emitted;
+  for (const NodeKey key : tree.order) {
+    // Post-order: every child already emitted.
+    for (int o = 0; o < 8 && key.level() < kMaxLevel; ++o) {
+      if (tree.nodes.count(key.Child(o))) {
+        ASSERT_TRUE(emitted.count(key.Child(o))) << key.Path();
+      }
+    }
+    emitted.insert(key);
+  }
+  EXPECT_EQ(tree.order.back(), region);
+
+  for (const auto& [key, points] : tree.nodes) {
+    SCOPED_TRACE("node " + key.Path());
+    const std::size_t n = points.size();
+    ASSERT_EQ(points.position.size(), 3 * n);
+    ASSERT_EQ(points.smoothing.size(), n);
+    ASSERT_EQ(points.type.size(), n);
+    ASSERT_EQ(points.id.size(), n);
+    ASSERT_EQ(points.velocity.size(), input.velocity.empty() ? 0 : 3 * n);
+    ASSERT_GT(n, 0u);
+    if (key.level() < options.max_level) {
+      EXPECT_LE(n, options.capacity);
+    }
+    // Mass: the weights sum to the mass of the leaves below.
+    long double subtree_mass = 0;
+    for (const auto& [leaf, mass] : leaf_mass) {
+      if (key.IsAncestorOrSelf(leaf)) subtree_mass += mass;
+    }
+    EXPECT_NEAR(static_cast<double>(Sum(points.weight) / subtree_mass), 1.0, 1e-12);
+    // Octant order, region, carried columns.
+    ASSERT_EQ(points.octant_offsets[0], 0u);
+    ASSERT_EQ(points.octant_offsets[8], n);
+    const bool leaf = tree.IsLeaf(key);
+    for (int o = 0; o < 8; ++o) {
+      for (std::uint32_t i = points.octant_offsets[o]; i < points.octant_offsets[o + 1]; ++i) {
+        const double* p = &points.position[3 * i];
+        ASSERT_TRUE(kCube.Holds(key, p));
+        ASSERT_EQ(kCube.ChildOctant(p, key.level()), o);
+        const std::uint64_t id = points.id[i];
+        ASSERT_TRUE(mass_of.count(id));
+        if (!input.velocity.empty()) {
+          ASSERT_EQ(points.velocity[3 * i + 1], static_cast<float>(id % 1000) + 1.0f);
+        }
+        ASSERT_EQ(points.type[i], static_cast<std::uint8_t>(((id - 3) / 10) % 3));
+        if (leaf) {
+          ASSERT_EQ(points.weight[i], mass_of[id]);
+        }
+        ASSERT_GE(points.smoothing[i], kCube.NodeSize(key.level()) / 65536);
+        ASSERT_LE(points.smoothing[i], kCube.NodeSize(key.level()));
+      }
+      // An inner node's points of octant o were kept by child o.
+      if (!leaf) {
+        const auto child = tree.nodes.find(key.Child(o));
+        if (child == tree.nodes.end()) {
+          ASSERT_EQ(points.octant_offsets[o], points.octant_offsets[o + 1]);
+          continue;
+        }
+        const std::set<std::uint64_t> child_ids(child->second.id.begin(), child->second.id.end());
+        for (std::uint32_t i = points.octant_offsets[o]; i < points.octant_offsets[o + 1]; ++i) {
+          ASSERT_TRUE(child_ids.count(points.id[i]));
+        }
+      }
+    }
+    // The block codec accepts every node as it is.
+    const Bytes block = EncodeBlock(points, key, kCube);
+    EXPECT_EQ(DecodeBlock(block, kAllColumns, key, kCube, "tree").points.id, points.id);
+  }
+  EXPECT_NEAR(static_cast<double>(Sum(tree.nodes.at(region).weight) / input_mass), 1.0, 1e-12);
+}
+
+TEST(SubtreeBuilder, BuildsAConsistentTree) {
+  std::mt19937_64 rng(1);
+  const ParticleChunk input = Clumpy(rng, 60000);
+  ParticleChunk work = input;
+  SubtreeOptions options;
+  options.capacity = 1000;
+  Tree tree;
+  const NodePoints root = BuildSubtree(work, NodeKey::Root(), kCube, options, tree.Sink());
+  EXPECT_EQ(root.id, tree.nodes.at(NodeKey::Root()).id);
+  EXPECT_EQ(root.weight, tree.nodes.at(NodeKey::Root()).weight);
+  EXPECT_EQ(root.size(), 1000u);
+  EXPECT_GT(tree.nodes.size(), 60u);
+  CheckTree(tree, input, NodeKey::Root(), options);
+  // The particles were reordered, not changed.
+  std::multiset<std::uint64_t> before(input.id.begin(), input.id.end()), after(work.id.begin(), work.id.end());
+  EXPECT_TRUE(before == after);
+}
+
+TEST(SubtreeBuilder, BuildsASubRegion) {
+  std::mt19937_64 rng(2);
+  ParticleChunk all = Clumpy(rng, 20000);
+  const NodeKey region = NodeKey::FromPath("r07");
+  ParticleChunk input;
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (!kCube.Holds(region, &all.position[3 * i])) continue;
+    input.position.insert(input.position.end(), &all.position[3 * i], &all.position[3 * i] + 3);
+    input.velocity.insert(input.velocity.end(), &all.velocity[3 * i], &all.velocity[3 * i] + 3);
+    input.mass.push_back(all.mass[i]);
+    input.id.push_back(all.id[i]);
+    input.type.push_back(all.type[i]);
+  }
+  ASSERT_GT(input.size(), 100u);
+  ParticleChunk work = input;
+  SubtreeOptions options;
+  options.capacity = 16;
+  Tree tree;
+  BuildSubtree(work, region, kCube, options, tree.Sink());
+  CheckTree(tree, input, region, options);
+}
+
+TEST(SubtreeBuilder, CoincidentPointsStopAtTheDepthLimit) {
+  ParticleChunk input;
+  const std::size_t n = 100000;
+  for (std::size_t i = 0; i < n; ++i) {
+    input.position.insert(input.position.end(), {12.345, -6.789, 0.001});
+    input.mass.push_back(1.0 + static_cast<double>(i % 7));
+    input.type.push_back(static_cast<std::uint8_t>(i % 3));
+    input.id.push_back(10 * i + 3);
+  }
+  ParticleChunk work = input;
+  SubtreeOptions options;
+  options.capacity = 500;
+  Tree tree;
+  BuildSubtree(work, NodeKey::Root(), kCube, options, tree.Sink());
+  EXPECT_EQ(tree.nodes.size(), static_cast<std::size_t>(kMaxLevel + 1));  // one chain down to level 21
+  const NodeKey leaf = kCube.LeafKey(&input.position[0], kMaxLevel);
+  ASSERT_TRUE(tree.nodes.count(leaf));
+  EXPECT_EQ(tree.nodes.at(leaf).size(), n);
+  EXPECT_EQ(tree.nodes.at(NodeKey::Root()).size(), 500u);
+  CheckTree(tree, input, NodeKey::Root(), options);
+}
+
+TEST(SubtreeBuilder, ShallowDepthLimitMakesLargeLeaves) {
+  std::mt19937_64 rng(3);
+  const ParticleChunk input = Clumpy(rng, 5000, true, false);
+  ParticleChunk work = input;
+  SubtreeOptions options;
+  options.capacity = 20;
+  options.max_level = 2;
+  Tree tree;
+  BuildSubtree(work, NodeKey::Root(), kCube, options, tree.Sink());
+  std::size_t big_leaves = 0;
+  for (const auto& [key, points] : tree.nodes) {
+    EXPECT_LE(key.level(), 2);
+    big_leaves += key.level() == 2 && points.size() > 20;
+  }
+  EXPECT_GT(big_leaves, 10u);
+  CheckTree(tree, input, NodeKey::Root(), options);
+}
+
+TEST(SubtreeBuilder, WorksWithoutIdsOrVelocities) {
+  std::mt19937_64 rng(4);
+  ParticleChunk input = Clumpy(rng, 8000, false, false);
+  long double mass = 0;
+  for (double m : input.mass) mass += m;
+  SubtreeOptions options;
+  options.capacity = 300;
+  Tree tree;
+  ParticleChunk again = input;
+  const NodePoints root = BuildSubtree(input, NodeKey::Root(), kCube, options, tree.Sink());
+  EXPECT_EQ(root.size(), 300u);
+  EXPECT_TRUE(root.id.empty());
+  EXPECT_TRUE(root.velocity.empty());
+  EXPECT_NEAR(static_cast<double>(Sum(root.weight) / mass), 1.0, 1e-12);
+  std::size_t leaf_points = 0;
+  for (const auto& [key, points] : tree.nodes) leaf_points += tree.IsLeaf(key) ? points.size() : 0;
+  EXPECT_EQ(leaf_points, 8000u);
+  // Deterministic: synthetic IDs come from the positions, whatever the order.
+  std::reverse(again.mass.begin(), again.mass.end());
+  std::reverse(again.type.begin(), again.type.end());
+  for (std::size_t i = 0, j = again.size() - 1; i < j; ++i, --j) {
+    for (int a = 0; a < 3; ++a) std::swap(again.position[3 * i + a], again.position[3 * j + a]);
+  }
+  Tree tree2;
+  const NodePoints root2 = BuildSubtree(again, NodeKey::Root(), kCube, options, tree2.Sink());
+  EXPECT_EQ(tree2.nodes.size(), tree.nodes.size());
+  auto sorted = [](const NodePoints& p) {
+    std::vector<std::array<double, 3>> v;
+    for (std::size_t i = 0; i < p.size(); ++i) v.push_back({p.position[3 * i], p.position[3 * i + 1], p.position[3 * i + 2]});
+    std::sort(v.begin(), v.end());
+    return v;
+  };
+  EXPECT_EQ(sorted(root), sorted(root2));
+}
+
+TEST(SubtreeBuilder, TopLevelsMatchOneBuildOverTheWholeCube) {
+  std::mt19937_64 rng(5);
+  const ParticleChunk input = Clumpy(rng, 40000);
+  SubtreeOptions options;
+  options.capacity = 200;
+
+  ParticleChunk whole = input;
+  Tree reference;
+  const NodePoints reference_root = BuildSubtree(whole, NodeKey::Root(), kCube, options, reference.Sink());
+
+  // Split into the level-2 regions, as the out-of-core pipeline would.
+  std::map<NodeKey, ParticleChunk> chunks;
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    ParticleChunk& c = chunks[kCube.LeafKey(&input.position[3 * i], 2)];
+    c.position.insert(c.position.end(), &input.position[3 * i], &input.position[3 * i] + 3);
+    c.velocity.insert(c.velocity.end(), &input.velocity[3 * i], &input.velocity[3 * i] + 3);
+    c.mass.push_back(input.mass[i]);
+    c.id.push_back(input.id[i]);
+    c.type.push_back(input.type[i]);
+  }
+  Tree pieces;
+  std::vector<RegionRoot> roots;
+  for (auto& [key, chunk] : chunks) {
+    roots.push_back({key, BuildSubtree(chunk, key, kCube, options, pieces.Sink())});
+  }
+  const NodePoints root = BuildTopLevels(std::move(roots), kCube, options, pieces.Sink());
+
+  // The same nodes with the same points and weights; the order of points
+  // within an octant depends on the input order and may differ.
+  auto by_id = [](const NodePoints& p) {
+    std::map<std::uint64_t, double> m;
+    for (std::size_t i = 0; i < p.size(); ++i) m[p.id[i]] = p.weight[i];
+    return m;
+  };
+  ASSERT_EQ(pieces.nodes.size(), reference.nodes.size());
+  for (const auto& [key, points] : reference.nodes) {
+    ASSERT_TRUE(pieces.nodes.count(key)) << key.Path();
+    const NodePoints& other = pieces.nodes.at(key);
+    EXPECT_EQ(other.octant_offsets, points.octant_offsets) << key.Path();
+    const auto expected = by_id(points), got = by_id(other);
+    ASSERT_EQ(got.size(), expected.size()) << key.Path();
+    for (const auto& [id, w] : expected) {
+      ASSERT_TRUE(got.count(id)) << key.Path() << " lacks " << id;
+      ASSERT_NEAR(got.at(id) / w, 1.0, 1e-12) << key.Path();
+    }
+  }
+  EXPECT_EQ(by_id(root).size(), by_id(reference_root).size());
+  for (const auto& [id, w] : by_id(reference_root)) ASSERT_TRUE(by_id(root).count(id));
+  CheckTree(pieces, input, NodeKey::Root(), options);
+}
+
+TEST(SubtreeBuilder, TopLevelsOfRegionsAtDifferentDepths) {
+  std::mt19937_64 rng(6);
+  const ParticleChunk input = Clumpy(rng, 3000);
+  // A level-3 region inside r1 but outside r10, where some particle is.
+  NodeKey deep;
+  for (std::size_t i = 0; i < input.size() && !deep.IsValid(); ++i) {
+    const NodeKey k = kCube.LeafKey(&input.position[3 * i], 3);
+    if (k.AncestorAt(1) == NodeKey::FromPath("r1") && k.AncestorAt(2) != NodeKey::FromPath("r10")) deep = k;
+  }
+  ASSERT_TRUE(deep.IsValid());
+  const std::vector<NodeKey> regions = {NodeKey::FromPath("r0"), NodeKey::FromPath("r10"), deep,
+                                        NodeKey::FromPath("r7")};
+  SubtreeOptions options;
+  options.capacity = 100;
+  Tree tree;
+  std::vector<RegionRoot> roots;
+  long double mass = 0;
+  for (const NodeKey region : regions) {
+    ParticleChunk c;
+    for (std::size_t i = 0; i < input.size(); ++i) {
+      if (!kCube.Holds(region, &input.position[3 * i])) continue;
+      c.position.insert(c.position.end(), &input.position[3 * i], &input.position[3 * i] + 3);
+      c.mass.push_back(input.mass[i]);
+      c.id.push_back(input.id[i]);
+      c.type.push_back(input.type[i]);
+      mass += input.mass[i];
+    }
+    roots.push_back({region, BuildSubtree(c, region, kCube, options, tree.Sink())});
+  }
+  const NodePoints root = BuildTopLevels(roots, kCube, options, tree.Sink());
+  EXPECT_NEAR(static_cast<double>(Sum(root.weight) / mass), 1.0, 1e-12);
+  for (const NodeKey key : {NodeKey::Root(), NodeKey::FromPath("r1"), deep.Parent()}) {
+    ASSERT_TRUE(tree.nodes.count(key)) << key.Path();
+  }
+  EXPECT_FALSE(tree.nodes.count(NodeKey::FromPath("r2")));
+
+  roots.push_back({deep.Parent(), roots[2].points});
+  EXPECT_THROW(BuildTopLevels(roots, kCube, options, tree.Sink()), Error);  // overlaps `deep`
+  EXPECT_TRUE(BuildTopLevels({}, kCube, options, tree.Sink()).size() == 0);
+}
+
+TEST(SubtreeBuilder, RejectsBadInput) {
+  std::mt19937_64 rng(7);
+  const ParticleChunk good = Clumpy(rng, 100);
+  SubtreeOptions options;
+  auto expect_invalid = [&](ParticleChunk c, NodeKey region, const SubtreeOptions& o) {
+    Tree tree;
+    try {
+      BuildSubtree(c, region, kCube, o, tree.Sink());
+      ADD_FAILURE();
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument) << e.what();
+    }
+    EXPECT_TRUE(tree.nodes.empty());
+  };
+  ParticleChunk c = good;
+  c.position[4] = std::nan("");
+  expect_invalid(c, NodeKey::Root(), options);
+  c = good;
+  c.mass[7] = 0;
+  expect_invalid(c, NodeKey::Root(), options);
+  c = good;
+  c.type.pop_back();
+  expect_invalid(c, NodeKey::Root(), options);
+  expect_invalid(good, NodeKey::FromPath("r3"), options);  // particles outside the region
+  SubtreeOptions bad = options;
+  bad.capacity = 0;
+  expect_invalid(good, NodeKey::Root(), bad);
+  bad = options;
+  bad.max_level = 22;
+  expect_invalid(good, NodeKey::Root(), bad);
+
+  ParticleChunk empty;
+  Tree tree;
+  EXPECT_EQ(BuildSubtree(empty, NodeKey::Root(), kCube, options, tree.Sink()).size(), 0u);
+  EXPECT_TRUE(tree.nodes.empty());
+}
+
+}  // namespace
+}  // namespace octocosm
