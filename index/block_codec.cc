@@ -143,9 +143,15 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
     // Ties go to the lower index, so the result does not depend on the sort.
     std::vector<std::uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0u);
-    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+    const auto larger_remainder = [&](std::uint32_t a, std::uint32_t b) {
       return remainder[a] != remainder[b] ? remainder[a] > remainder[b] : a < b;
-    });
+    };
+    if (deficit > 0 && static_cast<std::size_t>(deficit) < n) {
+      // The usual case needs only the `deficit` largest, in any order.
+      std::nth_element(order.begin(), order.begin() + deficit, order.end(), larger_remainder);
+    } else {
+      std::sort(order.begin(), order.end(), larger_remainder);
+    }
     // Rounding can leave the floors a unit or so above K as well as below.
     for (std::size_t j = 0; deficit > 0; j = (j + 1) % n, --deficit) ++units[order[j]];
     for (std::size_t j = n - 1; deficit < 0; j = (j + n - 1) % n) {

@@ -58,8 +58,8 @@ NodeCube Cube::NodeCubeOf(NodeKey key) const {
 }
 
 std::array<std::uint64_t, 3> Cube::GridCoords(const double* point, int bits) const {
-  const double cells = std::ldexp(1.0, bits);
   const std::uint64_t last = (std::uint64_t{1} << bits) - 1;
+  const double cells = static_cast<double>(last + 1);  // exact: bits <= kMaxGridBits < 53
   std::array<std::uint64_t, 3> grid{};
   for (int a = 0; a < 3; ++a) {
     double t = (point[a] - origin[a]) / size;
