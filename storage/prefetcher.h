@@ -60,7 +60,7 @@ struct PrefetchStats {
   // exactly one of completed, found_resident, failed, cancelled, so at any
   // snapshot
   //   queued == completed + found_resident + failed + cancelled + queue_depth + in_flight.
-  std::uint64_t hits = 0;            // requests not queued: resident when asked for
+  std::uint64_t hits = 0;            // not queued: resident when asked for (once per call)
   std::uint64_t queued = 0;          // requests put on the queue (re-ranking one does not count)
   std::uint64_t completed = 0;       // read into the cache by a worker
   std::uint64_t found_resident = 0;  // resident by the time a worker started them
@@ -77,9 +77,9 @@ class Prefetcher {
 
   // Called on a worker thread once per request a worker finishes
   // (completed, found resident or failed; not for cancelled requests or for
-  // ones skipped at submission as resident). `error` is null on success. It runs before the
-  // request stops counting as in flight, so WaitFor()/Drain() return after
-  // it. It must not call WaitFor() or Drain() (it would wait for itself) and
+  // ones skipped at submission as resident). `error` is null on success. It
+  // runs before the request stops counting as in flight, so WaitFor()/Drain()
+  // return after it. It must not call WaitFor() or Drain() (it would wait for itself) and
   // should not throw; an exception is swallowed and counted.
   using CompletionCallback = std::function<void(const BlockId& id, const Error* error)>;
 
@@ -96,8 +96,9 @@ class Prefetcher {
   ~Prefetcher();
 
   // Replaces the pending queue with `wanted`, most important first (duplicates
-  // keep their first position). Returns how many requests are pending after
-  // the call.
+  // keep their first position). Resident blocks are marked recently used in
+  // the cache, least important first, so the most important are evicted last.
+  // Returns how many requests are pending after the call.
   std::size_t Submit(std::span<const BlockId> wanted);
 
   // Queues one request, or re-ranks it if already pending. Returns false when
@@ -120,7 +121,8 @@ class Prefetcher {
   void Drain();
 
   // The error of the block's most recent failed prefetch, if it has not been
-  // read successfully since.
+  // read successfully since. One Error is kept per such block for the life of
+  // the Prefetcher.
   std::optional<Error> LastError(const BlockId& id) const;
 
   PrefetchStats Stats() const;
