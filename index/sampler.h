@@ -24,7 +24,7 @@
 //    runs are reproducible whatever the input order. Its priority is
 //    q_i = s_i / u_i. The n largest priorities are kept; tau is the (n+1)-th
 //    largest. For a kept point, max(s_i, tau) is an unbiased estimate of s_i
-//    (DLT, Theorem 1: E[s^_i] = s_i with s^_i = 0 for points not kept), so
+//    (shown in DLT: E[s^_i] = s_i with s^_i = 0 for points not kept), so
 //
 //       w^_i = w_i * max(1, tau / s_i)
 //

@@ -22,8 +22,9 @@
 //
 // Memory: the particles are partitioned in place, octant by octant
 // (an American-flag sort one level per recursion step), so the extra memory
-// is one byte per particle of the node being split plus at most 9 * capacity
-// points per level of the recursion.
+// is one byte per particle of the node being split, the finished children of
+// each node on the current path (at most 8 * capacity points per level), and
+// about 9 * capacity points more while one node is being sampled.
 #pragma once
 
 #include <cstddef>
