@@ -450,6 +450,19 @@ TEST(RunParticleMeshTest, SameSeedGivesIdenticalBytes) {
   EXPECT_FALSE(bytes == ReadAll(other[0].files[0]));
 }
 
+TEST(RunParticleMeshTest, ThreadCountDoesNotChangeTheBytes) {
+  // threads = 0 means "all cores", so a run must not depend on the machine.
+  TempDir a, b;
+  PmOptions options = SmallRun(a.path());
+  options.output_count = 1;
+  options.threads = 1;
+  const auto one = RunParticleMesh(options);
+  options.output_directory = b.path().string();
+  options.threads = 2;
+  const auto two = RunParticleMesh(options);
+  EXPECT_TRUE(ReadAll(one[0].files[0]) == ReadAll(two[0].files[0]));
+}
+
 TEST(RunParticleMeshTest, RejectsBadOptions) {
   TempDir dir;
   PmOptions options = SmallRun(dir.path());
@@ -461,6 +474,10 @@ TEST(RunParticleMeshTest, RejectsBadOptions) {
   options = SmallRun(dir.path());
   options.grid_factor = 3;
   EXPECT_THROW(RunParticleMesh(options), Error);
+  options = SmallRun(dir.path());
+  options.files_per_snapshot = 5000;  // more files than the 4096 particles
+  EXPECT_THROW(RunParticleMesh(options), Error);
+  EXPECT_TRUE(fs::is_empty(dir.path()));
   options = SmallRun(dir.path());
   options.output_directory = (dir.path() / "missing").string();
   try {

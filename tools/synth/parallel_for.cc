@@ -13,10 +13,9 @@ int ResolveThreadCount(int requested) {
   return hardware == 0 ? 1 : static_cast<int>(hardware);
 }
 
-void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body) {
-  // Below this many items per thread, starting threads costs more than it saves.
-  constexpr std::size_t kMinItemsPerThread = 4096;
-  const std::size_t useful = std::max<std::size_t>(1, count / kMinItemsPerThread);
+void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body,
+                 std::size_t min_items_per_thread) {
+  const std::size_t useful = std::max<std::size_t>(1, count / std::max<std::size_t>(1, min_items_per_thread));
   const std::size_t parts = std::min<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), useful);
   if (parts <= 1) {
     if (count > 0) body(0, count);

@@ -10,7 +10,10 @@
 
 namespace octocosm::synth {
 
-void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body);
+// min_items_per_thread keeps light loops on fewer threads, where starting a
+// thread would cost more than it saves.
+void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body,
+                 std::size_t min_items_per_thread = 4096);
 
 // The thread count to use for `requested` (0 means all hardware threads).
 int ResolveThreadCount(int requested);

@@ -36,8 +36,10 @@ void Validate(const PmOptions& o) {
                                    std::to_string(o.z_end) + ", " + std::to_string(o.z_start) + "]");
     }
   }
-  if (o.files_per_snapshot < 1) {
-    throw Error::InvalidArgument("files per snapshot must be >= 1, got " + std::to_string(o.files_per_snapshot));
+  const double particles = std::pow(static_cast<double>(o.particles_per_side), 3);
+  if (o.files_per_snapshot < 1 || o.files_per_snapshot > particles) {
+    throw Error::InvalidArgument("files per snapshot must be in [1, N^3], got " +
+                                 std::to_string(o.files_per_snapshot));
   }
   if (o.snapshot_prefix.empty() || o.snapshot_prefix.find('/') != std::string::npos) {
     throw Error::InvalidArgument("snapshot prefix must be a non-empty file name without '/', got '" +

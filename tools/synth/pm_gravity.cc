@@ -54,15 +54,13 @@ void PmGravity::SolvePoisson() {
         }
       }
     }
-  });
+  }, 1);
   grid_.Inverse();
 }
 
 void PmGravity::InterpolateGradient(std::span<const double> positions, double scale, std::span<double> out) const {
   const int n = grid_.n();
   const std::size_t un = static_cast<std::size_t>(n);
-  const std::size_t padded = grid_.padded();
-  const double* phi = grid_.real();
   const double cells_per_length = n / box_;
   // -grad over 12 dx, dx = box / n.
   const double difference_scale = -scale * cells_per_length / 12.0;
@@ -95,7 +93,7 @@ void PmGravity::InterpolateGradient(std::span<const double> positions, double sc
       const double* row[6][6] = {};
       for (int a = 0; a < 6; ++a) {
         for (int b = 0; b < 6; ++b) {
-          if ((a == 2 || a == 3) || (b == 2 || b == 3)) row[a][b] = phi + (ix[a] * un + iy[b]) * padded;
+          if ((a == 2 || a == 3) || (b == 2 || b == 3)) row[a][b] = grid_.RealRow(ix[a], iy[b]);
         }
       }
       const double wx[2] = {1.0 - axes[0].upper_weight, axes[0].upper_weight};

@@ -78,7 +78,7 @@ PmSimulation::PmSimulation(const PmSimulationOptions& options)
         }
       }
     }
-  });
+  }, 1);
 }
 
 double PmSimulation::GadgetVelocityFactor() const { return 100.0 / (a_ * std::sqrt(a_)); }

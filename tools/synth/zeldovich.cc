@@ -49,7 +49,7 @@ void ZeldovichDisplacement(int n, double box, const LinearPowerSpectrum& power, 
         }
       }
     }
-  });
+  }, 1);
 
   FourierGrid component(n, threads);
   for (int d = 0; d < 3; ++d) {
@@ -65,7 +65,7 @@ void ZeldovichDisplacement(int n, double box, const LinearPowerSpectrum& power, 
           }
         }
       }
-    });
+    }, 1);
     component.Inverse();
     ParallelFor(un, threads, [&](std::size_t begin, std::size_t end) {
       for (std::size_t i = begin; i < end; ++i) {
@@ -73,7 +73,7 @@ void ZeldovichDisplacement(int n, double box, const LinearPowerSpectrum& power, 
           for (std::size_t k = 0; k < un; ++k) displacement[3 * ((i * un + j) * un + k) + d] = component.Real(i, j, k);
         }
       }
-    });
+    }, 1);
   }
 }
 
