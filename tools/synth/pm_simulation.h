@@ -44,7 +44,9 @@ class PmSimulation {
   // Advances from a() through each boundary in turn (increasing, all above
   // a()), one leapfrog step per interval, and leaves positions and momenta
   // synchronised at the last boundary. Costs one force evaluation per
-  // boundary plus one. after_step(step_index, a) runs after each step.
+  // boundary plus one. after_step(step_index, a) runs after each step; in
+  // it, positions are at a but momenta are half a step ahead, except after
+  // the last step.
   void Evolve(std::span<const double> boundaries,
               const std::function<void(std::size_t, double)>& after_step = nullptr);
 
