@@ -1,0 +1,28 @@
+// Reads only some columns of a block: the header and directory with one
+// ranged read, then each run of adjacent wanted columns with one ranged read,
+// every column verified by its own checksum (index/block_codec.h). A block
+// small enough to arrive whole with the header read costs one read; asking
+// for every column reads the whole block once.
+#pragma once
+
+#include <cstdint>
+
+#include "index/block_codec.h"
+#include "index/dataset.h"
+
+namespace octocosm {
+
+struct ReadCounters {
+  std::uint64_t blocks = 0;  // blocks touched
+  std::uint64_t reads = 0;   // positioned reads issued
+  std::uint64_t bytes = 0;   // bytes read
+};
+
+// Decodes the columns in `wanted` of the block `entry` of `epoch`. Wanted
+// optional columns the block lacks come back empty. Throws Error::Corruption
+// (naming the file, epoch and block) when the header, a wanted column or a
+// required column's presence is wrong, Error::Io when the OS fails.
+DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                              ReadCounters& counters);
+
+}  // namespace octocosm

@@ -1,0 +1,67 @@
+#include "index/query.h"
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+template <typename T>
+void KeepColumn(std::vector<T>& column, std::size_t stride, const std::vector<std::uint32_t>& keep) {
+  if (column.empty()) return;
+  std::size_t out = 0;
+  for (std::uint32_t i : keep) {
+    for (std::size_t c = 0; c < stride; ++c) column[out * stride + c] = column[std::size_t{i} * stride + c];
+    ++out;
+  }
+  column.resize(out * stride);
+}
+
+}  // namespace
+
+void KeepPoints(NodePoints& points, const std::vector<std::uint32_t>& keep) {
+  KeepColumn(points.position, 3, keep);
+  KeepColumn(points.weight, 1, keep);
+  KeepColumn(points.smoothing, 1, keep);
+  KeepColumn(points.velocity, 3, keep);
+  KeepColumn(points.id, 1, keep);
+  KeepColumn(points.type, 1, keep);
+  KeepColumn(points.displacement, 3, keep);
+}
+
+std::vector<IndexEntry> SelectNodes(const Dataset& dataset, const Region& region, const QueryOptions& options,
+                                    SelectionStats& stats) {
+  if (options.level.has_value() == options.screen_error.has_value()) {
+    throw Error::InvalidArgument("a query needs exactly one level of detail: a level or a screen-space error");
+  }
+  if (options.level) return SelectLevel(dataset, options.epoch, region, *options.level, stats);
+  return SelectByScreenError(dataset, options.epoch, region, *options.screen_error, stats);
+}
+
+QueryStats RunQuery(const Dataset& dataset, const Region& region, const QueryOptions& options,
+                    const QueryCallback& callback) {
+  QueryStats stats;
+  const std::vector<IndexEntry> nodes = SelectNodes(dataset, region, options, stats.selection);
+  stats.nodes_selected = nodes.size();
+  const ColumnSet wanted = (options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition);
+  QueryBatch batch;
+  std::vector<std::uint32_t> keep;
+  for (const IndexEntry& entry : nodes) {
+    DecodedBlock block = ReadBlockColumns(dataset, options.epoch, entry, wanted, stats.reads);
+    const std::uint32_t n = block.header.point_count;
+    stats.points_scanned += n;
+    keep.clear();
+    for (std::uint32_t i = 0; i < n; ++i) {
+      if (region.Contains(&block.points.position[3 * std::size_t{i}])) keep.push_back(i);
+    }
+    if (keep.empty()) continue;
+    if (keep.size() != n) KeepPoints(block.points, keep);
+    stats.points_returned += keep.size();
+    batch.node = block.header.key;
+    batch.count = keep.size();
+    batch.points = std::move(block.points);
+    callback(batch);
+  }
+  return stats;
+}
+
+}  // namespace octocosm

@@ -1,0 +1,68 @@
+// Spatial queries on one epoch of a dataset: the points of a level of detail
+// (a level, or a screen-space error for a camera; index/node_selection.h)
+// that lie in a region (box, sphere, frustum; index/region.h), with only the
+// columns asked for.
+//
+// Cost: node selection reads index pages only; then each selected node's
+// block is read once, in file order, fetching the header and the wanted
+// columns only (index/column_reader.h). Results are streamed: the callback
+// receives one batch per block, holding that block's points that lie in the
+// region, so a result larger than memory is fine. Points come back in stored
+// coordinates (see region.h for periodic boxes), dequantized to doubles.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+
+#include "index/block_codec.h"
+#include "index/column_reader.h"
+#include "index/dataset.h"
+#include "index/node_selection.h"
+#include "index/region.h"
+
+namespace octocosm {
+
+struct QueryOptions {
+  std::uint32_t epoch = 0;
+  // Exactly one level of detail: a level, or a screen-space error.
+  std::optional<int> level;
+  std::optional<ScreenErrorView> screen_error;
+  // Columns to return besides the positions, which are always returned.
+  ColumnSet columns = ColumnBit(ColumnId::kPosition);
+};
+
+struct QueryStats {
+  SelectionStats selection;
+  std::uint64_t nodes_selected = 0;
+  ReadCounters reads;  // blocks touched, positioned reads, bytes read
+  std::uint64_t points_scanned = 0;   // points decoded
+  std::uint64_t points_returned = 0;  // of those, the ones in the region
+};
+
+// One block's points in the region. `points` holds the wanted columns only
+// (the others are empty) for the points[i] that are in the region, in block
+// order; octant_offsets is not meaningful after filtering. `count` is the
+// number of points (points.size() counts weights, which may not be wanted).
+struct QueryBatch {
+  NodeKey node;
+  std::size_t count = 0;
+  NodePoints points;
+};
+
+using QueryCallback = std::function<void(const QueryBatch&)>;
+
+// Runs the query. Throws Error::InvalidArgument for bad options (no or two
+// levels of detail, an epoch or level out of range, a bad camera), and
+// Error::Corruption / Error::Io from the store; a callback may throw to stop.
+QueryStats RunQuery(const Dataset& dataset, const Region& region, const QueryOptions& options,
+                    const QueryCallback& callback);
+
+// The node selection of RunQuery alone.
+std::vector<IndexEntry> SelectNodes(const Dataset& dataset, const Region& region, const QueryOptions& options,
+                                    SelectionStats& stats);
+
+// Keeps the points whose index is in `keep` (ascending), in every non-empty column.
+void KeepPoints(NodePoints& points, const std::vector<std::uint32_t>& keep);
+
+}  // namespace octocosm
