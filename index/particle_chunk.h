@@ -15,6 +15,7 @@ struct ParticleChunk {
   std::vector<double> mass;           // size(); always filled (from a mass column, a mass table, or 1)
   std::vector<std::uint64_t> id;      // size(), or empty when the input has no IDs
   std::vector<std::uint8_t> type;     // size(); particle type (GADGET PartType), 0 when the format has none
+  std::vector<float> displacement;    // 3 * size(), or empty: minimal-image offset to the same ID's next-epoch position
 
   std::size_t size() const { return mass.size(); }
   bool has_velocity() const { return !velocity.empty(); }
@@ -26,6 +27,7 @@ struct ParticleChunk {
     mass.clear();
     id.clear();
     type.clear();
+    displacement.clear();
   }
 };
 

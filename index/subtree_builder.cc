@@ -28,7 +28,8 @@ void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& 
   const std::size_t n = particles.size();
   if (particles.position.size() != 3 * n || particles.type.size() != n ||
       (particles.has_velocity() && particles.velocity.size() != 3 * n) ||
-      (particles.has_id() && particles.id.size() != n)) {
+      (particles.has_id() && particles.id.size() != n) ||
+      (!particles.displacement.empty() && particles.displacement.size() != 3 * n)) {
     throw Error::InvalidArgument("subtree builder: particle columns of region " + region.Path() +
                                  " have inconsistent lengths for " + std::to_string(n) + " particles");
   }
@@ -58,6 +59,9 @@ void SwapParticles(ParticleChunk& c, std::size_t i, std::size_t j) {
     for (int a = 0; a < 3; ++a) std::swap(c.velocity[3 * i + a], c.velocity[3 * j + a]);
   }
   if (c.has_id()) std::swap(c.id[i], c.id[j]);
+  if (!c.displacement.empty()) {
+    for (int a = 0; a < 3; ++a) std::swap(c.displacement[3 * i + a], c.displacement[3 * j + a]);
+  }
 }
 
 // Groups particles [begin, end) by their child octant at `level`, in place
@@ -93,12 +97,46 @@ std::array<std::size_t, 9> PartitionByOctant(ParticleChunk& c, std::size_t begin
 NodePoints MakeLeaf(ParticleChunk& c, std::size_t begin, std::size_t end, NodeKey key, const Cube& cube,
                     const SubtreeOptions& options) {
   const auto bounds = PartitionByOctant(c, begin, end, key.level(), cube);
+  // The in-place partition is not stable, so the order it leaves depends on
+  // what else shared the array (a whole input or one chunk of it). Ordering
+  // each octant's points by sampling ID (then by position, for inputs with
+  // coincident points and no IDs) makes every node, and every floating-point
+  // sum over a node, the same however the input was chunked.
+  std::vector<std::size_t> order(end - begin);
+  std::vector<std::uint64_t> sampling_id(end - begin);
+  for (std::size_t i = begin; i < end; ++i) {
+    order[i - begin] = i;
+    sampling_id[i - begin] = c.has_id() ? c.id[i] : SamplingId(&c.position[3 * i]);
+  }
+  for (int o = 0; o < 8; ++o) {
+    std::sort(order.begin() + static_cast<std::ptrdiff_t>(bounds[o] - begin),
+              order.begin() + static_cast<std::ptrdiff_t>(bounds[o + 1] - begin), [&](std::size_t a, std::size_t b) {
+                if (sampling_id[a - begin] != sampling_id[b - begin]) return sampling_id[a - begin] < sampling_id[b - begin];
+                return std::lexicographical_compare(&c.position[3 * a], &c.position[3 * a + 3], &c.position[3 * b],
+                                                    &c.position[3 * b + 3]);
+              });
+  }
+  const std::size_t n = end - begin;
   NodePoints leaf;
-  leaf.position.assign(c.position.begin() + 3 * begin, c.position.begin() + 3 * end);
-  leaf.weight.assign(c.mass.begin() + begin, c.mass.begin() + end);
-  leaf.type.assign(c.type.begin() + begin, c.type.begin() + end);
-  if (c.has_velocity()) leaf.velocity.assign(c.velocity.begin() + 3 * begin, c.velocity.begin() + 3 * end);
-  if (c.has_id()) leaf.id.assign(c.id.begin() + begin, c.id.begin() + end);
+  leaf.position.resize(3 * n);
+  leaf.weight.resize(n);
+  leaf.type.resize(n);
+  if (c.has_velocity()) leaf.velocity.resize(3 * n);
+  if (c.has_id()) leaf.id.resize(n);
+  if (!c.displacement.empty()) leaf.displacement.resize(3 * n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t i = order[k];
+    for (int a = 0; a < 3; ++a) leaf.position[3 * k + a] = c.position[3 * i + a];
+    leaf.weight[k] = c.mass[i];
+    leaf.type[k] = c.type[i];
+    if (c.has_velocity()) {
+      for (int a = 0; a < 3; ++a) leaf.velocity[3 * k + a] = c.velocity[3 * i + a];
+    }
+    if (c.has_id()) leaf.id[k] = c.id[i];
+    if (!c.displacement.empty()) {
+      for (int a = 0; a < 3; ++a) leaf.displacement[3 * k + a] = c.displacement[3 * i + a];
+    }
+  }
   for (int o = 0; o < 9; ++o) leaf.octant_offsets[o] = static_cast<std::uint32_t>(bounds[o] - begin);
   leaf.smoothing = LeafSmoothingLengths(leaf.position, leaf.weight, key, cube, options.sampler);
   return leaf;
@@ -126,35 +164,28 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   const bool has_id = first >= 0 && !children[first].id.empty();
   const bool has_displacement = first >= 0 && !children[first].displacement.empty();
 
-  NodePoints population;
-  population.position.reserve(3 * total);
-  population.weight.reserve(total);
-  population.type.reserve(total);
+  // The sampler needs only positions, weights and sampling IDs; the other
+  // columns are copied straight from the children for the kept points.
+  std::vector<double> position, weight;
   std::vector<std::uint64_t> sampling_id;
+  position.reserve(3 * total);
+  weight.reserve(total);
   sampling_id.reserve(total);
   std::array<std::size_t, 9> child_begin{};
   for (int o = 0; o < 8; ++o) {
     const NodePoints& child = children[o];
-    child_begin[o] = population.size();
-    population.position.insert(population.position.end(), child.position.begin(), child.position.end());
-    population.weight.insert(population.weight.end(), child.weight.begin(), child.weight.end());
-    population.type.insert(population.type.end(), child.type.begin(), child.type.end());
-    if (has_velocity) population.velocity.insert(population.velocity.end(), child.velocity.begin(), child.velocity.end());
-    if (has_displacement) {
-      population.displacement.insert(population.displacement.end(), child.displacement.begin(),
-                                     child.displacement.end());
-    }
+    child_begin[o] = weight.size();
+    position.insert(position.end(), child.position.begin(), child.position.end());
+    weight.insert(weight.end(), child.weight.begin(), child.weight.end());
     if (has_id) {
-      population.id.insert(population.id.end(), child.id.begin(), child.id.end());
       sampling_id.insert(sampling_id.end(), child.id.begin(), child.id.end());
     } else {
       for (std::size_t i = 0; i < child.size(); ++i) sampling_id.push_back(SamplingId(&child.position[3 * i]));
     }
   }
-  child_begin[8] = population.size();
+  child_begin[8] = weight.size();
 
-  const Sample sample =
-      SampleNode(population.position, population.weight, sampling_id, key, cube, options.capacity, options.sampler);
+  const Sample sample = SampleNode(position, weight, sampling_id, key, cube, options.capacity, options.sampler);
   NodePoints node;
   const std::size_t kept = sample.kept.size();
   node.position.reserve(3 * kept);
@@ -163,18 +194,20 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   node.smoothing = sample.smoothing;
   int octant = 0;
   for (std::size_t j = 0; j < kept; ++j) {
-    const std::uint32_t i = sample.kept[j];
     // Kept indices ascend and the population is grouped by octant, so the
     // node's points stay grouped by octant too.
+    const std::uint32_t i = sample.kept[j];
     while (i >= child_begin[octant + 1]) node.octant_offsets[++octant] = static_cast<std::uint32_t>(j);
-    for (int a = 0; a < 3; ++a) node.position.push_back(population.position[3 * i + a]);
-    node.type.push_back(population.type[i]);
+    const NodePoints& child = children[octant];
+    const std::size_t k = i - child_begin[octant];
+    for (int a = 0; a < 3; ++a) node.position.push_back(child.position[3 * k + a]);
+    node.type.push_back(child.type[k]);
     if (has_velocity) {
-      for (int a = 0; a < 3; ++a) node.velocity.push_back(population.velocity[3 * i + a]);
+      for (int a = 0; a < 3; ++a) node.velocity.push_back(child.velocity[3 * k + a]);
     }
-    if (has_id) node.id.push_back(population.id[i]);
+    if (has_id) node.id.push_back(child.id[k]);
     if (has_displacement) {
-      for (int a = 0; a < 3; ++a) node.displacement.push_back(population.displacement[3 * i + a]);
+      for (int a = 0; a < 3; ++a) node.displacement.push_back(child.displacement[3 * k + a]);
     }
   }
   while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(kept);

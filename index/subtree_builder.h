@@ -49,8 +49,8 @@ using NodeSink = std::function<void(NodeKey, NodePoints&&)>;
 
 // Builds the subtree of `region` from `particles`, which must all lie in the
 // region (Cube::Holds) with finite positions and finite masses > 0; columns
-// present in `particles` (velocity, id) are carried into every node: a kept
-// point keeps its particle's values. The
+// present in `particles` (velocity, id, displacement) are carried into every
+// node: a kept point keeps its particle's values. The
 // particles are reordered in place. Returns the region's own node (the same
 // points the sink received for it), for BuildTopLevels; an empty input
 // returns an empty node and calls no sink. Throws Error::InvalidArgument on

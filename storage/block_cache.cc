@@ -10,6 +10,10 @@ namespace octocosm {
 
 namespace {
 
+// Shared bytes whose object is not itself const, so that an evicted buffer
+// nobody else holds may be taken back for reuse (UnchargeLocked).
+std::shared_ptr<const Bytes> MakeShared(Bytes bytes) { return std::make_shared<Bytes>(std::move(bytes)); }
+
 // A copy of `error` that shares nothing with it. Copies of a std::runtime_error
 // share one message buffer through a reference count inside libstdc++, which
 // ThreadSanitizer cannot see; handing each thread its own buffer keeps the
@@ -137,6 +141,11 @@ void BlockCache::UnchargeLocked(Entry* entry) {
   stats_.resident_bytes -= entry->charge;
   --stats_.entries;
   if (entry->where == Where::kLru) {
+    // Nobody else holds the bytes (no handle, no Share()): keep the buffer.
+    // It was created non-const (see MakeShared), so taking it back is sound.
+    if (entry->bytes.use_count() == 1 && spare_buffers_.size() < kMaxSpareBuffers) {
+      spare_buffers_.push_back(std::move(const_cast<Bytes&>(*entry->bytes)));
+    }
     lru_.erase(entry->self);
   } else {
     assert(entry->where == Where::kInUse);
@@ -177,6 +186,7 @@ void BlockCache::Unpin(Entry* entry) {
 
 PinnedBlock BlockCache::Get(const BlockId& id) {
   std::shared_ptr<Flight> flight;
+  Bytes buffer;  // a recycled one when there is one
   {
     std::unique_lock lock(mutex_);
     if (Entry* entry = FindLocked(id)) {
@@ -199,6 +209,10 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
     }
     flight = std::make_shared<Flight>();
     flights_.emplace(id, flight);
+    if (!spare_buffers_.empty()) {
+      buffer = std::move(spare_buffers_.back());
+      spare_buffers_.pop_back();
+    }
     ++stats_.source_reads;
     ++stats_.reads_in_flight;
   }
@@ -207,7 +221,8 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
   std::exception_ptr thrown;  // this thread's own exception, rethrown to this caller
   std::optional<Error> error_for_waiters;
   try {
-    bytes = std::make_shared<const Bytes>(source_->ReadBlock(id));
+    source_->ReadBlock(id, buffer);
+    bytes = MakeShared(std::move(buffer));
   } catch (const Error& e) {
     thrown = std::current_exception();
     error_for_waiters = ThreadOwnCopy(e);
@@ -267,7 +282,7 @@ bool BlockCache::Contains(const BlockId& id) const {
 }
 
 PinnedBlock BlockCache::Insert(const BlockId& id, Bytes bytes) {
-  auto shared = std::make_shared<const Bytes>(std::move(bytes));
+  auto shared = MakeShared(std::move(bytes));
   std::lock_guard lock(mutex_);
   return PinnedBlock(this, InsertPinnedLocked(id, std::move(shared), 1));
 }

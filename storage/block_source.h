@@ -41,6 +41,11 @@ class BlockSource {
   // kCorruption when the bytes fail verification, kIo when the OS fails.
   // Corrupt bytes are never returned.
   virtual Bytes ReadBlock(const BlockId& id) const = 0;
+
+  // The same, into `buffer`, reusing its capacity: a reader that serves many
+  // blocks (the cache) recycles evicted buffers this way instead of touching
+  // fresh memory for every block. The default allocates.
+  virtual void ReadBlock(const BlockId& id, Bytes& buffer) const { buffer = ReadBlock(id); }
 };
 
 }  // namespace octocosm

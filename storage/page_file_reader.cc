@@ -95,6 +95,23 @@ void PageFileReader::ReadBlockInto(const IndexEntry& entry, std::span<std::uint8
   }
 }
 
+void PageFileReader::ReadBlockRange(const IndexEntry& entry, std::uint64_t offset, std::span<std::uint8_t> out) const {
+  if (offset > entry.byte_length || out.size() > entry.byte_length - offset) {
+    throw Error::InvalidArgument(BlockLabel(entry.key) + " of " + path() + " is " + std::to_string(entry.byte_length) +
+                                 " bytes; cannot read " + std::to_string(out.size()) + " bytes at " + std::to_string(offset));
+  }
+  if (out.empty()) return;
+  const std::uint64_t at = entry.first_page * header_.page_size + offset;
+  const std::size_t got = file_.ReadAt(at, out);
+  block_reads_.fetch_add(1, std::memory_order_relaxed);
+  bytes_read_.fetch_add(got, std::memory_order_relaxed);
+  if (got != out.size()) {
+    throw Error::Corruption(path(), BlockLabel(entry.key) + ": truncated: expected " + std::to_string(out.size()) +
+                                        " bytes at offset " + std::to_string(at) + ", the file ends after " +
+                                        std::to_string(got));
+  }
+}
+
 Bytes PageFileReader::ReadBlock(const IndexEntry& entry) const {
   Bytes bytes(static_cast<std::size_t>(entry.byte_length));
   ReadBlockInto(entry, bytes);

@@ -63,6 +63,12 @@ class PageFileReader {
   // that ends early (the contents of `out` are then unspecified), kIo if the
   // OS fails, kInvalidArgument if `out` is too small.
   void ReadBlockInto(const IndexEntry& entry, std::span<std::uint8_t> out) const;
+  // Reads bytes [offset, offset + out.size()) of a block WITHOUT verifying
+  // them: the block checksum covers the whole block only. For callers whose
+  // payload carries its own checksums for the parts they read (the block
+  // codec checksums its header and each column), so they can skip what they
+  // do not need. kInvalidArgument when the range exceeds the block.
+  void ReadBlockRange(const IndexEntry& entry, std::uint64_t offset, std::span<std::uint8_t> out) const;
   Bytes ReadBlock(const IndexEntry& entry) const;
   // Looks up and reads; kNotFound if there is no block with this key.
   Bytes ReadBlock(std::uint64_t key) const;

@@ -133,6 +133,25 @@ std::size_t StoreReader::ReadBlockInto(const BlockId& id, std::span<std::uint8_t
   return static_cast<std::size_t>(entry->byte_length);
 }
 
+void StoreReader::ReadBlock(const BlockId& id, Bytes& buffer) const {
+  const PageFileReader& file = page_file(id.epoch);
+  std::optional<IndexEntry> entry = file.Lookup(id.key);
+  if (!entry) {
+    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
+  }
+  buffer.resize(static_cast<std::size_t>(entry->byte_length));
+  file.ReadBlockInto(*entry, buffer);
+}
+
+void StoreReader::ReadBlockRange(const BlockId& id, std::uint64_t offset, std::span<std::uint8_t> out) const {
+  const PageFileReader& file = page_file(id.epoch);
+  std::optional<IndexEntry> entry = file.Lookup(id.key);
+  if (!entry) {
+    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
+  }
+  file.ReadBlockRange(*entry, offset, out);
+}
+
 void StoreReader::DropCaches() const {
   for (const auto& file : page_files_) file->DropCaches();
 }

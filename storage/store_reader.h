@@ -40,10 +40,15 @@ class StoreReader : public BlockSource {
   // BlockSource: the verified bytes of a block. kNotFound for an unknown
   // epoch or key.
   Bytes ReadBlock(const BlockId& id) const override;
+  void ReadBlock(const BlockId& id, Bytes& buffer) const override;
   // Reads a block into `out` without allocating; returns its length. `out`
   // must hold the block (Lookup tells its byte_length); kInvalidArgument if
   // it does not.
   std::size_t ReadBlockInto(const BlockId& id, std::span<std::uint8_t> out) const;
+
+  // Unverified bytes [offset, offset + out.size()) of a block; see
+  // PageFileReader::ReadBlockRange. kNotFound for an unknown block.
+  void ReadBlockRange(const BlockId& id, std::uint64_t offset, std::span<std::uint8_t> out) const;
 
   std::optional<IndexEntry> Lookup(const BlockId& id) const;
   // Visits the entries of `epoch` with keys in [lo, hi], in key order, until

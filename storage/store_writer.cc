@@ -97,6 +97,12 @@ void StoreWriter::EndEpoch() {
   manifest_.epochs.push_back(std::move(info));
 }
 
+void StoreWriter::SetDataset(nlohmann::json dataset) {
+  RequireUnfinished("SetDataset");
+  if (!dataset.is_object()) throw Error::InvalidArgument("store dataset metadata must be a JSON object");
+  manifest_.dataset = std::move(dataset);
+}
+
 void StoreWriter::Finish() {
   RequireUnfinished("Finish");
   if (open_epoch_) {

@@ -51,6 +51,9 @@ class StoreWriter {
   void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
   // Finishes the current epoch's page file (durable, under its final name).
   void EndEpoch();
+  // Replaces the dataset metadata (a JSON object) that Finish() will write:
+  // a writer learns some of it (per-epoch statistics) only while writing.
+  void SetDataset(nlohmann::json dataset);
   // Writes the manifest; the store is complete and opens from now on. An
   // epoch still open is an error (kInvalidArgument): end it first.
   void Finish();

@@ -278,6 +278,27 @@ TEST(SubtreeBuilder, WorksWithoutIdsOrVelocities) {
   EXPECT_EQ(sorted(root), sorted(root2));
 }
 
+TEST(SubtreeBuilder, CarriesDisplacements) {
+  std::mt19937_64 rng(8);
+  ParticleChunk input = Clumpy(rng, 5000);
+  for (const std::uint64_t id : input.id) {
+    for (int a = 0; a < 3; ++a) input.displacement.push_back(static_cast<float>(id % 997) * 0.01f + static_cast<float>(a));
+  }
+  SubtreeOptions options;
+  options.capacity = 200;
+  Tree tree;
+  BuildSubtree(input, NodeKey::Root(), kCube, options, tree.Sink());
+  ASSERT_GT(tree.nodes.size(), 8u);
+  for (const auto& [key, points] : tree.nodes) {
+    ASSERT_EQ(points.displacement.size(), 3 * points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      ASSERT_EQ(points.displacement[3 * i + 2], static_cast<float>(points.id[i] % 997) * 0.01f + 2.0f);
+    }
+    const Bytes block = EncodeBlock(points, key, kCube);
+    EXPECT_EQ(DecodeBlock(block, kAllColumns, key, kCube, "d").points.displacement.size(), 3 * points.size());
+  }
+}
+
 TEST(SubtreeBuilder, TopLevelsMatchOneBuildOverTheWholeCube) {
   std::mt19937_64 rng(5);
   const ParticleChunk input = Clumpy(rng, 40000);

@@ -1,0 +1,249 @@
+// The ingest pipeline end to end: snapshots in, store out, every invariant of
+// the octree checked by reading the store back.
+#include "tools/ingest/ingest.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <set>
+#include <unordered_map>
+
+#include "index/block_codec.h"
+#include "index/dataset.h"
+#include "index/id_index.h"
+#include "storage/error.h"
+#include "tools/snapshot/snapshot_source.h"
+#include "tests/tools/store_check.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace testing_support;
+
+class IngestTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("octocosm-ingest-test-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "tmp");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  IngestOptions Options(std::vector<std::string> inputs, const std::string& out) const {
+    IngestOptions o;
+    o.inputs = std::move(inputs);
+    o.output = (dir_ / out).string();
+    o.temp_dir = (dir_ / "tmp").string();
+    o.quiet = true;
+    o.page_size = 4096;
+    return o;
+  }
+  bool TempIsEmpty() const { return fs::is_empty(dir_ / "tmp"); }
+
+  fs::path dir_;
+};
+
+struct Particle {
+  double x[3];
+  double mass;
+  std::uint64_t id;
+};
+
+// Clustered points: a few Gaussian halos on a uniform background.
+std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double box) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uniform(0, box);
+  std::normal_distribution<double> gauss(0, box / 40);
+  std::vector<std::array<double, 3>> centres(6);
+  for (auto& c : centres) c = {uniform(rng), uniform(rng), uniform(rng)};
+  std::vector<Particle> particles(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    Particle& p = particles[i];
+    if (i % 3 == 0) {
+      for (double& x : p.x) x = uniform(rng);
+    } else {
+      const auto& c = centres[i % centres.size()];
+      for (int a = 0; a < 3; ++a) p.x[a] = std::clamp(c[a] + gauss(rng), 0.0, box * 0.999999);
+    }
+    p.mass = 1.0 + static_cast<double>(i % 7);
+    p.id = 1000 + i * 3;
+  }
+  return particles;
+}
+
+std::string WriteRaw(const fs::path& path, const std::vector<Particle>& particles) {
+  std::ofstream out(path, std::ios::binary);
+  for (const Particle& p : particles) {
+    out.write(reinterpret_cast<const char*>(p.x), sizeof p.x);
+    out.write(reinterpret_cast<const char*>(&p.mass), sizeof p.mass);
+    out.write(reinterpret_cast<const char*>(&p.id), sizeof p.id);
+  }
+  return path.string();
+}
+
+TEST_F(IngestTest, EveryParticleInExactlyOneLeafWeightsExactPositionsWithinHalfAQuantum) {
+  const auto particles = Clustered(60000, 1, 100.0);
+  const std::string input = WriteRaw(dir_ / "in.raw", particles);
+  IngestOptions o = Options({input}, "store");
+  o.read.format = "raw";
+  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  o.tree.capacity = 1000;
+  o.max_chunk_points = 8000;  // forces many chunks and re-splits of dense cells
+  const IngestReport report = Ingest(o);
+  ASSERT_EQ(report.input_points, particles.size());
+  EXPECT_GT(report.epochs[0].chunks, 5u);
+  EXPECT_TRUE(TempIsEmpty());
+
+  const Dataset dataset = Dataset::Open(o.output);
+  const TreeCheck check = CheckTree(dataset, 0);
+  ASSERT_EQ(check.leaf_points.size(), particles.size());
+  double total = 0;
+  const Cube& cube = dataset.cube(0);
+  for (const Particle& p : particles) {
+    total += p.mass;
+    const auto it = check.leaf_points.find(p.id);
+    ASSERT_NE(it, check.leaf_points.end()) << "ID " << p.id << " lost";
+    const LeafPoint& lp = it->second;
+    // A leaf keeps each particle's own mass, to within one integer weight unit.
+    EXPECT_NEAR(lp.weight, p.mass, lp.node_mass / static_cast<double>(kWeightTotalUnits)) << "ID " << p.id;
+    const double bound = cube.NodeSize(lp.leaf.level()) / 131072.0 * (1 + 1e-9);
+    for (int a = 0; a < 3; ++a) ASSERT_LE(std::fabs(lp.x[a] - p.x[a]), bound) << "ID " << p.id << " axis " << a;
+  }
+  EXPECT_NEAR(report.epochs[0].mass, total, 1e-12 * total);
+}
+
+TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
+  const auto particles = Clustered(30000, 2, 10.0);
+  const std::string input = WriteRaw(dir_ / "in.raw", particles);
+  IngestOptions whole = Options({input}, "whole");
+  whole.read.format = "raw";
+  whole.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  whole.tree.capacity = 500;
+  IngestOptions chunked = whole;
+  chunked.output = (dir_ / "chunked").string();
+  chunked.max_chunk_points = 2000;
+  chunked.threads = 2;
+  Ingest(whole);
+  const IngestReport report = Ingest(chunked);
+  EXPECT_GT(report.epochs[0].chunks, 10u);
+  const TreeCheck a = CheckTree(Dataset::Open(whole.output), 0);
+  const TreeCheck b = CheckTree(Dataset::Open(chunked.output), 0);
+  EXPECT_EQ(FirstDifference(a, b), "") << "the same data must give the same blocks whatever the memory budget";
+}
+
+TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) {
+  const double box = 50.0;
+  auto epoch0 = Clustered(20000, 3, box);
+  auto epoch1 = epoch0;
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> step(-2.0, 2.0);
+  for (auto& p : epoch1) {
+    for (double& x : p.x) {
+      x += step(rng);
+      x -= box * std::floor(x / box);  // wrapped into [0, box)
+    }
+  }
+  std::shuffle(epoch1.begin(), epoch1.end(), rng);  // a different file order
+  IngestOptions o = Options({WriteRaw(dir_ / "e0.raw", epoch0), WriteRaw(dir_ / "e1.raw", epoch1)}, "series");
+  o.read.format = "raw";
+  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  o.read.box_size_override = box;
+  o.tree.capacity = 800;
+  Ingest(o);
+  const Dataset dataset = Dataset::Open(o.output);
+  ASSERT_EQ(dataset.epoch_count(), 2u);
+  EXPECT_TRUE(dataset.cube(0).periodic);
+  const TreeCheck first = CheckTree(dataset, 0);
+  std::unordered_map<std::uint64_t, const Particle*> next;
+  for (const auto& p : epoch1) next[p.id] = &p;
+  std::size_t crossings = 0;
+  for (const Particle& p : epoch0) {
+    const LeafPoint& lp = first.leaf_points.at(p.id);
+    ASSERT_TRUE(lp.has_displacement);
+    for (int a = 0; a < 3; ++a) {
+      double expected = next.at(p.id)->x[a] - p.x[a];
+      if (std::fabs(expected) > box / 2) {
+        ++crossings;
+        expected -= box * std::nearbyint(expected / box);
+      }
+      // Quantized per block between min and max (|d| <= 2): error <= 4 / 131070, plus float rounding.
+      ASSERT_NEAR(lp.displacement[a], expected, 4.0 / 131070 + 1e-5) << "ID " << p.id;
+    }
+  }
+  EXPECT_GT(crossings, 100u) << "the test must exercise boundary crossings";
+  // The last epoch has nothing to move to.
+  const TreeCheck last = CheckTree(dataset, 1);
+  EXPECT_FALSE(last.leaf_points.begin()->second.has_displacement);
+  // The ID index finds every particle in both epochs.
+  IdIndexReader ids(dataset.id_index_directory());
+  for (std::size_t i = 0; i < epoch0.size(); i += 97) {
+    EXPECT_EQ(ids.Find(0, epoch0[i].id), first.leaf_points.at(epoch0[i].id).leaf);
+    EXPECT_EQ(ids.Find(1, epoch0[i].id), last.leaf_points.at(epoch0[i].id).leaf);
+  }
+  EXPECT_FALSE(ids.Find(0, 7).has_value());
+}
+
+TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
+  const auto e0 = Clustered(20000, 5, 20.0);
+  auto e1 = e0;
+  for (auto& p : e1) p.x[0] = std::min(p.x[0] * 0.9 + 1.0, 19.9);
+  IngestOptions big = Options({WriteRaw(dir_ / "e0.raw", e0), WriteRaw(dir_ / "e1.raw", e1)}, "big");
+  big.read.format = "raw";
+  big.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  big.tree.capacity = 700;
+  IngestOptions small = big;
+  small.output = (dir_ / "small").string();
+  small.memory_budget = 32 << 20;
+  small.sort_run_points = 1500;  // 14 sorted runs per epoch, merged
+  small.max_chunk_points = 3000;
+  Ingest(big);
+  Ingest(small);
+  for (std::uint32_t e = 0; e < 2; ++e) {
+    EXPECT_EQ(FirstDifference(CheckTree(Dataset::Open(big.output), e), CheckTree(Dataset::Open(small.output), e)), "");
+  }
+  EXPECT_TRUE(TempIsEmpty());
+}
+
+TEST_F(IngestTest, MalformedInputLeavesNoStoreAndNoTemporaryFiles) {
+  auto particles = Clustered(5000, 6, 1.0);
+  particles[1234].x[1] = std::nan("");
+  IngestOptions o = Options({WriteRaw(dir_ / "nan.raw", particles)}, "store");
+  o.read.format = "raw";
+  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  try {
+    Ingest(o);
+    FAIL() << "NaN coordinates must be rejected";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("nan.raw"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(o.output));
+  EXPECT_TRUE(TempIsEmpty());
+
+  // A truncated record: the file size is not a multiple of the record size.
+  {
+    std::ofstream out(dir_ / "short.raw", std::ios::binary);
+    const char bytes[50] = {};
+    out.write(bytes, sizeof bytes);
+  }
+  o.inputs = {(dir_ / "short.raw").string()};
+  EXPECT_THROW(Ingest(o), Error);
+  EXPECT_FALSE(fs::exists(o.output));
+  EXPECT_TRUE(TempIsEmpty());
+
+  // An output that already holds a store is refused and left alone.
+  o.inputs = {WriteRaw(dir_ / "good.raw", Clustered(100, 7, 1.0))};
+  Ingest(o);
+  EXPECT_THROW(Ingest(o), Error);
+  EXPECT_NO_THROW(Dataset::Open(o.output));
+}
+
+}  // namespace
+}  // namespace octocosm

@@ -1,0 +1,107 @@
+// Test helpers: read a dataset store back and check the octree invariants.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <set>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "index/block_codec.h"
+#include "index/dataset.h"
+
+namespace octocosm::testing_support {
+
+struct LeafPoint {
+  double x[3];
+  double weight;
+  std::uint8_t type;
+  NodeKey leaf;
+  float displacement[3];
+  bool has_displacement;
+  double node_mass;  // sum of the leaf's weights: one weight unit is node_mass / kWeightTotalUnits
+};
+
+struct TreeCheck {
+  std::unordered_map<std::uint64_t, LeafPoint> leaf_points;  // by ID
+  std::map<std::uint64_t, std::vector<Bytes>> blocks;       // raw blocks by key, for comparisons
+  std::uint64_t nodes = 0;
+};
+
+// Empty when both stores hold the same blocks; else names the first difference.
+inline std::string FirstDifference(const TreeCheck& a, const TreeCheck& b) {
+  if (a.blocks.size() != b.blocks.size()) {
+    return std::to_string(a.blocks.size()) + " vs " + std::to_string(b.blocks.size()) + " blocks";
+  }
+  std::string differing;
+  for (auto ia = a.blocks.begin(), ib = b.blocks.begin(); ia != a.blocks.end(); ++ia, ++ib) {
+    if (ia->first != ib->first) return "node " + NodeKey::FromValue(ia->first).Path() + " vs " + NodeKey::FromValue(ib->first).Path();
+    if (ia->second != ib->second) differing += " " + NodeKey::FromValue(ia->first).Path();
+  }
+  return differing.empty() ? "" : "blocks differ:" + differing;
+}
+
+// Walks every block of an epoch and checks the octree invariants.
+inline TreeCheck CheckTree(const Dataset& dataset, std::uint32_t epoch) {
+  TreeCheck check;
+  const Cube& cube = dataset.cube(epoch);
+  std::set<std::uint64_t> keys;
+  dataset.store().Scan(epoch, 0, ~std::uint64_t{0}, [&](const IndexEntry& e) {
+    keys.insert(e.key);
+    return true;
+  });
+  std::unordered_map<std::uint64_t, double> own, below;
+  for (std::uint64_t k : keys) {
+    const NodeKey key = NodeKey::FromValue(k);
+    bool leaf = true;
+    for (int o = 0; o < 8 && key.level() < kMaxLevel; ++o) leaf &= !keys.count(key.Child(o).value());
+    const Bytes bytes = dataset.store().ReadBlock({epoch, k});
+    check.blocks[k].push_back(bytes);
+    const DecodedBlock block = DecodeBlock(bytes, kAllColumns, key, cube, "test");
+    const NodePoints& p = block.points;
+    EXPECT_LE(p.size(), dataset.capacity()) << key.Path();
+    if (key.level() > 0) {
+      EXPECT_TRUE(keys.count(key.Parent().value())) << "orphan " << key.Path();
+    }
+    double sum = 0;
+    for (double w : p.weight) sum += w;
+    own[k] = sum;
+    if (key.level() > 0) below[key.Parent().value()] += sum;
+    const NodeCube node = cube.NodeCubeOf(key);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      for (int a = 0; a < 3; ++a) {
+        EXPECT_GE(p.position[3 * i + a], node.origin[a]);
+        EXPECT_LE(p.position[3 * i + a], node.origin[a] + node.size);
+      }
+    }
+    if (leaf) {
+      EXPECT_FALSE(p.id.empty());
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        LeafPoint lp{{p.position[3 * i], p.position[3 * i + 1], p.position[3 * i + 2]},
+                     p.weight[i], p.type[i], key, {0, 0, 0}, !p.displacement.empty(), sum};
+        if (lp.has_displacement) {
+          for (int a = 0; a < 3; ++a) lp.displacement[a] = p.displacement[3 * i + a];
+        }
+        EXPECT_TRUE(check.leaf_points.emplace(p.id[i], lp).second) << "ID " << p.id[i] << " in two leaves";
+      }
+    }
+    ++check.nodes;
+  }
+  for (const auto& [k, sum] : below) {
+    EXPECT_NEAR(own.at(k), sum, 1e-12 * sum) << "weights of " << NodeKey::FromValue(k).Path() << " vs its children";
+  }
+  return check;
+}
+
+
+// Particles per type among the leaves.
+inline std::map<int, std::uint64_t> TypeCounts(const TreeCheck& check) {
+  std::map<int, std::uint64_t> counts;
+  for (const auto& [id, p] : check.leaf_points) ++counts[p.type];
+  return counts;
+}
+
+}  // namespace octocosm::testing_support

@@ -1,0 +1,89 @@
+// octocosm ingest: snapshots -> store.
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "storage/error.h"
+#include "tools/cli_util.h"
+#include "tools/commands.h"
+#include "tools/ingest/ingest.h"
+#include "tools/progress.h"
+
+namespace octocosm {
+
+void AddIngestCommand(CLI::App& app) {
+  struct Flags {
+    IngestOptions options;
+    std::string memory, page_size = "64K", cube, format = "auto", raw_layout, types;
+    double box_size = -1;
+    bool no_velocity = false, no_ids = false;
+    std::size_t chunk_particles = std::size_t{1} << 16;
+  };
+  auto flags = std::make_shared<Flags>();
+  IngestOptions& o = flags->options;
+  CLI::App* cmd = app.add_subcommand(
+      "ingest",
+      "Build a level-of-detail store from snapshots, out of core. Give one snapshot per epoch, in time order;\n"
+      "a multi-file snapshot is named by its base name (snap_005 for snap_005.0, snap_005.1, ...) or any of\n"
+      "its files. Formats: GADGET 1 and 2 (either endianness), HDF5 (GADGET-4, AREPO, SWIFT), raw binary\n"
+      "(--format raw --raw-layout), CSV (docs/INPUT_FORMATS.md).");
+  cmd->add_option("inputs", o.inputs, "snapshots, one per epoch")->required();
+  cmd->add_option("-o,--output", o.output, "store directory to create (must not hold a store)")->required();
+  cmd->add_option("-n,--capacity", o.tree.capacity, "most points per node")->default_val(16000)->check(CLI::Range(1, 100000000));
+  cmd->add_option("--max-depth", o.tree.max_level, "depth limit of the tree (0-21); coincident points stop here")
+      ->default_val(21)->check(CLI::Range(0, 21));
+  cmd->add_option("--alpha", o.tree.sampler.alpha,
+                  "density exponent of the subselection: 0 keeps points in proportion to mass, larger values thin "
+                  "sparse regions less")->default_val(0.5)->check(CLI::Range(0.0, 4.0));
+  cmd->add_option("--seed", o.tree.sampler.seed, "seed of the deterministic sampling hash")->default_val(0);
+  cmd->add_option("--memory", flags->memory, "memory budget, e.g. 2G (default: half the physical memory)");
+  cmd->add_option("--temp-dir", o.temp_dir, "where temporary files go (default: beside the output)");
+  cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);
+  cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M")->default_val("64K");
+  cmd->add_option("--cube", flags->cube, "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube)");
+  cmd->add_option("--box-size", flags->box_size, "periodic box size, overriding the header's (0 = not periodic)");
+  cmd->add_option("--types", flags->types, "particle types to read, e.g. '1,2' (default: all)");
+  cmd->add_option("--format", flags->format, "input format")->check(CLI::IsMember({"auto", "gadget", "hdf5", "raw", "csv"}))->default_val("auto");
+  cmd->add_option("--raw-layout", flags->raw_layout, "record layout of raw binary input, e.g. 'xyz:f32,vel:f32x3,id:u64'");
+  cmd->add_option("--chunk-particles", flags->chunk_particles, "particles read per batch (small batches stay in CPU caches)")->default_val(std::size_t{1} << 16);
+  cmd->add_flag("--no-velocity", flags->no_velocity, "do not store velocities");
+  cmd->add_flag("--no-ids", flags->no_ids, "do not store particle IDs (no ID index, no displacements)");
+  cmd->add_flag("-q,--quiet", o.quiet, "no progress output");
+  cmd->callback([flags] {
+    IngestOptions& options = flags->options;
+    if (!flags->memory.empty()) options.memory_budget = ParseByteSize(flags->memory, "--memory");
+    options.page_size = static_cast<std::uint32_t>(ParseByteSize(flags->page_size, "--page-size"));
+    options.read.format = flags->format;
+    options.read.read_velocity = !flags->no_velocity;
+    options.read.read_id = !flags->no_ids;
+    options.read.chunk_particles = flags->chunk_particles;
+    options.read.box_size_override = flags->box_size;
+    if (!flags->raw_layout.empty()) options.read.raw = RawLayout::Parse(flags->raw_layout);
+    if (!flags->types.empty()) {
+      for (double t : ParseNumberList(flags->types, "--types")) options.read.types.push_back(static_cast<int>(t));
+    }
+    if (!flags->cube.empty()) {
+      const auto v = ParseNumberList(flags->cube, "--cube");
+      if (v.size() != 4) throw Error::InvalidArgument("--cube '" + flags->cube + "': expected x,y,z,size");
+      options.cube = Cube{{v[0], v[1], v[2]}, v[3], false};
+    }
+    const IngestReport report = Ingest(options);
+    std::printf("ingested %s points in %zu epoch(s) into %s: %s, %.1f s, %.2f M points/s\n",
+                HumanCount(static_cast<double>(report.input_points)).c_str(), report.epochs.size(),
+                options.output.c_str(), HumanBytes(static_cast<double>(report.store_bytes)).c_str(), report.seconds,
+                report.seconds > 0 ? static_cast<double>(report.input_points) / report.seconds / 1e6 : 0.0);
+    for (std::size_t e = 0; e < report.epochs.size(); ++e) {
+      const EpochReport& r = report.epochs[e];
+      std::printf("  epoch %zu: %llu points, %llu nodes (%llu leaves), depth %d, %llu chunks, mass %.9g",
+                  e, static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
+                  static_cast<unsigned long long>(r.leaves), r.depth, static_cast<unsigned long long>(r.chunks), r.mass);
+      if (r.missing_in_next) std::printf(", %llu IDs missing in the next epoch", static_cast<unsigned long long>(r.missing_in_next));
+      if (r.duplicate_ids) std::printf(", %llu duplicate IDs", static_cast<unsigned long long>(r.duplicate_ids));
+      std::printf("\n");
+    }
+  });
+}
+
+}  // namespace octocosm

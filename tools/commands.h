@@ -1,0 +1,17 @@
+// The subcommands of `octocosm`. Each Add*Command registers its subcommand,
+// flags and help on the app; the callback runs the command and throws Error on
+// failure (main() turns that into a message and an exit status).
+#pragma once
+
+namespace CLI {
+class App;
+}
+
+namespace octocosm {
+
+void AddIngestCommand(CLI::App& app);
+void AddInfoCommand(CLI::App& app);
+void AddVerifyCommand(CLI::App& app);
+void AddSynthCommand(CLI::App& app);
+
+}  // namespace octocosm

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The main job on an embedded default: simulate a small universe, ingest its
+# epochs into a level-of-detail store, describe the store and verify it.
+#   tools/demo.sh BUILD_DIR [WORK_DIR]
+set -euo pipefail
+build="${1:?usage: tools/demo.sh BUILD_DIR [WORK_DIR]}"
+work="${2:-$build/demo}"
+octocosm="$build/tools/octocosm"
+
+rm -rf "$work"
+mkdir -p "$work"
+echo "== 1. synth: a 64^3 particle-mesh run, 100 Mpc/h box, 5 epochs from z = 49 to z = 0"
+"$octocosm" synth pm -o "$work/snapshots" -N 64 --box 100 --steps 40 --outputs 5 --quiet
+echo "== 2. ingest: every epoch into one store (node capacity 4000)"
+"$octocosm" ingest "$work"/snapshots/snap_00? -o "$work/store" --capacity 4000
+echo "== 3. info"
+"$octocosm" info "$work/store"
+echo "== 4. verify"
+"$octocosm" verify "$work/store"
+echo "demo finished: the store is in $work/store"

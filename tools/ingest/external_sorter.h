@@ -1,0 +1,152 @@
+// Sorts more records than fit in memory by a 64-bit key: records are
+// gathered into runs of at most `run_records`, each run is sorted in memory
+// (stably, so equal keys keep their input order and results are reproducible)
+// and written to a temporary file, and reading merges the runs with a heap.
+// A set that fits in one run never touches the disk.
+//
+// Record must be trivially copyable and have a member `std::uint64_t key`.
+#pragma once
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdint>
+#include <cstdio>
+#include <memory>
+#include <queue>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "storage/error.h"
+
+namespace octocosm {
+
+template <typename Record>
+class ExternalSorter {
+  static_assert(std::is_trivially_copyable_v<Record>);
+
+ public:
+  // Run files are named `path_prefix` + "-run-N".
+  ExternalSorter(std::string path_prefix, std::size_t run_records)
+      : prefix_(std::move(path_prefix)), run_records_(std::max<std::size_t>(run_records, 1)) {}
+  ExternalSorter(const ExternalSorter&) = delete;
+  ExternalSorter& operator=(const ExternalSorter&) = delete;
+  ~ExternalSorter() {
+    for (const std::string& path : run_paths_) std::remove(path.c_str());
+  }
+
+  void Add(const Record& record) {
+    if (finished_) throw Error::InvalidArgument("ExternalSorter: Add after Finish");
+    buffer_.push_back(record);
+    ++size_;
+    if (buffer_.size() >= run_records_) WriteRun();
+  }
+
+  // Sorts the last run; afterwards only reading is allowed.
+  void Finish() {
+    if (finished_) return;
+    finished_ = true;
+    SortBuffer();
+    if (!run_paths_.empty() && !buffer_.empty()) WriteRun();
+    if (!run_paths_.empty()) {
+      buffer_.clear();
+      buffer_.shrink_to_fit();
+    }
+  }
+
+  std::uint64_t size() const { return size_; }
+  std::size_t run_count() const { return run_paths_.empty() ? (size_ > 0 ? 1 : 0) : run_paths_.size(); }
+
+  // Reads the records in key order. Several readers may be open at once.
+  class Reader {
+   public:
+    bool Next(Record& out) {
+      if (memory_ != nullptr) {
+        if (memory_index_ >= memory_->size()) return false;
+        out = (*memory_)[memory_index_++];
+        return true;
+      }
+      if (heap_.empty()) return false;
+      const std::size_t run = heap_.top().second;
+      heap_.pop();
+      out = runs_[run].current;
+      if (runs_[run].Advance()) heap_.push({runs_[run].current.key, run});
+      return true;
+    }
+
+   private:
+    friend class ExternalSorter;
+    struct RunCursor {
+      std::unique_ptr<std::FILE, int (*)(std::FILE*)> file{nullptr, &std::fclose};
+      std::string path;
+      std::vector<Record> batch;
+      std::size_t index = 0, filled = 0;
+      Record current{};
+      bool Advance() {
+        if (index == filled) {
+          filled = std::fread(batch.data(), sizeof(Record), batch.size(), file.get());
+          index = 0;
+          if (filled == 0) {
+            if (std::ferror(file.get())) throw IoErrorFromErrno(path, "reading a sort run", errno);
+            return false;
+          }
+        }
+        current = batch[index++];
+        return true;
+      }
+    };
+    using HeapItem = std::pair<std::uint64_t, std::size_t>;  // (key, run); ties by run keep input order
+    const std::vector<Record>* memory_ = nullptr;
+    std::size_t memory_index_ = 0;
+    std::vector<RunCursor> runs_;
+    std::priority_queue<HeapItem, std::vector<HeapItem>, std::greater<>> heap_;
+  };
+
+  Reader Open() const {
+    if (!finished_) throw Error::InvalidArgument("ExternalSorter: Open before Finish");
+    Reader reader;
+    if (run_paths_.empty()) {
+      reader.memory_ = &buffer_;
+      return reader;
+    }
+    // Read buffers share the run budget: a merge of many runs reads small batches.
+    const std::size_t batch = std::max<std::size_t>(run_records_ / run_paths_.size() / 4, 1024);
+    reader.runs_.resize(run_paths_.size());
+    for (std::size_t r = 0; r < run_paths_.size(); ++r) {
+      auto& cursor = reader.runs_[r];
+      cursor.path = run_paths_[r];
+      cursor.file.reset(std::fopen(cursor.path.c_str(), "rb"));
+      if (!cursor.file) throw IoErrorFromErrno(cursor.path, "opening a sort run", errno);
+      cursor.batch.resize(batch);
+      if (cursor.Advance()) reader.heap_.push({cursor.current.key, r});
+    }
+    return reader;
+  }
+
+ private:
+  void SortBuffer() {
+    std::stable_sort(buffer_.begin(), buffer_.end(), [](const Record& a, const Record& b) { return a.key < b.key; });
+  }
+
+  void WriteRun() {
+    SortBuffer();
+    const std::string path = prefix_ + "-run-" + std::to_string(run_paths_.size());
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
+    if (!file) throw IoErrorFromErrno(path, "creating a sort run", errno);
+    run_paths_.push_back(path);
+    if (std::fwrite(buffer_.data(), sizeof(Record), buffer_.size(), file.get()) != buffer_.size() ||
+        std::fflush(file.get()) != 0) {
+      throw IoErrorFromErrno(path, "writing a sort run (is the temporary directory full?)", errno);
+    }
+    buffer_.clear();
+  }
+
+  std::string prefix_;
+  std::size_t run_records_;
+  std::vector<Record> buffer_;
+  std::vector<std::string> run_paths_;
+  std::uint64_t size_ = 0;
+  bool finished_ = false;
+};
+
+}  // namespace octocosm

@@ -1,0 +1,416 @@
+#include "tools/ingest/ingest.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <exception>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <unordered_set>
+
+#include <nlohmann/json.hpp>
+
+#include "index/block_codec.h"
+#include "index/id_index.h"
+#include "storage/error.h"
+#include "storage/store_writer.h"
+#include "tools/ingest/chunker.h"
+#include "tools/ingest/epoch_join.h"
+#include "tools/ingest/external_sorter.h"
+#include "tools/progress.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Bytes of memory one particle costs while its chunk's subtree is built: the
+// chunk's columns (about 65 bytes), the octant partition, and the node copies
+// handed to the sink and the encoder. Measured peak RSS / chunk points is
+// about 120; this leaves room.
+constexpr std::uint64_t kBuildBytesPerPoint = 160;
+
+struct IdLeafRecord {
+  std::uint64_t key;  // particle ID
+  std::uint64_t leaf;
+};
+
+// A directory for temporary files, removed with everything in it when the
+// object dies, whether the ingest succeeded or threw.
+class TempDirectory {
+ public:
+  explicit TempDirectory(const std::string& parent) {
+    std::string pattern = (fs::path(parent) / "octocosm-ingest-XXXXXX").string();
+    if (::mkdtemp(pattern.data()) == nullptr) {
+      throw IoErrorFromErrno(pattern, "creating the temporary directory", errno);
+    }
+    path_ = pattern;
+  }
+  ~TempDirectory() {
+    std::error_code ignored;
+    fs::remove_all(path_, ignored);
+  }
+  TempDirectory(const TempDirectory&) = delete;
+  TempDirectory& operator=(const TempDirectory&) = delete;
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+// Removes the output directory on failure, but only if this run created it.
+class OutputGuard {
+ public:
+  explicit OutputGuard(const std::string& path) : path_(path), created_(!fs::exists(path)) {}
+  ~OutputGuard() {
+    if (!committed_ && created_) {
+      std::error_code ignored;
+      fs::remove_all(path_, ignored);
+    }
+  }
+  void Commit() { committed_ = true; }
+
+ private:
+  std::string path_;
+  bool created_;
+  bool committed_ = false;
+};
+
+nlohmann::json CubeJson(const Cube& cube) {
+  return {{"origin", cube.origin}, {"size", cube.size}, {"periodic", cube.periodic}};
+}
+
+nlohmann::json HeaderJson(const SnapshotHeader& h) {
+  return {{"format", h.format},
+          {"files", h.files},
+          {"time", h.time},
+          {"redshift", h.redshift},
+          {"box_size", h.box_size},
+          {"count_per_type", h.count_per_type},
+          {"total_count", h.total_count},
+          {"cosmological", h.cosmological},
+          {"omega0", h.omega0},
+          {"omega_lambda", h.omega_lambda},
+          {"hubble_param", h.hubble_param},
+          {"extra", h.extra}};
+}
+
+nlohmann::json AttributeSchema(bool velocity, bool id, bool displacement) {
+  nlohmann::json columns = nlohmann::json::array();
+  auto add = [&](ColumnId column, const char* encoding, const char* meaning) {
+    columns.push_back({{"id", static_cast<int>(column)}, {"name", ColumnName(column)}, {"encoding", encoding},
+                       {"meaning", meaning}});
+  };
+  add(ColumnId::kPosition, "u16x3 relative to the node cube", "position");
+  add(ColumnId::kWeight, "u32 units x f64 unit per block", "mass the point stands for");
+  add(ColumnId::kSmoothing, "u16 log2 code relative to the node size", "smoothing length");
+  add(ColumnId::kType, "u8", "particle type");
+  if (velocity) add(ColumnId::kVelocity, "u16x3 between per-block min and max", "velocity (input units)");
+  if (id) add(ColumnId::kId, "u64", "particle ID");
+  if (displacement) add(ColumnId::kDisplacement, "u16x3 between per-block min and max", "offset to the next epoch (minimal image)");
+  return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
+}
+
+void WrapIntoBox(ParticleChunk& chunk, const Cube& cube) {
+  for (std::size_t i = 0; i < chunk.position.size(); ++i) {
+    const int a = static_cast<int>(i % 3);
+    double t = (chunk.position[i] - cube.origin[a]) / cube.size;
+    t -= std::floor(t);
+    double x = cube.origin[a] + t * cube.size;
+    if (x >= cube.origin[a] + cube.size) x = cube.origin[a];  // t rounded up to 1
+    chunk.position[i] = x;
+  }
+}
+
+// Everything one epoch's build shares between the worker threads.
+struct EpochBuild {
+  const Cube* cube = nullptr;
+  const SubtreeOptions* tree = nullptr;
+  StoreWriter* store = nullptr;
+  ExternalSorter<IdLeafRecord>* id_pairs = nullptr;  // null without IDs
+  std::mutex mutex;  // guards store, id_pairs, roots and report
+  std::vector<RegionRoot> roots;
+  EpochReport* report = nullptr;
+  Progress* progress = nullptr;
+
+  // Encodes a finished node and adds it to the store. `is_leaf` decides
+  // whether its IDs go to the ID index.
+  void Emit(NodeKey key, const NodePoints& points, bool is_leaf) {
+    Bytes block = EncodeBlock(points, key, *cube);
+    std::lock_guard lock(mutex);
+    store->AddBlock(key.value(), block, points.size());
+    ++report->nodes;
+    report->depth = std::max(report->depth, key.level());
+    if (is_leaf) {
+      ++report->leaves;
+      if (id_pairs != nullptr) {
+        for (std::uint64_t id : points.id) id_pairs->Add({id, key.value()});
+      }
+    }
+  }
+};
+
+// A sink that tells leaves from inner nodes: nodes arrive children first, so
+// a node none of whose children has arrived is a leaf.
+NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has_children) {
+  return [&build, &has_children](NodeKey key, NodePoints&& points) {
+    const bool is_leaf = has_children.erase(key.value()) == 0;
+    if (key.level() > 0) has_children.insert(key.Parent().value());
+    build.Emit(key, points, is_leaf);
+  };
+}
+
+void BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads) {
+  std::sort(chunks.begin(), chunks.end(), [](const Chunk& a, const Chunk& b) { return a.point_count > b.point_count; });
+  std::atomic<std::size_t> next{0};
+  std::atomic<bool> failed{false};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  auto work = [&] {
+    try {
+      for (std::size_t c = next++; c < chunks.size() && !failed; c = next++) {
+        ParticleChunk points;
+        {
+          ParticleFileReader reader(chunks[c].path);
+          reader.ReadAll(points);
+        }
+        std::remove(chunks[c].path.c_str());
+        const std::uint64_t count = points.size();
+        std::unordered_set<std::uint64_t> has_children;
+        NodePoints root = BuildSubtree(points, chunks[c].key, *build.cube, *build.tree, LeafAwareSink(build, has_children));
+        {
+          std::lock_guard lock(build.mutex);
+          build.roots.push_back({chunks[c].key, std::move(root)});
+        }
+        build.progress->Add(count);
+      }
+    } catch (...) {
+      std::lock_guard lock(error_mutex);
+      if (!error) error = std::current_exception();
+      failed = true;
+    }
+  };
+  std::vector<std::thread> workers;
+  for (unsigned t = 1; t < threads; ++t) workers.emplace_back(work);
+  work();
+  for (auto& worker : workers) worker.join();
+  if (error) std::rethrow_exception(error);
+}
+
+}  // namespace
+
+std::uint64_t DefaultMemoryBudget() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES);
+  const long page_size = ::sysconf(_SC_PAGE_SIZE);
+  const std::uint64_t physical = pages > 0 && page_size > 0 ? static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page_size) : 0;
+  return std::max<std::uint64_t>(physical / 2, std::uint64_t{256} << 20);
+}
+
+IngestReport Ingest(const IngestOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
+  if (options.output.empty()) throw Error::InvalidArgument("ingest: no output store given (-o)");
+  if (options.cube) options.cube->Validate();
+  Progress::SetQuiet(options.quiet);
+
+  IngestReport report;
+  report.memory_budget = options.memory_budget ? options.memory_budget : DefaultMemoryBudget();
+  if (report.memory_budget < (std::uint64_t{32} << 20)) {
+    throw Error::InvalidArgument("ingest: a memory budget below 32 MiB is too small to work in");
+  }
+  const unsigned threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  const std::uint64_t budget = report.memory_budget;
+  report.max_chunk_points = options.max_chunk_points
+                                ? options.max_chunk_points
+                                : std::max<std::uint64_t>(budget / 2 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity);
+  const std::size_t sort_run_records = static_cast<std::size_t>(
+      options.sort_run_points ? options.sort_run_points : std::max<std::uint64_t>(budget * 2 / 5 / sizeof(ParticleRecord), 1024));
+  const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 5 / sizeof(IdLeafRecord), 1024));
+
+  // Open the first epoch to learn what the series carries.
+  std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);
+  const bool has_id = source->header().has_id;
+  const bool has_velocity = source->header().has_velocity;
+  const bool join_epochs = has_id && options.inputs.size() > 1;
+
+  OutputGuard output_guard(options.output);
+  const std::string temp_parent =
+      options.temp_dir.empty() ? fs::absolute(options.output).parent_path().string() : options.temp_dir;
+  fs::create_directories(temp_parent);
+  TempDirectory temp(temp_parent);
+
+  nlohmann::json dataset = {{"generator", "octocosm ingest"},
+                            {"capacity", options.tree.capacity},
+                            {"max_level", options.tree.max_level},
+                            {"sampler", {{"alpha", options.tree.sampler.alpha},
+                                         {"density_grid_bits", options.tree.sampler.density_grid_bits},
+                                         {"seed", options.tree.sampler.seed}}},
+                            {"has_velocity", has_velocity},
+                            {"has_id", has_id},
+                            {"has_displacement", join_epochs},
+                            {"id_index", has_id ? "ids" : ""},
+                            {"epochs", nlohmann::json::array()}};
+  StoreWriterOptions store_options;
+  store_options.page_size = options.page_size;
+  StoreWriter store(options.output, dataset, AttributeSchema(has_velocity, has_id, join_epochs), store_options);
+  std::unique_ptr<StoreWriter> id_store;
+  if (has_id) {
+    id_store = std::make_unique<StoreWriter>((fs::path(options.output) / "ids").string(),
+                                             nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
+                                             nlohmann::json::object(), store_options);
+  }
+
+  std::unique_ptr<SortedEpoch> sorted_current, sorted_next;
+  auto sort_epoch = [&](ParticleSource& s, std::size_t e) {
+    Progress progress("epoch " + std::to_string(e) + ": sort by ID", s.header().total_count, "points");
+    auto sorted = std::make_unique<SortedEpoch>(s, temp.path() + "/sorted-" + std::to_string(e), sort_run_records,
+                                                [&](std::uint64_t n) { progress.Add(n); });
+    progress.Finish();
+    return sorted;
+  };
+
+  for (std::size_t e = 0; e < options.inputs.size(); ++e) {
+    if (!source) source = OpenSnapshot(options.inputs[e], options.read);
+    const SnapshotHeader header = source->header();
+    if (header.has_id != has_id || header.has_velocity != has_velocity) {
+      throw Error::BadInput(header.files.front(), "this epoch " + std::string(header.has_id ? "has" : "lacks") +
+                                                      " IDs / velocities unlike epoch 0; all epochs of a series must carry the same columns");
+    }
+    EpochReport epoch_report;
+    const std::string label = "epoch " + std::to_string(e);
+
+    // 1. sort (series with IDs) or bounds.
+    std::unique_ptr<ParticleSource> next_source;
+    Bounds bounds;
+    if (join_epochs) {
+      if (!sorted_current) sorted_current = sort_epoch(*source, e);
+      if (e + 1 < options.inputs.size()) {
+        next_source = OpenSnapshot(options.inputs[e + 1], options.read);
+        sorted_next = sort_epoch(*next_source, e + 1);
+      }
+      bounds = sorted_current->bounds();
+      epoch_report.duplicate_ids = sorted_current->duplicate_ids();
+    } else if (!options.cube && header.box_size <= 0) {
+      Progress progress(label + ": bounds", header.total_count, "points");
+      source->Rewind();
+      ParticleChunk chunk;
+      while (source->Next(chunk)) {
+        bounds.Add(chunk);
+        progress.Add(chunk.size());
+      }
+    }
+
+    Cube cube;
+    if (options.cube) {
+      cube = *options.cube;
+    } else if (header.box_size > 0) {
+      cube = {{0, 0, 0}, header.box_size, true};
+    } else if (!bounds.empty()) {
+      cube = Cube::FromBounds(bounds.lo, bounds.hi);
+    }
+
+    // The epoch's points as a repeatable pass, wrapped into a periodic box.
+    const SortedEpoch* next_sorted = sorted_next.get();
+    const double box = cube.periodic ? cube.size : 0.0;
+    JoinStats join_stats;
+    PointPass pass = [&](const std::function<void(const ParticleChunk&)>& consume) {
+      auto forward = [&](const ParticleChunk& chunk) {
+        if (!cube.periodic) return consume(chunk);
+        ParticleChunk wrapped = chunk;
+        WrapIntoBox(wrapped, cube);
+        consume(wrapped);
+      };
+      if (join_epochs) {
+        join_stats = JoinedPass(*sorted_current, next_sorted, box, options.read.chunk_particles, forward);
+      } else {
+        source->Rewind();
+        ParticleChunk chunk;
+        while (source->Next(chunk)) forward(chunk);
+      }
+    };
+
+    // 2. chunk.
+    ChunkerOptions chunker_options;
+    chunker_options.max_chunk_points = report.max_chunk_points;
+    chunker_options.max_level = options.tree.max_level;
+    chunker_options.buffer_bytes = static_cast<std::size_t>(budget / 5);
+    chunker_options.temp_dir = temp.path();
+    chunker_options.columns = {has_velocity, has_id, join_epochs && next_sorted != nullptr};
+    std::vector<Chunk> chunks;
+    {
+      Progress progress(label + ": chunk", 0, "chunks");
+      chunks = Chunker(cube, chunker_options).Split(NodeKey::Root(), pass);
+      progress.Add(chunks.size());
+    }
+    for (const Chunk& c : chunks) epoch_report.points += c.point_count;
+    epoch_report.chunks = chunks.size();
+    epoch_report.missing_in_next = join_stats.missing_in_next;
+
+    // 3. build, 4. top levels.
+    store.BeginEpoch(header.time, header.redshift);
+    std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
+    if (has_id) id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp.path() + "/ids-" + std::to_string(e), id_run_records);
+    EpochBuild build;
+    build.cube = &cube;
+    build.tree = &options.tree;
+    build.store = &store;
+    build.id_pairs = id_pairs.get();
+    build.report = &epoch_report;
+    {
+      Progress progress(label + ": build", epoch_report.points, "points");
+      build.progress = &progress;
+      BuildChunks(std::move(chunks), build, threads);
+      NodePoints root = BuildTopLevels(std::move(build.roots), cube, options.tree, [&](NodeKey key, NodePoints&& points) {
+        build.Emit(key, points, /*is_leaf=*/false);
+      });
+      for (double w : root.weight) epoch_report.mass += w;
+      progress.Finish();
+    }
+    store.EndEpoch();
+
+    // 5. ID index.
+    if (has_id) {
+      id_pairs->Finish();
+      id_store->BeginEpoch(header.time, header.redshift);
+      IdIndexEpochWriter ids(*id_store, options.page_size);
+      auto reader = id_pairs->Open();
+      IdLeafRecord r{};
+      while (reader.Next(r)) ids.Add(r.key, NodeKey::FromValue(r.leaf));
+      ids.Finish();
+      id_store->EndEpoch();
+    }
+
+    dataset["epochs"].push_back({{"epoch", e},
+                                 {"input", HeaderJson(header)},
+                                 {"cube", CubeJson(cube)},
+                                 {"points", epoch_report.points},
+                                 {"mass", epoch_report.mass},
+                                 {"nodes", epoch_report.nodes},
+                                 {"leaves", epoch_report.leaves},
+                                 {"depth", epoch_report.depth},
+                                 {"missing_in_next", epoch_report.missing_in_next},
+                                 {"duplicate_ids", epoch_report.duplicate_ids}});
+    report.input_points += epoch_report.points;
+    report.epochs.push_back(epoch_report);
+
+    // The next epoch reuses what this one read ahead.
+    sorted_current = std::move(sorted_next);
+    source = std::move(next_source);
+  }
+
+  if (id_store) id_store->Finish();
+  store.SetDataset(dataset);
+  store.Finish();
+  output_guard.Commit();
+  report.store_bytes = store.bytes_written() + (id_store ? id_store->bytes_written() : 0);
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+}  // namespace octocosm

@@ -1,0 +1,76 @@
+// `octocosm ingest`: snapshots in, a level-of-detail store out, in bounded
+// memory. The pipeline, per epoch (PotreeConverter 2's count / chunk / index
+// / merge, plus the epoch join):
+//
+//   1. sort    (series with IDs) read the snapshot once, sorted by ID into
+//              temporary runs; the merge join with the next epoch's runs gives
+//              each particle its displacement to the next epoch
+//      bounds  (otherwise) one pass for the bounding box, unless the box is
+//              periodic or the cube is given
+//   2. chunk   count on a coarse grid, merge cells into chunks that fit in
+//              memory, distribute the points into chunk files (tools/ingest/chunker.h)
+//   3. build   each chunk's subtree in memory (index/subtree_builder.h), chunks
+//              in parallel; blocks are encoded (index/block_codec.h) and added
+//              to the store as they complete
+//   4. top     the levels above the chunks, from the chunks' root samples
+//   5. ids     the (ID, leaf) pairs, sorted, into the ID index (index/id_index.h)
+//
+// Nothing half-written survives a failure: the store writers remove their
+// files, the temporary directory is removed, and an output directory that this
+// run created is removed again.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "index/cube.h"
+#include "index/subtree_builder.h"
+#include "tools/snapshot/snapshot_source.h"
+
+namespace octocosm {
+
+struct IngestOptions {
+  std::vector<std::string> inputs;  // one snapshot per epoch, in time order (each may be multi-file)
+  std::string output;               // the store directory to create
+  ReadOptions read;
+  SubtreeOptions tree;
+  std::uint64_t memory_budget = 0;  // bytes; 0 = DefaultMemoryBudget()
+  std::string temp_dir;             // parent of the temporary directory; "" = beside the output
+  std::optional<Cube> cube;         // overrides the periodic box / bounding cube
+  unsigned threads = 0;             // 0 = all cores
+  std::uint32_t page_size = 65536;
+  std::uint64_t max_chunk_points = 0;  // 0 = derived from the memory budget; tests set it to force chunking
+  std::uint64_t sort_run_points = 0;   // 0 = derived from the memory budget; tests set it to force merge sorts
+  bool quiet = false;               // no progress output
+};
+
+struct EpochReport {
+  std::uint64_t points = 0;
+  std::uint64_t nodes = 0;
+  std::uint64_t leaves = 0;
+  std::uint64_t chunks = 0;
+  int depth = 0;
+  double mass = 0;
+  std::uint64_t missing_in_next = 0;
+  std::uint64_t duplicate_ids = 0;
+};
+
+struct IngestReport {
+  std::vector<EpochReport> epochs;
+  std::uint64_t input_points = 0;
+  std::uint64_t store_bytes = 0;
+  std::uint64_t max_chunk_points = 0;
+  std::uint64_t memory_budget = 0;
+  double seconds = 0;
+};
+
+// Half of the physical memory, at least 256 MiB: "a safe fraction of RAM".
+std::uint64_t DefaultMemoryBudget();
+
+// Runs the whole pipeline. Throws Error (kBadInput for malformed snapshots,
+// kInvalidArgument for bad options, kIo for the disk) after cleaning up.
+IngestReport Ingest(const IngestOptions& options);
+
+}  // namespace octocosm
