@@ -217,7 +217,7 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
 
 void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
                    const std::string& where, std::vector<float>& out) {
-  std::array<double, 3> lo{}, step{};
+  std::array<double, 3> lo{}, hi{}, step{};
   for (int a = 0; a < 3; ++a) {
     const float min = GetF32(column.params.data() + 4 * a);
     const float max = GetF32(column.params.data() + 12 + 4 * a);
@@ -227,11 +227,14 @@ void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const s
                                                                "], expected finite min <= max"));
     }
     lo[a] = min;
+    hi[a] = max;
     step[a] = (static_cast<double>(max) - min) / 65535.0;
   }
   out.resize(3 * std::size_t{n});
   for (std::size_t i = 0; i < 3 * std::size_t{n}; ++i) {
-    out[i] = static_cast<float>(lo[i % 3] + GetU16(bytes.data() + 2 * i) * step[i % 3]);
+    // Clamped so that rounding near +-FLT_MAX cannot leave the float range.
+    const double v = lo[i % 3] + GetU16(bytes.data() + 2 * i) * step[i % 3];
+    out[i] = static_cast<float>(std::min(v, hi[i % 3]));
   }
 }
 

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "storage/error.h"
@@ -390,6 +391,21 @@ TEST(BlockCodec, WrongKeyAndVersionAreReported) {
     ADD_FAILURE();
   } catch (const Error& e) {
     EXPECT_EQ(e.kind(), ErrorKind::kNotSupported);
+  }
+}
+
+TEST(BlockCodec, ExtremeVelocityRangesStayFinite) {
+  std::mt19937_64 rng(10);
+  const NodeKey key = NodeKey::FromPath("r6");
+  NodePoints p = RandomPoints(rng, 64, key, kCube, kVelocityBit | kDisplacementBit);
+  const float big = std::numeric_limits<float>::max();
+  for (std::size_t i = 0; i < p.velocity.size(); ++i) p.velocity[i] = (i % 2 ? big : -big) * (static_cast<float>(i % 5) / 4);
+  for (float& d : p.displacement) d = 1e-30f;  // a zero range
+  const NodePoints d = DecodeBlock(EncodeBlock(p, key, kCube), kAllColumns, key, kCube, "extreme").points;
+  for (std::size_t i = 0; i < p.velocity.size(); ++i) {
+    ASSERT_TRUE(std::isfinite(d.velocity[i]));
+    ASSERT_LE(std::fabs(static_cast<double>(d.velocity[i]) - p.velocity[i]), 2.0 * big / 131070 * 1.001);
+    ASSERT_EQ(d.displacement[i], 1e-30f);
   }
 }
 
