@@ -13,5 +13,7 @@ void AddIngestCommand(CLI::App& app);
 void AddInfoCommand(CLI::App& app);
 void AddVerifyCommand(CLI::App& app);
 void AddSynthCommand(CLI::App& app);
+void AddQueryCommand(CLI::App& app);
+void AddFollowCommand(CLI::App& app);
 
 }  // namespace octocosm

@@ -38,6 +38,8 @@ int main(int argc, char** argv) {
   octocosm::AddInfoCommand(app);
   octocosm::AddVerifyCommand(app);
   octocosm::AddSynthCommand(app);
+  octocosm::AddQueryCommand(app);
+  octocosm::AddFollowCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
