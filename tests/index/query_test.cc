@@ -459,6 +459,51 @@ TEST_F(QueryTest, BadOptionsAreInvalidArguments) {
   EXPECT_THROW(MakeSphereRegion({0, 0, 0}, -1, dataset.cube(0)), Error);
 }
 
+TEST_F(QueryTest, DamagedColumnIsCorruptionOnlyWhenRead) {
+  const fs::path copy = stores->dir / "damaged";
+  fs::remove_all(copy);
+  fs::copy(stores->bounded, copy, fs::copy_options::recursive);
+  std::uint64_t offset = 0;
+  std::string page_file;
+  {
+    const Dataset dataset = Dataset::Open(copy.string());
+    const auto entry = dataset.store().Lookup({0, NodeKey::Root().value()});
+    ASSERT_TRUE(entry.has_value());
+    Bytes prefix(kBlockMaxHeaderSize);
+    dataset.store().ReadBlockRange({0, entry->key}, 0, prefix);
+    const BlockHeader header = DecodeBlockHeader(prefix, NodeKey::Root(), "test");
+    const BlockColumn* velocity = header.Find(ColumnId::kVelocity);
+    ASSERT_NE(velocity, nullptr);
+    offset = entry->first_page * dataset.store().page_size() + velocity->offset + velocity->length / 2;
+    page_file = (copy / dataset.store().epochs()[0].file).string();
+  }
+  {
+    std::fstream file(page_file, std::ios::in | std::ios::out | std::ios::binary);
+    file.seekg(static_cast<std::streamoff>(offset));
+    char byte = 0;
+    file.read(&byte, 1);
+    byte = static_cast<char>(byte ^ 0x5a);
+    file.seekp(static_cast<std::streamoff>(offset));
+    file.write(&byte, 1);
+  }
+  const Dataset dataset = Dataset::Open(copy.string());
+  const auto everything = MakeEverythingRegion();
+  QueryOptions options;
+  options.level = 0;
+  EXPECT_EQ(RunQuery(dataset, *everything, options, [](const QueryBatch&) {}).points_returned,
+            dataset.store().Lookup({0, NodeKey::Root().value()})->point_count);
+  options.columns = ColumnBit(ColumnId::kVelocity);
+  try {
+    RunQuery(dataset, *everything, options, [](const QueryBatch&) {});
+    ADD_FAILURE() << "a damaged velocity column went unnoticed";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << e.what();
+    EXPECT_NE(std::string(e.what()).find("velocity"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(page_file.substr(page_file.rfind('/') + 1)), std::string::npos) << e.what();
+  }
+  fs::remove_all(copy);
+}
+
 TEST(FrustumTest, ViewMatrixGivesTheSameCamera) {
   // glm::lookAt({1, 2, 3}, {4, 2, 3}, {0, 0, 1}): forward +x, right -y, up +z.
   const std::array<double, 16> view = {0, 0, -1, 0, -1, 0, 0, 0, 0, 1, 0, 0, 2, -3, 1, 1};
