@@ -47,13 +47,24 @@ Density EstimateDensity(std::span<const double> position, std::span<const double
   }
   // Summing in an order fixed by the points' values (not their positions in
   // the input) makes the sums, and so the sample, independent of input order.
+  // A counting sort groups the points by fine cell in O(m); only the few
+  // points sharing a cell need a comparison sort.
+  const std::size_t cells = std::size_t{1} << (3 * bits);
+  std::vector<std::uint32_t> start(cells + 1, 0);
+  for (std::size_t i = 0; i < m; ++i) ++start[fine[i] + 1];
+  for (std::size_t c = 0; c < cells; ++c) start[c + 1] += start[c];
   std::vector<std::uint32_t> order(m);
-  std::iota(order.begin(), order.end(), 0u);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
-    if (fine[a] != fine[b]) return fine[a] < fine[b];
-    if (tie_break[a] != tie_break[b]) return tie_break[a] < tie_break[b];
-    return weight[a] < weight[b];
-  });
+  {
+    std::vector<std::uint32_t> next(start.begin(), start.end() - 1);
+    for (std::size_t i = 0; i < m; ++i) order[next[fine[i]]++] = static_cast<std::uint32_t>(i);
+  }
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (start[c + 1] - start[c] < 2) continue;
+    std::sort(order.begin() + start[c], order.begin() + start[c + 1], [&](std::uint32_t a, std::uint32_t b) {
+      if (tie_break[a] != tie_break[b]) return tie_break[a] < tie_break[b];
+      return weight[a] < weight[b];
+    });
+  }
   Density d;
   d.cell_weight.resize(m);
   d.cell_edge = cube.NodeSize(level + bits);

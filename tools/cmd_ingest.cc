@@ -79,8 +79,11 @@ void AddIngestCommand(CLI::App& app) {
       std::printf("  epoch %zu: %llu points, %llu nodes (%llu leaves), depth %d, %llu chunks, mass %.9g",
                   e, static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
                   static_cast<unsigned long long>(r.leaves), r.depth, static_cast<unsigned long long>(r.chunks), r.mass);
+      if (r.spilled_points) std::printf(", %llu points spilled to disk", static_cast<unsigned long long>(r.spilled_points));
       if (r.missing_in_next) std::printf(", %llu IDs missing in the next epoch", static_cast<unsigned long long>(r.missing_in_next));
       if (r.duplicate_ids) std::printf(", %llu duplicate IDs", static_cast<unsigned long long>(r.duplicate_ids));
+      std::printf("\n    seconds:");
+      for (const auto& [phase, seconds] : r.phase_seconds) std::printf(" %s %.2f", phase.c_str(), seconds);
       std::printf("\n");
     }
   });

@@ -1,8 +1,10 @@
 #include "tools/ingest/chunker.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <numeric>
+#include <optional>
 
 #include "storage/error.h"
 
@@ -36,20 +38,42 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
 
 }  // namespace
 
+ParticleChunk Chunk::TakePoints() {
+  if (path.empty()) return std::move(points);
+  ParticleChunk all = std::move(points);  // a remainder that never spilled, if any
+  ParticleChunk from_file;
+  {
+    ParticleFileReader reader(path);
+    reader.ReadAll(from_file);
+  }
+  std::remove(path.c_str());
+  path.clear();
+  if (all.size() == 0) return from_file;
+  std::vector<std::uint32_t> everything(all.size());
+  std::iota(everything.begin(), everything.end(), 0u);
+  AppendPoints(all, everything, from_file);
+  return from_file;
+}
+
+int SplitLevelsFor(std::uint64_t points, std::uint64_t target_points) {
+  int levels = 1;
+  double cells = 8;
+  while (levels < 6 && static_cast<double>(points) > cells * static_cast<double>(std::max<std::uint64_t>(target_points, 1))) {
+    ++levels;
+    cells *= 8;
+  }
+  return levels;
+}
+
 Chunker::Chunker(const Cube& cube, ChunkerOptions options) : cube_(cube), options_(std::move(options)) {
   cube_.Validate();
-  if (options_.grid_bits < 1 || options_.grid_bits > 8) {
-    throw Error::InvalidArgument("chunker grid_bits must be 1..8, got " + std::to_string(options_.grid_bits));
+  if (options_.split_levels < 1 || options_.split_levels > 6) {
+    throw Error::InvalidArgument("chunker split_levels must be 1..6, got " + std::to_string(options_.split_levels));
   }
   if (options_.max_chunk_points == 0) throw Error::InvalidArgument("chunker max_chunk_points must be positive");
   if (options_.max_level < 0 || options_.max_level > kMaxLevel) {
     throw Error::InvalidArgument("depth limit must be 0.." + std::to_string(kMaxLevel));
   }
-}
-
-std::size_t Chunker::PeakMemoryBytes() const {
-  const std::size_t cells = std::size_t{1} << (3 * options_.grid_bits);
-  return cells * (sizeof(std::uint64_t) + sizeof(std::int32_t)) + options_.buffer_bytes;
 }
 
 std::string Chunker::NewChunkPath() {
@@ -58,144 +82,95 @@ std::string Chunker::NewChunkPath() {
   return options_.temp_dir + name;
 }
 
-Chunker::Plan Chunker::Count(NodeKey root, const PointPass& pass) const {
-  Plan plan;
-  const int bits = std::min(options_.grid_bits, options_.max_level - root.level());
-  plan.grid_level = root.level() + bits;
-  const std::uint64_t first = root.DescendantRange(plan.grid_level).first;
-  std::vector<std::uint64_t> counts(std::size_t{1} << (3 * bits), 0);
-  pass([&](const ParticleChunk& chunk) {
-    for (std::size_t i = 0; i < chunk.size(); ++i) {
-      const NodeKey cell = cube_.LeafKey(&chunk.position[3 * i], plan.grid_level);
-      if (!root.IsAncestorOrSelf(cell)) {
-        throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
-      }
-      ++counts[cell.value() - first];
-    }
-  });
-
-  // Sums over aligned groups: the count of a node at depth d below the root
-  // is the sum of its 8^(bits-d) grid cells, which are contiguous in Morton order.
-  std::vector<std::vector<std::uint64_t>> level_counts(static_cast<std::size_t>(bits) + 1);
-  level_counts[static_cast<std::size_t>(bits)] = std::move(counts);
-  for (int d = bits - 1; d >= 0; --d) {
-    const auto& finer = level_counts[static_cast<std::size_t>(d) + 1];
-    auto& coarser = level_counts[static_cast<std::size_t>(d)];
-    coarser.assign(finer.size() / 8, 0);
-    for (std::size_t i = 0; i < coarser.size(); ++i) {
-      coarser[i] = std::accumulate(finer.begin() + static_cast<std::ptrdiff_t>(8 * i),
-                                   finer.begin() + static_cast<std::ptrdiff_t>(8 * i + 8), std::uint64_t{0});
-    }
-  }
-
-  plan.chunk_of_cell.assign(level_counts[static_cast<std::size_t>(bits)].size(), -1);
-  // Depth-first: a node small enough (or at the grid's bottom) becomes a chunk.
-  auto visit = [&](auto&& self, int d, std::uint64_t index) -> void {
-    const std::uint64_t count = level_counts[static_cast<std::size_t>(d)][index];
-    if (count == 0) return;
-    if (count <= options_.max_chunk_points || d == bits) {
-      const auto chunk_index = static_cast<std::int32_t>(plan.chunks.size());
-      const NodeKey key = NodeKey::FromValue((root.value() << (3 * d)) | index);
-      plan.chunks.push_back(key);
-      plan.counts.push_back(count);
-      const int shift = 3 * (bits - d);
-      std::fill(plan.chunk_of_cell.begin() + static_cast<std::ptrdiff_t>(index << shift),
-                plan.chunk_of_cell.begin() + static_cast<std::ptrdiff_t>((index + 1) << shift), chunk_index);
-      return;
-    }
-    for (std::uint64_t octant = 0; octant < 8; ++octant) self(self, d + 1, index * 8 + octant);
-  };
-  visit(visit, 0, 0);
-  return plan;
-}
-
-std::vector<Chunk> Chunker::Distribute(NodeKey root, const Plan& plan, const PointPass& pass) {
-  const std::uint64_t first = root.DescendantRange(plan.grid_level).first;
-  std::vector<Chunk> chunks(plan.chunks.size());
-  std::vector<ParticleFileWriter> writers;
-  writers.reserve(chunks.size());
-  for (std::size_t c = 0; c < chunks.size(); ++c) {
-    chunks[c] = {plan.chunks[c], NewChunkPath(), 0};
-    writers.emplace_back(chunks[c].path, options_.columns);
-  }
-  // Points wait in per-chunk buffers; when all buffers together exceed the
-  // budget the fullest ones are written out. (An open FILE per chunk with its
-  // own buffer would cost chunks x buffer size of memory.)
-  std::vector<ParticleChunk> buffers(chunks.size());
-  std::vector<std::vector<std::uint32_t>> picks(chunks.size());
+std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass& pass) {
+  const int level = root.level() + levels;
+  const std::uint64_t first = root.DescendantRange(level).first;
+  const std::size_t cells = std::size_t{1} << (3 * levels);
+  std::vector<Chunk> chunks(cells);
+  std::vector<std::optional<ParticleFileWriter>> writers(cells);  // opened on a chunk's first spill
+  std::vector<std::vector<std::uint32_t>> picks(cells);
   const std::size_t bytes_per_point = options_.columns.BytesPerPoint();
+  const std::size_t max_buffered = std::max<std::size_t>(options_.memory_bytes / bytes_per_point, 1);
   std::size_t buffered_points = 0;
-  const std::size_t max_buffered = std::max<std::size_t>(options_.buffer_bytes / bytes_per_point, 1);
 
-  auto flush = [&](std::size_t c) {
-    if (buffers[c].size() == 0) return;
-    writers[c].Append(buffers[c]);
-    chunks[c].point_count += buffers[c].size();
-    buffered_points -= buffers[c].size();
-    buffers[c].clear();
+  auto spill = [&](std::size_t c) {
+    Chunk& chunk = chunks[c];
+    if (chunk.points.size() == 0) return;
+    if (chunk.path.empty()) {
+      chunk.path = NewChunkPath();
+      writers[c].emplace(chunk.path, options_.columns);
+    }
+    writers[c]->Append(chunk.points);
+    spilled_points_ += chunk.points.size();
+    buffered_points -= chunk.points.size();
+    chunk.points = ParticleChunk();  // give the memory back
   };
 
   pass([&](const ParticleChunk& batch) {
     if (batch.size() > UINT32_MAX) throw Error::InvalidArgument("chunker: batch too large");
     for (std::uint32_t i = 0; i < batch.size(); ++i) {
-      const NodeKey cell = cube_.LeafKey(&batch.position[3 * i], plan.grid_level);
-      const std::int32_t c = cell.value() >= first && cell.value() - first < plan.chunk_of_cell.size()
-                                 ? plan.chunk_of_cell[cell.value() - first]
-                                 : -1;
-      if (c < 0) {
-        throw Error::InvalidArgument(
-            "chunker: the input changed between passes (a point fell into a cell the counting pass found empty)");
+      const NodeKey cell = cube_.LeafKey(&batch.position[3 * i], level);
+      const std::uint64_t c = cell.value() - first;
+      if (cell.value() < first || c >= cells) {
+        throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
       }
-      picks[static_cast<std::size_t>(c)].push_back(i);
+      picks[c].push_back(i);
     }
-    for (std::size_t c = 0; c < chunks.size(); ++c) {
+    for (std::size_t c = 0; c < cells; ++c) {
       if (picks[c].empty()) continue;
-      AppendPoints(batch, picks[c], buffers[c]);
+      AppendPoints(batch, picks[c], chunks[c].points);
+      chunks[c].point_count += picks[c].size();
       buffered_points += picks[c].size();
       picks[c].clear();
     }
     if (buffered_points > max_buffered) {
-      // Write the fullest half of the buffers, which frees most memory per write call.
-      std::vector<std::size_t> order(chunks.size());
+      // Spill the fullest buffers first: the most memory back per write call.
+      std::vector<std::size_t> order(cells);
       std::iota(order.begin(), order.end(), 0);
-      std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return buffers[a].size() > buffers[b].size(); });
+      std::sort(order.begin(), order.end(),
+                [&](std::size_t a, std::size_t b) { return chunks[a].points.size() > chunks[b].points.size(); });
       for (std::size_t c : order) {
         if (buffered_points <= max_buffered / 2) break;
-        flush(c);
+        spill(c);
       }
     }
   });
-  for (std::size_t c = 0; c < chunks.size(); ++c) {
-    flush(c);
-    writers[c].Close();
-    if (chunks[c].point_count != plan.counts[c]) {
-      throw Error::InvalidArgument("chunker: chunk " + chunks[c].key.Path() + " received " +
-                                   std::to_string(chunks[c].point_count) + " points but the counting pass found " +
-                                   std::to_string(plan.counts[c]) + " (the input changed between passes)");
+
+  std::vector<Chunk> result;
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (chunks[c].point_count == 0) continue;
+    if (!chunks[c].path.empty()) {
+      spill(c);  // a chunk that spilled once goes wholly to its file
+      writers[c]->Close();
     }
+    chunks[c].key = NodeKey::FromValue(first + c);
+    result.push_back(std::move(chunks[c]));
   }
-  return chunks;
+  return result;
 }
 
 std::vector<Chunk> Chunker::Split(NodeKey root, const PointPass& pass) {
-  const Plan plan = Count(root, pass);
-  std::vector<Chunk> distributed = Distribute(root, plan, pass);
+  return SplitAt(root, options_.split_levels, pass);
+}
+
+std::vector<Chunk> Chunker::SplitAt(NodeKey root, int levels, const PointPass& pass) {
+  levels = std::min(levels, options_.max_level - root.level());
   std::vector<Chunk> result;
-  for (Chunk& chunk : distributed) {
-    const bool oversized = chunk.point_count > options_.max_chunk_points;
-    if (!oversized || chunk.key.level() >= options_.max_level) {
+  for (Chunk& chunk : Distribute(root, std::max(levels, 0), pass)) {
+    if (chunk.point_count <= options_.max_chunk_points || chunk.key.level() >= options_.max_level) {
       result.push_back(std::move(chunk));
       continue;
     }
-    // Split the oversized chunk from its own file, then drop the file.
-    const std::string path = chunk.path;
-    PointPass file_pass = [&path](const std::function<void(const ParticleChunk&)>& consume) {
-      ParticleFileReader reader(path);
+    // Split the oversized chunk again, streaming its own file (or buffer).
+    PointPass own_pass = [&chunk](const std::function<void(const ParticleChunk&)>& consume) {
+      if (chunk.path.empty()) return consume(chunk.points);
+      ParticleFileReader reader(chunk.path);
       ParticleChunk batch;
       while (reader.Next(batch)) consume(batch);
     };
-    std::vector<Chunk> parts = Split(chunk.key, file_pass);
-    std::remove(path.c_str());
+    const int finer = std::clamp(SplitLevelsFor(chunk.point_count, options_.max_chunk_points / 2), 1, 3);
+    std::vector<Chunk> parts = SplitAt(chunk.key, finer, own_pass);
+    if (!chunk.path.empty()) std::remove(chunk.path.c_str());
     for (Chunk& part : parts) result.push_back(std::move(part));
   }
   return result;

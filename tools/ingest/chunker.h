@@ -1,13 +1,16 @@
-// Out-of-core chunking, after PotreeConverter 2: count the points on a coarse
-// grid, merge grid cells into octree nodes ("chunks") that each hold at most
-// `max_chunk_points`, then distribute every point into its chunk's file. Each
-// chunk is afterwards small enough for its subtree to be built in memory.
+// Out-of-core chunking: splits a point set into "chunks", octree nodes small
+// enough for their subtrees to be built in memory, in ONE pass over the input
+// (after PotreeConverter 2, minus its counting pass).
 //
-// A grid cell that alone holds more than max_chunk_points (a dense halo, or
-// coincident points) cannot be split by this grid; its chunk is split again
-// from its own file, one grid level finer each time, until every chunk fits or
-// the depth limit is reached (a chunk at the depth limit is kept whole: its
-// points coincide to within the finest cell).
+// Every point goes to its cell `split_levels` levels below the region; each
+// non-empty cell is a chunk. Points wait in per-chunk buffers; while all
+// buffers fit in `memory_bytes` they stay in memory (a data set that fits in
+// the budget never touches the disk), and when they do not, the fullest are
+// appended to the chunks' temporary files. A chunk that ends up with more than
+// `max_chunk_points` (a dense halo) is split again the same way from its own
+// file or buffer, until every chunk fits or the depth limit is reached (a
+// chunk at the depth limit is kept whole: its points coincide to within the
+// finest cell).
 #pragma once
 
 #include <cstdint>
@@ -27,17 +30,21 @@ using PointPass = std::function<void(const std::function<void(const ParticleChun
 
 struct Chunk {
   NodeKey key;
-  std::string path;  // its particle file
   std::uint64_t point_count = 0;
+  std::string path;       // its particle file, when it spilled to disk
+  ParticleChunk points;   // its points, when they stayed in memory (path empty)
+
+  // Moves the chunk's points out (reading and deleting its file if it has one).
+  ParticleChunk TakePoints();
 };
 
 struct ChunkerOptions {
   std::uint64_t max_chunk_points = 10'000'000;
-  int grid_bits = 7;                  // counting grid: 2^grid_bits cells per axis below the region
-  int max_level = kMaxLevel;          // the tree's depth limit
-  std::size_t buffer_bytes = 256u << 20;  // distribution buffers, all chunks together
-  std::string temp_dir;               // chunk files are created here
-  ParticleColumns columns;            // the optional columns the points carry
+  int split_levels = 2;                  // levels below the region at which points are bucketed (1..6)
+  int max_level = kMaxLevel;             // the tree's depth limit
+  std::size_t memory_bytes = 256u << 20;  // buffers of all chunks together
+  std::string temp_dir;                  // spilled chunk files are created here
+  ParticleColumns columns;               // the optional columns the points carry
 };
 
 class Chunker {
@@ -45,28 +52,25 @@ class Chunker {
   Chunker(const Cube& cube, ChunkerOptions options);
 
   // Splits the points of region `root` (every point must lie in it) into
-  // chunks. Calls `pass` twice (count, distribute), plus one pass over each
-  // oversized chunk's own file per extra split. Returns chunks in depth-first
-  // order of their keys; every point is in exactly one chunk file.
+  // chunks: one call of `pass`, plus one pass over each oversized chunk. Every
+  // point ends in exactly one chunk; chunks come in depth-first key order.
   std::vector<Chunk> Split(NodeKey root, const PointPass& pass);
 
-  // Bytes of memory the counting grid and distribution buffers use at most.
-  std::size_t PeakMemoryBytes() const;
+  std::uint64_t spilled_points() const { return spilled_points_; }
 
  private:
-  struct Plan {
-    std::vector<NodeKey> chunks;                 // depth-first
-    std::vector<std::uint64_t> counts;           // per chunk
-    std::vector<std::int32_t> chunk_of_cell;     // grid cell (Morton order below root) -> chunk, -1 = empty
-    int grid_level = 0;                          // absolute level of the counting grid
-  };
-  Plan Count(NodeKey root, const PointPass& pass) const;
-  std::vector<Chunk> Distribute(NodeKey root, const Plan& plan, const PointPass& pass);
+  std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);
+  std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);
   std::string NewChunkPath();
 
   Cube cube_;
   ChunkerOptions options_;
   std::uint64_t next_file_ = 0;
+  std::uint64_t spilled_points_ = 0;
 };
+
+// The number of levels to bucket `points` by so that chunks come out near
+// `target_points` each: ceil(log8(points / target_points)), at least 1.
+int SplitLevelsFor(std::uint64_t points, std::uint64_t target_points);
 
 }  // namespace octocosm

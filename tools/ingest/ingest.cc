@@ -117,6 +117,14 @@ nlohmann::json AttributeSchema(bool velocity, bool id, bool displacement) {
   return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
 }
 
+bool InsideBox(const ParticleChunk& chunk, const Cube& cube) {
+  for (std::size_t i = 0; i < chunk.position.size(); ++i) {
+    const double t = chunk.position[i] - cube.origin[i % 3];
+    if (!(t >= 0 && t < cube.size)) return false;
+  }
+  return true;
+}
+
 void WrapIntoBox(ParticleChunk& chunk, const Cube& cube) {
   for (std::size_t i = 0; i < chunk.position.size(); ++i) {
     const int a = static_cast<int>(i % 3);
@@ -127,6 +135,21 @@ void WrapIntoBox(ParticleChunk& chunk, const Cube& cube) {
     chunk.position[i] = x;
   }
 }
+
+// Wall time of consecutive phases.
+class PhaseClock {
+ public:
+  explicit PhaseClock(EpochReport& report) : report_(report) {}
+  void Lap(const char* phase) {
+    const auto now = std::chrono::steady_clock::now();
+    report_.phase_seconds.emplace_back(phase, std::chrono::duration<double>(now - last_).count());
+    last_ = now;
+  }
+
+ private:
+  EpochReport& report_;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
 
 // Everything one epoch's build shares between the worker threads.
 struct EpochBuild {
@@ -175,12 +198,7 @@ void BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads)
   auto work = [&] {
     try {
       for (std::size_t c = next++; c < chunks.size() && !failed; c = next++) {
-        ParticleChunk points;
-        {
-          ParticleFileReader reader(chunks[c].path);
-          reader.ReadAll(points);
-        }
-        std::remove(chunks[c].path.c_str());
+        ParticleChunk points = chunks[c].TakePoints();
         const std::uint64_t count = points.size();
         std::unordered_set<std::uint64_t> has_children;
         NodePoints root = BuildSubtree(points, chunks[c].key, *build.cube, *build.tree, LeafAwareSink(build, has_children));
@@ -226,12 +244,14 @@ IngestReport Ingest(const IngestOptions& options) {
   }
   const unsigned threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   const std::uint64_t budget = report.memory_budget;
-  report.max_chunk_points = options.max_chunk_points
-                                ? options.max_chunk_points
-                                : std::max<std::uint64_t>(budget / 2 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity);
+  // The budget's shares (docs/INGEST.md): the sorted current and next epochs
+  // 15 % each, the (ID, leaf) pairs 10 %, chunk buffers 30 %, chunk builds
+  // 30 %. Phases overlap only partly, so the sum is a bound, not a forecast.
+  const std::uint64_t build_budget_points =
+      std::max<std::uint64_t>(budget * 3 / 10 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity);
   const std::size_t sort_run_records = static_cast<std::size_t>(
-      options.sort_run_points ? options.sort_run_points : std::max<std::uint64_t>(budget * 2 / 5 / sizeof(ParticleRecord), 1024));
-  const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 5 / sizeof(IdLeafRecord), 1024));
+      options.sort_run_points ? options.sort_run_points : std::max<std::uint64_t>(budget * 15 / 100 / sizeof(ParticleRecord), 1024));
+  const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 10 / sizeof(IdLeafRecord), 1024));
 
   // Open the first epoch to learn what the series carries.
   std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);
@@ -283,6 +303,7 @@ IngestReport Ingest(const IngestOptions& options) {
                                                       " IDs / velocities unlike epoch 0; all epochs of a series must carry the same columns");
     }
     EpochReport epoch_report;
+    PhaseClock clock(epoch_report);
     const std::string label = "epoch " + std::to_string(e);
 
     // 1. sort (series with IDs) or bounds.
@@ -306,6 +327,7 @@ IngestReport Ingest(const IngestOptions& options) {
       }
     }
 
+    clock.Lap(join_epochs ? "sort" : "bounds");
     Cube cube;
     if (options.cube) {
       cube = *options.cube;
@@ -321,7 +343,7 @@ IngestReport Ingest(const IngestOptions& options) {
     JoinStats join_stats;
     PointPass pass = [&](const std::function<void(const ParticleChunk&)>& consume) {
       auto forward = [&](const ParticleChunk& chunk) {
-        if (!cube.periodic) return consume(chunk);
+        if (!cube.periodic || InsideBox(chunk, cube)) return consume(chunk);
         ParticleChunk wrapped = chunk;
         WrapIntoBox(wrapped, cube);
         consume(wrapped);
@@ -335,19 +357,35 @@ IngestReport Ingest(const IngestOptions& options) {
       }
     };
 
-    // 2. chunk.
+    // 2. chunk. Chunks small enough for memory, and numerous enough (four
+    // per thread) that every core has work until the end.
+    const std::uint64_t expected = join_epochs ? bounds.count : header.total_count;
+    const std::uint64_t max_chunk =
+        options.max_chunk_points
+            ? options.max_chunk_points
+            : std::min(build_budget_points, std::max<std::uint64_t>(expected / (4 * threads), 4 * options.tree.capacity));
+    report.max_chunk_points = std::max(report.max_chunk_points, max_chunk);
     ChunkerOptions chunker_options;
-    chunker_options.max_chunk_points = report.max_chunk_points;
+    chunker_options.max_chunk_points = max_chunk;
+    chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
     chunker_options.max_level = options.tree.max_level;
-    chunker_options.buffer_bytes = static_cast<std::size_t>(budget / 5);
+    chunker_options.memory_bytes = static_cast<std::size_t>(budget * 3 / 10);
     chunker_options.temp_dir = temp.path();
     chunker_options.columns = {has_velocity, has_id, join_epochs && next_sorted != nullptr};
     std::vector<Chunk> chunks;
     {
-      Progress progress(label + ": chunk", 0, "chunks");
-      chunks = Chunker(cube, chunker_options).Split(NodeKey::Root(), pass);
-      progress.Add(chunks.size());
+      Progress progress(label + ": read + chunk", expected, "points");
+      PointPass counted = [&](const std::function<void(const ParticleChunk&)>& consume) {
+        pass([&](const ParticleChunk& chunk) {
+          consume(chunk);
+          progress.Add(chunk.size());
+        });
+      };
+      Chunker chunker(cube, chunker_options);
+      chunks = chunker.Split(NodeKey::Root(), counted);
+      epoch_report.spilled_points = chunker.spilled_points();
     }
+    clock.Lap("read+chunk");
     for (const Chunk& c : chunks) epoch_report.points += c.point_count;
     epoch_report.chunks = chunks.size();
     epoch_report.missing_in_next = join_stats.missing_in_next;
@@ -366,13 +404,16 @@ IngestReport Ingest(const IngestOptions& options) {
       Progress progress(label + ": build", epoch_report.points, "points");
       build.progress = &progress;
       BuildChunks(std::move(chunks), build, threads);
+      clock.Lap("build");
       NodePoints root = BuildTopLevels(std::move(build.roots), cube, options.tree, [&](NodeKey key, NodePoints&& points) {
         build.Emit(key, points, /*is_leaf=*/false);
       });
       for (double w : root.weight) epoch_report.mass += w;
       progress.Finish();
     }
+    clock.Lap("top");
     store.EndEpoch();
+    clock.Lap("write");
 
     // 5. ID index.
     if (has_id) {
@@ -384,6 +425,7 @@ IngestReport Ingest(const IngestOptions& options) {
       while (reader.Next(r)) ids.Add(r.key, NodeKey::FromValue(r.leaf));
       ids.Finish();
       id_store->EndEpoch();
+      clock.Lap("ids");
     }
 
     dataset["epochs"].push_back({{"epoch", e},

@@ -22,6 +22,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -51,6 +52,8 @@ struct EpochReport {
   std::uint64_t nodes = 0;
   std::uint64_t leaves = 0;
   std::uint64_t chunks = 0;
+  std::uint64_t spilled_points = 0;  // points that went through temporary chunk files
+  std::vector<std::pair<std::string, double>> phase_seconds;  // wall time of each phase, in order
   int depth = 0;
   double mass = 0;
   std::uint64_t missing_in_next = 0;
