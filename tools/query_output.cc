@@ -1,6 +1,7 @@
 #include "tools/query_output.h"
 
 #include <array>
+#include <charconv>
 #include <cstring>
 #include <sstream>
 #include <vector>
@@ -62,38 +63,33 @@ void AppendBinary(const QueryBatch& batch, std::size_t i, ColumnSet columns, std
   }
 }
 
+// Appends a number in the shortest form that reads back to the same value.
+template <typename T>
+void AppendNumber(T value, std::string& out) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
+  out.append(buffer, result.ptr);
+}
+
 // Appends point i as text fields separated by `separator`.
 void AppendText(const QueryBatch& batch, std::size_t i, ColumnSet columns, char separator, std::string& out) {
   const NodePoints& p = batch.points;
-  char buffer[64];
-  const auto number = [&](double v, bool first = false) {
-    if (!first) out += separator;
-    std::snprintf(buffer, sizeof buffer, "%.17g", v);
-    out += buffer;
-  };
-  const auto single = [&](float v) {
+  const auto field = [&](auto value) {
     out += separator;
-    std::snprintf(buffer, sizeof buffer, "%.9g", static_cast<double>(v));
-    out += buffer;
+    AppendNumber(value, out);
   };
-  number(p.position[3 * i], true);
-  number(p.position[3 * i + 1]);
-  number(p.position[3 * i + 2]);
-  if (Has(columns, ColumnId::kWeight)) number(At(p.weight, i));
-  if (Has(columns, ColumnId::kSmoothing)) number(At(p.smoothing, i));
+  AppendNumber(p.position[3 * i], out);
+  field(p.position[3 * i + 1]);
+  field(p.position[3 * i + 2]);
+  if (Has(columns, ColumnId::kWeight)) field(At(p.weight, i));
+  if (Has(columns, ColumnId::kSmoothing)) field(At(p.smoothing, i));
   if (Has(columns, ColumnId::kVelocity)) {
-    for (int a = 0; a < 3; ++a) single(At(p.velocity, 3 * i + a));
+    for (int a = 0; a < 3; ++a) field(At(p.velocity, 3 * i + a));
   }
-  if (Has(columns, ColumnId::kId)) {
-    out += separator;
-    out += std::to_string(At(p.id, i));
-  }
-  if (Has(columns, ColumnId::kType)) {
-    out += separator;
-    out += std::to_string(At(p.type, i));
-  }
+  if (Has(columns, ColumnId::kId)) field(At(p.id, i));
+  if (Has(columns, ColumnId::kType)) field(static_cast<unsigned>(At(p.type, i)));
   if (Has(columns, ColumnId::kDisplacement)) {
-    for (int a = 0; a < 3; ++a) single(At(p.displacement, 3 * i + a));
+    for (int a = 0; a < 3; ++a) field(At(p.displacement, 3 * i + a));
   }
   out += '\n';
 }
