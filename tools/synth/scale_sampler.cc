@@ -22,9 +22,17 @@ std::uint64_t ChunkSeed(std::uint64_t seed, int file, std::uint64_t chunk) {
   return Mix(Mix(Mix(seed) ^ static_cast<std::uint64_t>(file)) + chunk);
 }
 
+// Into [0, box). Structures reach less than a box length outside it, so one
+// addition or subtraction almost always does; the division is the fallback.
 double Wrap(double x, double box) {
+  if (x < 0.0) {
+    x += box;
+  } else if (x >= box) {
+    x -= box;
+  }
+  if (x >= 0.0 && x < box) return x;
   x -= box * std::floor(x / box);
-  return x < box ? x : 0.0;
+  return x < box ? x : 0.0;  // a hair below 0 can round up to box
 }
 
 }  // namespace
