@@ -67,9 +67,11 @@ void AddSynthScaleCommand(CLI::App& synth) {
                    100.0 * static_cast<double>(p.particles_done) / static_cast<double>(p.particle_count), p.elapsed_seconds,
                    static_cast<double>(p.particles_done) / std::max(p.elapsed_seconds, 1e-9) / 1e6);
     });
-    std::printf("%llu particles (mass %.6g x 1e10 Msun/h), %zu halos, %zu filaments, %zu files, %d threads, %.2f s\n",
+    std::printf("%llu particles (mass %.6g x 1e10 Msun/h), %zu halos, %zu filaments (drawn in %.2f s), %zu files, "
+                "%d threads, %.2f s, %.1f M particles/s\n",
                 static_cast<unsigned long long>(result.particle_count), result.particle_mass, result.halos,
-                result.filaments, result.files.size(), result.threads, result.total_seconds);
+                result.filaments, result.web_seconds, result.files.size(), result.threads, result.total_seconds,
+                static_cast<double>(result.particle_count) / std::max(result.total_seconds, 1e-9) / 1e6);
     std::printf("%s%s\n", result.files.front().c_str(),
                 result.files.size() > 1 ? (" .. " + result.files.back()).c_str() : "");
   });

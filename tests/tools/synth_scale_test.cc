@@ -24,6 +24,7 @@
 #include "tools/synth/nfw_profile.h"
 #include "tools/synth/scale_generator.h"
 #include "tools/synth/scale_random.h"
+#include "tools/synth/scale_sampler.h"
 
 namespace octocosm::synth {
 namespace {
@@ -359,6 +360,42 @@ TEST(SynthScaleTest, OneFileTakesThePrefixAsItsName) {
   const ScaleResult result = RunScaleGenerator(options);
   ASSERT_EQ(result.files, std::vector<std::string>{(dir.path() / "snap").string()});
   EXPECT_EQ(ReadSnapshot(result.files[0]).header.total_count, 1000u);
+}
+
+TEST(SynthScaleTest, ChunksOfBillionsOfParticlesIndexWithoutOverflow) {
+  // 6e9 particles (IDs beyond 2^32) in 50 files, drawn in memory: the last
+  // chunk of the last file ends at ID N.
+  ScaleOptions options;
+  options.particle_count = 6'000'000'000;
+  options.files = 50;
+  options.halo_count = 1000;
+  options.node_count = 64;
+  ValidateScaleOptions(options);
+  const CosmicWeb web = BuildCosmicWeb(options);
+  EXPECT_EQ(web.halo_particles + web.filament_particles + web.background_particles, options.particle_count);
+  const ScaleSampler sampler(web, options.seed, 50, options.chunk_particles, 1.0);
+  EXPECT_EQ(sampler.FileParticleCount(49), 120'000'000u);
+  for (int file : {0, 17, 49}) {
+    const std::uint64_t last_chunk = sampler.ChunkCount(file) - 1;
+    for (std::uint64_t chunk : {std::uint64_t{0}, last_chunk / 2, last_chunk}) {
+      ScaleChunk out;
+      sampler.Fill(file, chunk, out);
+      ASSERT_FALSE(out.ids.empty());
+      for (std::size_t i = 0; i < out.ids.size(); ++i) {
+        ASSERT_EQ((out.ids[i] - 1) % 50, static_cast<std::uint64_t>(file));
+        if (i > 0) {
+          ASSERT_EQ(out.ids[i], out.ids[i - 1] + 50);
+        }
+      }
+      for (float x : out.positions) {
+        ASSERT_GE(x, 0.0f);
+        ASSERT_LT(x, 500.0f);
+      }
+      if (file == 49 && chunk == last_chunk) {
+        EXPECT_EQ(out.ids.back(), options.particle_count);
+      }
+    }
+  }
 }
 
 TEST(SynthScaleTest, RejectsImpossibleOptions) {
