@@ -244,45 +244,63 @@ NodePoints BuildSubtree(ParticleChunk& particles, NodeKey region, const Cube& cu
   return BuildNode(particles, 0, particles.size(), region, cube, options, sink);
 }
 
+TopLevelMerger::TopLevelMerger(const Cube& cube, const SubtreeOptions& options, NodeSink sink)
+    : cube_(cube), options_(options), sink_(std::move(sink)) {
+  cube_.Validate();
+}
+
+void TopLevelMerger::CloseDeepest() {
+  Open closing = std::move(open_.back());
+  open_.pop_back();
+  NodePoints node = SampleParent(closing.key, closing.children, cube_, options_);
+  sink_(closing.key, NodePoints(node));
+  if (open_.empty()) {
+    root_ = std::move(node);
+  } else {
+    open_.back().children[closing.key.OctantInParent()] = std::move(node);
+  }
+}
+
+void TopLevelMerger::Add(NodeKey region, NodePoints points) {
+  if (finished_) throw Error::InvalidArgument("TopLevelMerger: Add after Finish");
+  CheckOptions(options_, region);
+  if (have_last_ && !PreorderLess{}(last_, region)) {
+    throw Error::InvalidArgument("TopLevelMerger: region " + region.Path() + " does not follow " + last_.Path() +
+                                 " in depth-first order");
+  }
+  if (have_last_ && last_.IsAncestorOrSelf(region)) {
+    throw Error::InvalidArgument("TopLevelMerger: region " + last_.Path() + " overlaps region " + region.Path());
+  }
+  have_last_ = true;
+  last_ = region;
+  if (points.size() == 0) return;
+  if (region.level() == 0) {
+    if (!open_.empty() || root_.size() > 0) throw Error::InvalidArgument("TopLevelMerger: the root overlaps other regions");
+    root_ = std::move(points);
+    return;
+  }
+  // Close what the new region is not inside of: those subtrees are complete.
+  while (!open_.empty() && !open_.back().key.IsAncestorOrSelf(region)) CloseDeepest();
+  const int depth = open_.empty() ? 0 : open_.back().key.level() + 1;
+  for (int level = depth; level < region.level(); ++level) open_.push_back({region.AncestorAt(level), {}});
+  open_.back().children[region.OctantInParent()] = std::move(points);
+}
+
+NodePoints TopLevelMerger::Finish() {
+  if (!finished_) {
+    finished_ = true;
+    while (!open_.empty()) CloseDeepest();
+  }
+  return std::move(root_);
+}
+
 NodePoints BuildTopLevels(std::vector<RegionRoot> regions, const Cube& cube, const SubtreeOptions& options,
                           const NodeSink& sink) {
-  cube.Validate();
-  std::erase_if(regions, [](const RegionRoot& r) { return r.points.size() == 0; });
-  for (const RegionRoot& r : regions) CheckOptions(options, r.key);
   std::sort(regions.begin(), regions.end(),
             [](const RegionRoot& a, const RegionRoot& b) { return PreorderLess{}(a.key, b.key); });
-  // In depth-first order a node's descendants follow it directly, so any
-  // overlap shows up between neighbours.
-  for (std::size_t i = 1; i < regions.size(); ++i) {
-    if (regions[i - 1].key.IsAncestorOrSelf(regions[i].key)) {
-      throw Error::InvalidArgument("BuildTopLevels: region " + regions[i - 1].key.Path() + " overlaps region " +
-                                   regions[i].key.Path());
-    }
-  }
-
-  // Keys in numeric order are level-major, so the deepest pending nodes are
-  // always at the end of the map.
-  std::map<NodeKey, NodePoints> pending;
-  for (RegionRoot& r : regions) pending.emplace(r.key, std::move(r.points));
-  while (!pending.empty()) {
-    const int level = std::prev(pending.end())->first.level();
-    if (level == 0) return std::move(pending.begin()->second);
-    auto it = pending.lower_bound(NodeKey::FromValue(std::uint64_t{1} << (3 * level)));
-    std::vector<std::pair<NodeKey, NodePoints>> parents;
-    while (it != pending.end()) {
-      const NodeKey parent = it->first.Parent();
-      std::array<NodePoints, 8> children;
-      for (; it != pending.end() && it->first.Parent() == parent; ++it) {
-        children[it->first.OctantInParent()] = std::move(it->second);
-      }
-      NodePoints node = SampleParent(parent, children, cube, options);
-      sink(parent, NodePoints(node));
-      parents.emplace_back(parent, std::move(node));
-    }
-    pending.erase(pending.lower_bound(NodeKey::FromValue(std::uint64_t{1} << (3 * level))), pending.end());
-    for (auto& [key, node] : parents) pending.emplace(key, std::move(node));
-  }
-  return {};
+  TopLevelMerger merger(cube, options, sink);
+  for (RegionRoot& r : regions) merger.Add(r.key, std::move(r.points));
+  return merger.Finish();
 }
 
 }  // namespace octocosm

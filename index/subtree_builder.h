@@ -27,6 +27,7 @@
 // about 9 * capacity points more while one node is being sampled.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <functional>
 #include <vector>
@@ -71,6 +72,38 @@ struct RegionRoot {
 // Returns the root node (the only region's node when that region is the
 // root; empty when there are no points at all). Throws
 // Error::InvalidArgument when regions overlap or repeat.
+// The same, streaming: regions arrive one at a time in depth-first order
+// (PreorderLess), and each ancestor is sampled and passed to the sink as soon
+// as the input has left its subtree, so memory holds at most eight child
+// samples per level instead of every region's. This is how an out-of-core
+// build merges its chunks. Not thread-safe.
+class TopLevelMerger {
+ public:
+  TopLevelMerger(const Cube& cube, const SubtreeOptions& options, NodeSink sink);
+  // Throws Error::InvalidArgument when `region` does not follow the previous
+  // one in depth-first order or overlaps it.
+  void Add(NodeKey region, NodePoints points);
+  // Closes every open ancestor up to the root and returns the root node
+  // (empty when there were no points).
+  NodePoints Finish();
+
+ private:
+  struct Open {
+    NodeKey key;
+    std::array<NodePoints, 8> children;
+  };
+  void CloseDeepest();
+
+  Cube cube_;
+  SubtreeOptions options_;
+  NodeSink sink_;
+  std::vector<Open> open_;  // the chain of open ancestors, root first
+  NodePoints root_;
+  NodeKey last_;
+  bool have_last_ = false;
+  bool finished_ = false;
+};
+
 NodePoints BuildTopLevels(std::vector<RegionRoot> regions, const Cube& cube, const SubtreeOptions& options,
                           const NodeSink& sink);
 

@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -157,8 +158,7 @@ struct EpochBuild {
   const SubtreeOptions* tree = nullptr;
   StoreWriter* store = nullptr;
   ExternalSorter<IdLeafRecord>* id_pairs = nullptr;  // null without IDs
-  std::mutex mutex;  // guards store, id_pairs, roots and report
-  std::vector<RegionRoot> roots;
+  std::mutex mutex;  // guards store, id_pairs and report
   EpochReport* report = nullptr;
   Progress* progress = nullptr;
 
@@ -189,8 +189,18 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
   };
 }
 
-void BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads) {
-  std::sort(chunks.begin(), chunks.end(), [](const Chunk& a, const Chunk& b) { return a.point_count > b.point_count; });
+// Builds the chunks' subtrees on `threads` threads and merges the levels
+// above them as they complete. Chunks are taken in depth-first order and
+// their roots handed to the merger in that order (a root that completes early
+// waits for its predecessors), so memory holds a few chunk roots plus the
+// merger's open ancestors, never every chunk's sample. Returns the root.
+NodePoints BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads) {
+  TopLevelMerger merger(*build.cube, *build.tree, [&build](NodeKey key, NodePoints&& points) {
+    build.Emit(key, points, /*is_leaf=*/false);
+  });
+  std::mutex merge_mutex;  // guards merger, ready, next_to_merge
+  std::map<std::size_t, NodePoints> ready;
+  std::size_t next_to_merge = 0;
   std::atomic<std::size_t> next{0};
   std::atomic<bool> failed{false};
   std::exception_ptr error;
@@ -202,9 +212,14 @@ void BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads)
         const std::uint64_t count = points.size();
         std::unordered_set<std::uint64_t> has_children;
         NodePoints root = BuildSubtree(points, chunks[c].key, *build.cube, *build.tree, LeafAwareSink(build, has_children));
+        points = ParticleChunk();
         {
-          std::lock_guard lock(build.mutex);
-          build.roots.push_back({chunks[c].key, std::move(root)});
+          std::lock_guard lock(merge_mutex);
+          ready.emplace(c, std::move(root));
+          for (auto it = ready.begin(); it != ready.end() && it->first == next_to_merge; it = ready.erase(it)) {
+            merger.Add(chunks[next_to_merge].key, std::move(it->second));
+            ++next_to_merge;
+          }
         }
         build.progress->Add(count);
       }
@@ -219,6 +234,7 @@ void BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads)
   work();
   for (auto& worker : workers) worker.join();
   if (error) std::rethrow_exception(error);
+  return merger.Finish();
 }
 
 }  // namespace
@@ -403,15 +419,11 @@ IngestReport Ingest(const IngestOptions& options) {
     {
       Progress progress(label + ": build", epoch_report.points, "points");
       build.progress = &progress;
-      BuildChunks(std::move(chunks), build, threads);
-      clock.Lap("build");
-      NodePoints root = BuildTopLevels(std::move(build.roots), cube, options.tree, [&](NodeKey key, NodePoints&& points) {
-        build.Emit(key, points, /*is_leaf=*/false);
-      });
+      const NodePoints root = BuildChunks(std::move(chunks), build, threads);
       for (double w : root.weight) epoch_report.mass += w;
       progress.Finish();
     }
-    clock.Lap("top");
+    clock.Lap("build");
     store.EndEpoch();
     clock.Lap("write");
 

@@ -1,0 +1,146 @@
+// octocosm-bench-ingest: ingest throughput, CPU time and peak memory.
+//
+// For each case it generates a clustered snapshot with the scale generator
+// (halos with NFW profiles on a filament skeleton plus a background,
+// `octocosm synth scale`), then runs `octocosm ingest` on it as a child
+// process, so that the child's own peak RSS and CPU time are measured
+// (wait4's rusage), and prints one row per case:
+//   points, input MB, budget, wall s, M points/s, CPU s, CPU use, peak RSS, RSS / budget
+// Default cases (issue 3 §7): 10^7 and 10^8 points with the default budget,
+// and 4x10^7 points (1.1 GB of input) under a 256 MiB budget: input > 4x budget.
+//
+// The reference figure is the issue's: PotreeConverter 2.x `-m random` builds
+// clustered data at about 2.4 M points/s on these 2-core machines. It is not
+// measured here (PotreeConverter is not packaged for Debian).
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <thread>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "storage/error.h"
+#include "tools/cli_util.h"
+#include "tools/synth/scale_generator.h"
+
+extern char** environ;
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Case {
+  std::uint64_t points;
+  std::string memory;  // "" = ingest's default
+};
+
+struct ChildUsage {
+  double wall = 0, cpu = 0;
+  double peak_rss_bytes = 0;
+  int status = 0;
+};
+
+ChildUsage RunChild(const std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const auto start = std::chrono::steady_clock::now();
+  pid_t pid = 0;
+  if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) != 0) {
+    throw IoErrorFromErrno(args[0], "starting", errno);
+  }
+  ChildUsage usage;
+  struct rusage ru {};
+  if (wait4(pid, &usage.status, 0, &ru) < 0) throw IoErrorFromErrno(args[0], "waiting for", errno);
+  usage.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  usage.cpu = static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+              static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) / 1e6;
+  usage.peak_rss_bytes = static_cast<double>(ru.ru_maxrss) * 1024.0;
+  return usage;
+}
+
+std::uint64_t DirectoryBytes(const fs::path& dir) {
+  std::uint64_t total = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (entry.is_regular_file()) total += entry.file_size();
+  }
+  return total;
+}
+
+}  // namespace
+}  // namespace octocosm
+
+int main(int argc, char** argv) {
+  using namespace octocosm;
+  std::string dir = "octocosm-ingest-bench";
+  std::string octocosm_path = (fs::path(argv[0]).parent_path() / ".." / "tools" / "octocosm").string();
+  std::vector<std::string> case_texts = {"1e7", "1e8", "4e7@256M"};
+  bool keep = false;
+  CLI::App app{"octocosm-bench-ingest: ingest throughput, CPU time and peak RSS on generated clustered data"};
+  app.add_option("--dir", dir, "scratch directory (removed afterwards)")->default_val(dir);
+  app.add_option("--octocosm", octocosm_path, "the octocosm program to measure")->default_val(octocosm_path);
+  app.add_option("--case", case_texts, "cases POINTS[@MEMORY], e.g. 1e7 1e8 4e7@256M")->default_val(case_texts);
+  app.add_flag("--keep", keep, "keep the generated snapshots and stores");
+  CLI11_PARSE(app, argc, argv);
+
+  try {
+    std::vector<Case> cases;
+    for (const std::string& text : case_texts) {
+      const auto at = text.find('@');
+      Case c;
+      c.points = static_cast<std::uint64_t>(std::stod(text.substr(0, at)));
+      if (at != std::string::npos) c.memory = text.substr(at + 1);
+      cases.push_back(c);
+    }
+    fs::create_directories(dir);
+    std::printf("octocosm-bench-ingest: %s on %u cores\n", octocosm_path.c_str(), std::thread::hardware_concurrency());
+    std::printf("%12s %10s %9s %9s %11s %8s %7s %11s %10s %10s\n", "points", "input MB", "budget", "wall s",
+                "M points/s", "CPU s", "CPU use", "peak RSS", "RSS/budget", "vs 2.4M/s");
+    for (const Case& c : cases) {
+      const fs::path snapshots = fs::path(dir) / ("snap-" + std::to_string(c.points));
+      if (!fs::exists(snapshots)) {
+        synth::ScaleOptions options;
+        options.output_directory = snapshots.string();
+        options.particle_count = c.points;
+        options.seed = 7;
+        synth::RunScaleGenerator(options, nullptr);
+      }
+      const std::uint64_t input_bytes = DirectoryBytes(snapshots);
+      const fs::path store = fs::path(dir) / "store";
+      fs::remove_all(store);
+      std::vector<std::string> args = {octocosm_path, "ingest", (snapshots / "snap").string(), "-o", store.string(), "-q"};
+      if (!c.memory.empty()) {
+        args.push_back("--memory");
+        args.push_back(c.memory);
+      }
+      const ChildUsage u = RunChild(args);
+      if (!WIFEXITED(u.status) || WEXITSTATUS(u.status) != 0) {
+        std::fprintf(stderr, "octocosm ingest failed for %llu points\n", static_cast<unsigned long long>(c.points));
+        return 1;
+      }
+      const double budget = c.memory.empty() ? 0.0 : static_cast<double>(ParseByteSize(c.memory, "--case"));
+      const double rate = static_cast<double>(c.points) / u.wall / 1e6;
+      std::printf("%12llu %10.0f %9s %9.2f %11.2f %8.2f %6.0f%% %11s %10s %9.2fx\n",
+                  static_cast<unsigned long long>(c.points), static_cast<double>(input_bytes) / 1e6,
+                  c.memory.empty() ? "default" : c.memory.c_str(), u.wall, rate, u.cpu, 100.0 * u.cpu / u.wall,
+                  HumanBytes(u.peak_rss_bytes).c_str(),
+                  budget > 0 ? (std::to_string(u.peak_rss_bytes / budget).substr(0, 4)).c_str() : "-", rate / 2.4);
+      std::fflush(stdout);
+      fs::remove_all(store);
+      if (!keep) fs::remove_all(snapshots);
+    }
+    if (!keep) fs::remove_all(dir);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "octocosm-bench-ingest: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
