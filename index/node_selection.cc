@@ -26,6 +26,7 @@ std::vector<IndexEntry> Walk(const Dataset& dataset, std::uint32_t epoch, const 
                              const std::function<bool(const IndexEntry&)>& refine, SelectionStats& stats) {
   const StoreReader& store = dataset.store();
   const Cube& cube = dataset.cube(epoch);
+  const ReaderStats before = store.page_file(epoch).stats();
   std::vector<IndexEntry> selected;
   std::vector<IndexEntry> stack;
   if (auto root = store.Lookup({epoch, NodeKey::Root().value()})) stack.push_back(*root);
@@ -51,6 +52,9 @@ std::vector<IndexEntry> Walk(const Dataset& dataset, std::uint32_t epoch, const 
       stack.insert(stack.end(), children.rbegin(), children.rend());
     }
   }
+  const ReaderStats after = store.page_file(epoch).stats();
+  stats.index_pages_read += after.index_page_reads - before.index_page_reads;
+  stats.index_bytes_read += after.bytes_read - before.bytes_read;
   std::sort(selected.begin(), selected.end(),
             [](const IndexEntry& a, const IndexEntry& b) { return a.first_page < b.first_page; });
   return selected;

@@ -34,8 +34,14 @@
 namespace octocosm {
 
 struct SelectionStats {
-  std::uint64_t nodes_visited = 0;  // index entries examined
-  std::uint64_t index_scans = 0;    // child look-ups (one per refined node)
+  std::uint64_t nodes_visited = 0;     // index entries examined
+  std::uint64_t index_scans = 0;       // child look-ups (one per refined node)
+  // Index pages the epoch's page file read from disk (and bytes) during the
+  // walk; pages found decoded in its cache cost nothing. Taken from the page
+  // file's counters, so they include the reads of any query running on the
+  // same store at the same time.
+  std::uint64_t index_pages_read = 0;
+  std::uint64_t index_bytes_read = 0;
 };
 
 struct ScreenErrorView {

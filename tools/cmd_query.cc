@@ -127,7 +127,17 @@ void RunQueryCommand(const QueryFlags& f) {
   if (f.level.has_value() == f.error.has_value()) throw Error::InvalidArgument("give exactly one of --level and --error");
   if (!(f.width > 0) || !(f.height > 0)) throw Error::InvalidArgument("--width and --height must be > 0");
   std::optional<Camera> camera;
-  if (HasCamera(f)) camera = CameraFrom(f, cube);
+  if (HasCamera(f)) {
+    try {
+      camera = CameraFrom(f, cube);
+    } catch (const Error& e) {
+      if (e.kind() != ErrorKind::kInvalidArgument) throw;
+      std::string what = e.what();
+      const std::string prefix = "invalid argument: ";
+      if (what.rfind(prefix, 0) == 0) what.erase(0, prefix.size());
+      throw Error::InvalidArgument("camera flags (--camera, --look-at, --up, --view-matrix, --fov, --aspect, --near, --far): " + what);
+    }
+  }
   QueryOptions options;
   options.epoch = f.epoch;
   options.columns = ParseColumnList(f.columns);
@@ -158,11 +168,12 @@ void RunQueryCommand(const QueryFlags& f) {
   if (!f.quiet) {
     std::fprintf(stderr,
                  "query: %llu points returned of %llu decoded; %llu nodes selected (%llu index entries visited, %llu "
-                 "child scans); %llu blocks, %llu reads, %s read\n",
+                 "child scans, %llu index pages read); %llu blocks, %llu reads, %s read\n",
                  static_cast<unsigned long long>(stats.points_returned), static_cast<unsigned long long>(stats.points_scanned),
                  static_cast<unsigned long long>(stats.nodes_selected),
                  static_cast<unsigned long long>(stats.selection.nodes_visited),
                  static_cast<unsigned long long>(stats.selection.index_scans),
+                 static_cast<unsigned long long>(stats.selection.index_pages_read),
                  static_cast<unsigned long long>(stats.reads.blocks), static_cast<unsigned long long>(stats.reads.reads),
                  HumanBytes(static_cast<double>(stats.reads.bytes)).c_str());
   }
