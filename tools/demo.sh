@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job on an embedded default: simulate a small universe, ingest its
-# epochs into a level-of-detail store, describe the store and verify it.
+# epochs into a level-of-detail store, describe the store, verify it, query a
+# box and follow a few particles through time.
 #   tools/demo.sh BUILD_DIR [WORK_DIR]
 set -euo pipefail
 build="${1:?usage: tools/demo.sh BUILD_DIR [WORK_DIR]}"
@@ -17,4 +18,10 @@ echo "== 3. info"
 "$octocosm" info "$work/store"
 echo "== 4. verify"
 "$octocosm" verify "$work/store"
+echo "== 5. query: a 20 Mpc/h box at level 2 of the last epoch, as PLY"
+"$octocosm" query "$work/store" --epoch 4 --box 40000,40000,40000,60000,60000,60000 --level 2 \
+  --columns weight --format ply -o "$work/box.ply"
+echo "== 6. follow: particles 1, 1000 and 100000 through every epoch"
+printf '1\n1000\n100000\n' > "$work/ids.txt"
+"$octocosm" follow "$work/store" --ids "$work/ids.txt"
 echo "demo finished: the store is in $work/store"
