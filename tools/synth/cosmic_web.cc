@@ -26,11 +26,15 @@ Vec3 Normalized(const Vec3& v) {
   return {v[0] / length, v[1] / length, v[2] / length};
 }
 
+// For points inside the box, where each difference is below one box length,
+// two selects replace the division and rounding, and branches that random
+// points would mispredict half the time (the nearest-neighbour search makes
+// nodes^2 of these).
 Vec3 MinimalImage(const Vec3& from, const Vec3& to, double box) {
   Vec3 d;
   for (int k = 0; k < 3; ++k) {
-    d[k] = to[k] - from[k];
-    d[k] -= box * std::round(d[k] / box);
+    const double difference = to[k] - from[k];
+    d[k] = difference - (difference > 0.5 * box ? box : 0.0) + (difference < -0.5 * box ? box : 0.0);
   }
   return d;
 }
@@ -91,16 +95,20 @@ CosmicWeb BuildCosmicWeb(const ScaleOptions& options) {
     for (double& x : node) x = Wrap(uniform() * box, box);
   }
   std::vector<std::pair<std::size_t, std::size_t>> edges;
-  std::vector<std::pair<double, std::size_t>> distances(node_count);
   for (std::size_t i = 0; i < node_count; ++i) {
+    // The nearest kNeighboursPerNode, kept sorted by (distance, index).
+    std::array<std::pair<double, std::size_t>, kNeighboursPerNode> nearest;
+    nearest.fill({INFINITY, node_count});
     for (std::size_t j = 0; j < node_count; ++j) {
+      if (j == i) continue;
       const Vec3 d = MinimalImage(web.nodes[i], web.nodes[j], box);
-      distances[j] = {j == i ? INFINITY : Dot(d, d), j};
+      std::pair<double, std::size_t> candidate{Dot(d, d), j};
+      if (!(candidate < nearest.back())) continue;
+      nearest.back() = candidate;
+      for (std::size_t k = nearest.size() - 1; k > 0 && nearest[k] < nearest[k - 1]; --k) std::swap(nearest[k], nearest[k - 1]);
     }
-    const std::size_t neighbours = std::min<std::size_t>(kNeighboursPerNode, node_count - 1);
-    std::partial_sort(distances.begin(), distances.begin() + static_cast<std::ptrdiff_t>(neighbours), distances.end());
-    for (std::size_t k = 0; k < neighbours; ++k) {
-      edges.emplace_back(std::min(i, distances[k].second), std::max(i, distances[k].second));
+    for (const auto& [distance, j] : nearest) {
+      if (j < node_count) edges.emplace_back(std::min(i, j), std::max(i, j));
     }
   }
   std::sort(edges.begin(), edges.end());
