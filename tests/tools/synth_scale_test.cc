@@ -414,6 +414,11 @@ TEST(SynthScaleTest, RejectsImpossibleOptions) {
   expect_invalid([](ScaleOptions& o) { o.particle_count = 0; });
   expect_invalid([](ScaleOptions& o) { o.particle_count = 5; });  // 7 files
   expect_invalid([](ScaleOptions& o) { o.particles_per_file = 10; });  // and files = 7
+  expect_invalid([](ScaleOptions& o) {  // 10^7 files of one particle
+    o.files = 0;
+    o.particle_count = 10'000'000;
+    o.particles_per_file = 1;
+  });
   expect_invalid([](ScaleOptions& o) { o.box_size_mpc_h = -1; });
   expect_invalid([](ScaleOptions& o) { o.node_count = 1; });
   expect_invalid([](ScaleOptions& o) {

@@ -20,13 +20,22 @@ std::size_t DefaultHaloCount(std::uint64_t halo_particles) {
 
 std::size_t DefaultNodeCount(std::size_t halo_count) { return std::clamp<std::size_t>(halo_count / 16, 16, 4096); }
 
-int ResolveScaleFileCount(const ScaleOptions& options) {
-  if (options.files > 0) return options.files;
+namespace {
+
+constexpr std::uint64_t kMaxFiles = 1'000'000;
+
+std::uint64_t RequestedFileCount(const ScaleOptions& options) {
+  if (options.files > 0) return static_cast<std::uint64_t>(options.files);
   if (options.particles_per_file > 0) {
-    const std::uint64_t files = (options.particle_count + options.particles_per_file - 1) / options.particles_per_file;
-    return static_cast<int>(std::min<std::uint64_t>(files, 1'000'000));
+    return (options.particle_count + options.particles_per_file - 1) / options.particles_per_file;
   }
-  return DefaultScaleFileCount(options.particle_count);
+  return static_cast<std::uint64_t>(DefaultScaleFileCount(options.particle_count));
+}
+
+}  // namespace
+
+int ResolveScaleFileCount(const ScaleOptions& options) {
+  return static_cast<int>(std::min(RequestedFileCount(options), kMaxFiles));  // ValidateScaleOptions rejects more
 }
 
 void ValidateScaleOptions(const ScaleOptions& o) {
@@ -38,11 +47,12 @@ void ValidateScaleOptions(const ScaleOptions& o) {
   if (o.particles_per_file > kMaxScaleParticlesPerFile) {
     fail("at most " + std::to_string(kMaxScaleParticlesPerFile) + " particles fit one GADGET file");
   }
+  const std::uint64_t requested_files = RequestedFileCount(o);
+  if (requested_files > kMaxFiles) fail(std::to_string(requested_files) + " files: at most 10^6");
   const int files = ResolveScaleFileCount(o);
   if (static_cast<std::uint64_t>(files) > o.particle_count) {
     fail(std::to_string(files) + " files for " + std::to_string(o.particle_count) + " particles: every file needs one");
   }
-  if (files > 1'000'000) fail("more than 10^6 files");
   const std::uint64_t largest_file = (o.particle_count + static_cast<std::uint64_t>(files) - 1) / static_cast<std::uint64_t>(files);
   if (largest_file > kMaxScaleParticlesPerFile) {
     fail(std::to_string(largest_file) + " particles in one file overflow a GADGET record; use more files");

@@ -21,7 +21,7 @@ struct ScaleOptions {
   std::uint64_t seed = 1;
 
   // Files: `files` when > 0, else ceil(particle_count / particles_per_file)
-  // when that is > 0, else DefaultScaleFileCount().
+  // when that is > 0, else DefaultScaleFileCount(); at most 10^6 files.
   int files = 0;
   std::uint64_t particles_per_file = 0;
 
