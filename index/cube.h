@@ -9,7 +9,7 @@
 // quantized position inside a node block, its fine density cell) goes through
 // one function, GridCoords, so that they can never disagree with each other:
 //
-//   t    = (x - origin) / size                  the point's unit coordinate
+//   t    = (x - origin) * (1 / size)            the point's unit coordinate
 //   t    = t - floor(t)                         only in a periodic cube
 //   grid = clamp(floor(t * 2^bits), 0, 2^bits - 1)
 //
