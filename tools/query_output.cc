@@ -1,6 +1,7 @@
 #include "tools/query_output.h"
 
 #include <array>
+#include <cerrno>
 #include <charconv>
 #include <cstring>
 #include <sstream>
