@@ -11,27 +11,28 @@
 namespace octocosm {
 namespace {
 
-// Copies the points `indices` of `from` to the end of `to` (all columns `from` carries).
+// Copies the points `indices` of `from` to the end of `to` (all columns
+// `from` carries). Appends rather than resizing: resize would zero memory
+// that is overwritten at once.
 void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& indices, ParticleChunk& to) {
-  const std::size_t old = to.size();
-  const std::size_t n = indices.size();
-  to.position.resize(3 * (old + n));
-  to.mass.resize(old + n);
-  to.type.resize(old + n);
-  if (from.has_velocity()) to.velocity.resize(3 * (old + n));
-  if (from.has_id()) to.id.resize(old + n);
-  if (!from.displacement.empty()) to.displacement.resize(3 * (old + n));
-  for (std::size_t j = 0; j < n; ++j) {
-    const std::size_t i = indices[j], k = old + j;
-    for (int a = 0; a < 3; ++a) to.position[3 * k + a] = from.position[3 * i + a];
-    to.mass[k] = from.mass[i];
-    to.type[k] = from.type[i];
-    if (from.has_velocity()) {
-      for (int a = 0; a < 3; ++a) to.velocity[3 * k + a] = from.velocity[3 * i + a];
-    }
-    if (from.has_id()) to.id[k] = from.id[i];
+  const std::size_t n = to.size() + indices.size();
+  auto grow = [](auto& column, std::size_t size) {
+    if (column.capacity() < size) column.reserve(std::max(size, 2 * column.capacity()));
+  };
+  grow(to.position, 3 * n);
+  grow(to.mass, n);
+  grow(to.type, n);
+  if (from.has_velocity()) grow(to.velocity, 3 * n);
+  if (from.has_id()) grow(to.id, n);
+  if (!from.displacement.empty()) grow(to.displacement, 3 * n);
+  for (const std::uint32_t i : indices) {
+    to.position.insert(to.position.end(), &from.position[3 * i], &from.position[3 * i] + 3);
+    to.mass.push_back(from.mass[i]);
+    to.type.push_back(from.type[i]);
+    if (from.has_velocity()) to.velocity.insert(to.velocity.end(), &from.velocity[3 * i], &from.velocity[3 * i] + 3);
+    if (from.has_id()) to.id.push_back(from.id[i]);
     if (!from.displacement.empty()) {
-      for (int a = 0; a < 3; ++a) to.displacement[3 * k + a] = from.displacement[3 * i + a];
+      to.displacement.insert(to.displacement.end(), &from.displacement[3 * i], &from.displacement[3 * i] + 3);
     }
   }
 }
