@@ -1,0 +1,201 @@
+// octocosm verify finds each kind of damage a test inflicts, and nothing in a
+// sound store.
+#include "tools/store_verify.h"
+
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <nlohmann/json.hpp>
+
+#include "index/block_codec.h"
+#include "index/dataset.h"
+#include "storage/error.h"
+#include "storage/store_reader.h"
+#include "storage/store_writer.h"
+#include "tools/ingest/ingest.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool AnyFaultMentions(const VerifyReport& report, const std::string& text) {
+  for (const std::string& fault : report.faults) {
+    if (fault.find(text) != std::string::npos) return true;
+  }
+  return false;
+}
+
+std::string AllFaults(const VerifyReport& report) {
+  std::string all;
+  for (const std::string& fault : report.faults) all += fault + "\n";
+  return all;
+}
+
+void FlipByte(const fs::path& file, std::uint64_t offset) {
+  std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+  f.seekg(static_cast<std::streamoff>(offset));
+  char c = 0;
+  f.read(&c, 1);
+  c = static_cast<char>(c ^ 0x5A);
+  f.seekp(static_cast<std::streamoff>(offset));
+  f.write(&c, 1);
+}
+
+class VerifyTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("octocosm-verify-test-" + std::to_string(::getpid()) + "-" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // An ingested store of clustered points with IDs.
+  std::string IngestedStore() {
+    std::mt19937_64 rng(3);
+    std::normal_distribution<double> gauss(0.5, 0.1);
+    {
+      std::ofstream out(dir_ / "in.raw", std::ios::binary);
+      for (std::uint64_t i = 1; i <= 20000; ++i) {
+        const double record[4] = {gauss(rng), gauss(rng), gauss(rng), 1.0};
+        out.write(reinterpret_cast<const char*>(record), sizeof record);
+        out.write(reinterpret_cast<const char*>(&i), sizeof i);
+      }
+    }
+    IngestOptions o;
+    o.inputs = {(dir_ / "in.raw").string()};
+    o.output = (dir_ / "store").string();
+    o.read.format = "raw";
+    o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+    o.tree.capacity = 500;
+    o.page_size = 4096;
+    o.quiet = true;
+    Ingest(o);
+    return o.output;
+  }
+
+  // A hand-built one-epoch store: `nodes` (key, points) with the dataset
+  // metadata ingest would write for them.
+  std::string CraftedStore(const std::vector<std::pair<NodeKey, NodePoints>>& nodes, std::size_t capacity,
+                           std::uint64_t leaf_points) {
+    const Cube cube{{0, 0, 0}, 1.0, false};
+    nlohmann::json dataset = {{"capacity", capacity},
+                              {"max_level", 21},
+                              {"id_index", ""},
+                              {"epochs", {{{"cube", {{"origin", cube.origin}, {"size", cube.size}, {"periodic", false}}},
+                                           {"points", leaf_points}}}}};
+    const std::string path = (dir_ / "crafted").string();
+    StoreWriter writer(path, dataset, nlohmann::json::object());
+    writer.BeginEpoch(0, 0);
+    for (const auto& [key, points] : nodes) writer.AddBlock(key.value(), EncodeBlock(points, key, cube), points.size());
+    writer.EndEpoch();
+    writer.Finish();
+    return path;
+  }
+
+  fs::path dir_;
+};
+
+// Points spread over a node's cube, ordered by octant, with the given total weight.
+NodePoints PointsIn(NodeKey key, std::size_t n, double total_weight) {
+  const Cube cube{{0, 0, 0}, 1.0, false};
+  const NodeCube node = cube.NodeCubeOf(key);
+  NodePoints p;
+  std::mt19937_64 rng(key.value());
+  std::uniform_real_distribution<double> u(0.01, 0.99);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) p.position.push_back(node.origin[a] + u(rng) * node.size);
+    p.weight.push_back(total_weight / static_cast<double>(n));
+    p.smoothing.push_back(node.size / 10);
+    p.type.push_back(1);
+    p.id.push_back(key.value() * 1000 + i);
+  }
+  OrderByOctant(p, key, cube);
+  return p;
+}
+
+TEST_F(VerifyTest, ASoundStoreHasNoFaults) {
+  const std::string store = IngestedStore();
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(report.faults.empty()) << AllFaults(report);
+  EXPECT_GT(report.blocks_checked, 20u);
+  EXPECT_TRUE(report.id_index_checked);
+}
+
+TEST_F(VerifyTest, AFlippedBlockByteIsAChecksumFaultNamingTheBlock) {
+  const std::string store = IngestedStore();
+  std::uint64_t offset = 0;
+  std::string path;
+  {
+    const Dataset dataset = Dataset::Open(store);
+    const auto entry = dataset.store().Lookup({0, NodeKey::Root().Child(0).value()}).value_or(
+        *dataset.store().Lookup({0, NodeKey::Root().value()}));
+    offset = entry.first_page * dataset.store().page_size() + entry.byte_length / 2;
+    path = (fs::path(store) / dataset.store().epochs()[0].file).string();
+  }
+  FlipByte(path, offset);
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "checksum mismatch")) << AllFaults(report);
+  EXPECT_TRUE(AnyFaultMentions(report, "epoch-00000.pages")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, AManifestThatMiscountsTheLeavesIsAFault) {
+  const std::string store = IngestedStore();
+  const fs::path manifest = fs::path(store) / "manifest.json";
+  nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
+  json["dataset"]["epochs"][0]["points"] = 20001;
+  std::ofstream(manifest) << json.dump();
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "leaves hold 20000 points, the manifest says 20001")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, ADamagedIdIndexIsAFault) {
+  const std::string store = IngestedStore();
+  const fs::path ids = fs::path(store) / "ids" / "epoch-00000.pages";
+  FlipByte(ids, 4096 + 100);  // inside the first bucket block
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_FALSE(report.faults.empty());
+  EXPECT_TRUE(AnyFaultMentions(report, "ids")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, WeightsThatDisagreeWithTheChildrenAreAFault) {
+  const NodeKey root = NodeKey::Root();
+  const std::string store = CraftedStore({{root, PointsIn(root, 8, 11.0)},  // children sum to 10
+                                          {root.Child(0), PointsIn(root.Child(0), 4, 5.0)},
+                                          {root.Child(7), PointsIn(root.Child(7), 4, 5.0)}},
+                                         100, 8);
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "weights sum to 11")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, AnOrphanNodeIsAFault) {
+  const NodeKey root = NodeKey::Root();
+  const NodeKey orphan = root.Child(3).Child(5);  // its parent r3 has no block
+  const std::string store = CraftedStore({{root, PointsIn(root, 4, 4.0)}, {orphan, PointsIn(orphan, 4, 4.0)}}, 100, 4);
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "its parent r3 is missing")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, ANodeOverCapacityIsAFault) {
+  const NodeKey root = NodeKey::Root();
+  const std::string store = CraftedStore({{root, PointsIn(root, 12, 12.0)}}, 10, 12);
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "exceed the node capacity 10")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, ATruncatedPageFileDoesNotOpen) {
+  const std::string store = IngestedStore();
+  const fs::path pages = fs::path(store) / "epoch-00000.pages";
+  fs::resize_file(pages, fs::file_size(pages) - 4096);
+  EXPECT_THROW(VerifyStore(store), Error);
+}
+
+}  // namespace
+}  // namespace octocosm
