@@ -37,6 +37,9 @@ namespace fs = std::filesystem;
 // about 120; this leaves room.
 constexpr std::uint64_t kBuildBytesPerPoint = 160;
 
+// The most memory chunk buffers take, whatever the budget.
+constexpr std::uint64_t kMaxChunkBufferBytes = std::uint64_t{256} << 20;
+
 struct IdLeafRecord {
   std::uint64_t key;  // particle ID
   std::uint64_t leaf;
@@ -385,7 +388,10 @@ IngestReport Ingest(const IngestOptions& options) {
     chunker_options.max_chunk_points = max_chunk;
     chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
     chunker_options.max_level = options.tree.max_level;
-    chunker_options.memory_bytes = static_cast<std::size_t>(budget * 3 / 10);
+    // Capped: measured on this project's machines, buffering gigabytes of
+    // points costs more in first-touch page faults than spilling them to
+    // temporary files that stay in the OS page cache (docs/BENCHMARKS.md).
+    chunker_options.memory_bytes = static_cast<std::size_t>(std::min<std::uint64_t>(budget * 3 / 10, kMaxChunkBufferBytes));
     chunker_options.temp_dir = temp.path();
     chunker_options.columns = {has_velocity, has_id, join_epochs && next_sorted != nullptr};
     std::vector<Chunk> chunks;
