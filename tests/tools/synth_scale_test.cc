@@ -23,7 +23,7 @@
 #include "tools/synth/cosmic_web.h"
 #include "tools/synth/nfw_profile.h"
 #include "tools/synth/scale_generator.h"
-#include "tools/synth/scale_random.h"
+#include "tools/synth/random.h"
 #include "tools/synth/scale_sampler.h"
 
 namespace octocosm::synth {
@@ -141,8 +141,8 @@ TEST(NfwProfileTest, TableInvertsTheEnclosedMass) {
   EXPECT_EQ(table.NearestIndex(table.Concentration(20) * 1.01), 20);
 }
 
-TEST(ScaleRandomTest, GaussianMatchesTheNormalDistribution) {
-  ScaleRandom random(42);
+TEST(RandomTest, GaussianMatchesTheNormalDistribution) {
+  Random random(42);
   constexpr int kSamples = 1'000'000;
   const std::vector<double> points = {-4.0, -3.7, -2.0, -1.0, -0.3, 0.0, 0.5, 1.5, 3.0, 3.7};
   std::vector<int> below(points.size(), 0);
@@ -167,8 +167,8 @@ TEST(ScaleRandomTest, GaussianMatchesTheNormalDistribution) {
   }
 }
 
-TEST(ScaleRandomTest, DirectionsAreUnitAndIsotropic) {
-  ScaleRandom random(7);
+TEST(RandomTest, DirectionsAreUnitAndIsotropic) {
+  Random random(7);
   constexpr int kSamples = 200000;
   double dir_sum[3] = {0, 0, 0}, z2 = 0;
   for (int i = 0; i < kSamples; ++i) {

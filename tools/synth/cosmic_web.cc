@@ -83,8 +83,8 @@ CosmicWeb BuildCosmicWeb(const ScaleOptions& options) {
       n - web.halo_particles, static_cast<std::uint64_t>(std::llround(static_cast<double>(n) * options.filament_fraction)));
   web.background_particles = n - web.halo_particles - web.filament_particles;
 
-  GaussianRandom random(options.seed ^ kWebStream);
-  auto uniform = [&random] { return random.Uniform() - 0x1.0p-53; };  // [0, 1)
+  Random random(options.seed ^ kWebStream);
+  auto uniform = [&random] { return random.Uniform(); };  // [0, 1)
 
   // Skeleton.
   const std::size_t halo_count =

@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "tools/synth/gadget_writer.h"
-#include "tools/synth/scale_random.h"
+#include "tools/synth/random.h"
 
 namespace octocosm::synth {
 namespace {
@@ -67,7 +67,7 @@ void ScaleSampler::Fill(int file, std::uint64_t chunk, ScaleChunk& out) const {
   out.ids.resize(count);
   if (count == 0) return;
 
-  ScaleRandom random(ChunkSeed(seed_, file, chunk));
+  Random random(ChunkSeed(seed_, file, chunk));
   const double box = web_.box_size;
   const std::uint64_t stride = static_cast<std::uint64_t>(files_);
   const std::uint64_t filaments_begin = web_.halo_particles;

@@ -19,7 +19,7 @@ void ZeldovichDisplacement(int n, double box, const LinearPowerSpectrum& power, 
   }
 
   FourierGrid density(n, threads);
-  GaussianRandom random(seed);
+  Random random(seed);
   for (std::size_t i = 0; i < un; ++i) {
     for (std::size_t j = 0; j < un; ++j) {
       for (std::size_t k = 0; k < un; ++k) density.Real(i, j, k) = random.Gaussian();
