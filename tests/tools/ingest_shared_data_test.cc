@@ -2,7 +2,6 @@
 // shared-data; skipped when the folder is absent).
 #include <gtest/gtest.h>
 
-#include <unistd.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -10,6 +9,7 @@
 #include <unordered_map>
 
 #include "index/dataset.h"
+#include "tests/tools/ingest_fixture.h"
 #include "tests/tools/store_check.h"
 #include "tools/ingest/ingest.h"
 #include "tools/snapshot/snapshot_source.h"
@@ -20,30 +20,12 @@ namespace {
 namespace fs = std::filesystem;
 using namespace testing_support;
 
-class SharedDataIngestTest : public ::testing::Test {
+class SharedDataIngestTest : public IngestFixture {
  protected:
   static constexpr const char* kData = OCTOCOSM_SHARED_DATA;
   void SetUp() override {
     if (!fs::is_directory(kData)) GTEST_SKIP() << "no shared data folder at " << kData;
-    dir_ = fs::temp_directory_path() / ("octocosm-shared-ingest-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_ / "tmp");
   }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
-  }
-  IngestOptions Options(std::vector<std::string> inputs, const std::string& out) const {
-    IngestOptions o;
-    o.inputs = std::move(inputs);
-    o.output = (dir_ / out).string();
-    o.temp_dir = (dir_ / "tmp").string();
-    o.quiet = true;
-    o.page_size = 4096;
-    return o;
-  }
-  bool TempIsEmpty() const { return fs::is_empty(dir_ / "tmp"); }
-  fs::path dir_;
 };
 
 TEST_F(SharedDataIngestTest, GadgetFilesIngestWithTheirCountsTypesAndIds) {

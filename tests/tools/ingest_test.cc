@@ -18,6 +18,7 @@
 #include "index/id_index.h"
 #include "storage/error.h"
 #include "tools/snapshot/snapshot_source.h"
+#include "tests/tools/ingest_fixture.h"
 #include "tests/tools/store_check.h"
 
 namespace octocosm {
@@ -26,29 +27,7 @@ namespace {
 namespace fs = std::filesystem;
 using namespace testing_support;
 
-class IngestTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("octocosm-ingest-test-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_ / "tmp");
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  IngestOptions Options(std::vector<std::string> inputs, const std::string& out) const {
-    IngestOptions o;
-    o.inputs = std::move(inputs);
-    o.output = (dir_ / out).string();
-    o.temp_dir = (dir_ / "tmp").string();
-    o.quiet = true;
-    o.page_size = 4096;
-    return o;
-  }
-  bool TempIsEmpty() const { return fs::is_empty(dir_ / "tmp"); }
-
-  fs::path dir_;
-};
+using IngestTest = IngestFixture;
 
 struct Particle {
   double x[3];

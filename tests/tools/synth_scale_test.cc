@@ -25,32 +25,20 @@
 #include "tools/synth/scale_generator.h"
 #include "tools/synth/random.h"
 #include "tools/synth/scale_sampler.h"
+#include "tests/support/temp_dir.h"
 
 namespace octocosm::synth {
 namespace {
 
 namespace fs = std::filesystem;
 
-class TempDir {
+// A scratch directory per use.
+class TempDir : public testing_support::TempDir {
  public:
-  TempDir() {
-    path_ = fs::temp_directory_path() /
-            ("octocosm_synth_scale_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter_++));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  const fs::path& path() const { return path_; }
-
- private:
-  static inline int counter_ = 0;
-  fs::path path_;
+  TempDir() : testing_support::TempDir("synth-scale-test") {}
 };
 
-std::vector<std::uint8_t> ReadAll(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in), {});
-}
+std::vector<std::uint8_t> ReadAll(const fs::path& path) { return testing_support::ReadFileBytes(path); }
 
 template <typename T>
 T Load(const std::vector<std::uint8_t>& bytes, std::size_t offset) {

@@ -4,7 +4,6 @@
 
 #include <gtest/gtest.h>
 
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -15,6 +14,7 @@
 #include "index/block_codec.h"
 #include "index/dataset.h"
 #include "storage/error.h"
+#include "tests/support/temp_dir.h"
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"
 #include "tools/ingest/ingest.h"
@@ -49,13 +49,6 @@ void FlipByte(const fs::path& file, std::uint64_t offset) {
 
 class VerifyTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("octocosm-verify-test-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
 
   // An ingested store of clustered points with IDs.
   std::string IngestedStore() {
@@ -100,7 +93,8 @@ class VerifyTest : public ::testing::Test {
     return path;
   }
 
-  fs::path dir_;
+  testing_support::TempDir scratch_{"verify-test"};
+  const fs::path dir_ = scratch_.path();
 };
 
 // Points spread over a node's cube, ordered by octant, with the given total weight.

@@ -1,0 +1,37 @@
+// A test fixture for ingest runs: a scratch directory with a `tmp` folder for
+// ingest's temporary files (so a test can check that none are left behind),
+// and ingest options pointing into it.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "tests/support/temp_dir.h"
+#include "tools/ingest/ingest.h"
+
+namespace octocosm::testing_support {
+
+class IngestFixture : public ::testing::Test {
+ protected:
+  IngestFixture() { std::filesystem::create_directories(dir_ / "tmp"); }
+
+  // Quiet, 4 KiB pages, output `out` and temporary files in the scratch directory.
+  IngestOptions Options(std::vector<std::string> inputs, const std::string& out) const {
+    IngestOptions o;
+    o.inputs = std::move(inputs);
+    o.output = (dir_ / out).string();
+    o.temp_dir = (dir_ / "tmp").string();
+    o.quiet = true;
+    o.page_size = 4096;
+    return o;
+  }
+  bool TempIsEmpty() const { return std::filesystem::is_empty(dir_ / "tmp"); }
+
+  TempDir scratch_{"ingest-test"};
+  const std::filesystem::path dir_ = scratch_.path();
+};
+
+}  // namespace octocosm::testing_support
