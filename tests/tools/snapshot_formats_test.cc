@@ -21,18 +21,6 @@ void WriteFile(const std::string& path, const std::string& bytes) {
   out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
-void ExpectBadInput(const std::string& path, const std::string& problem, const ReadOptions& options = {}) {
-  try {
-    auto source = OpenSnapshot(path, options);
-    ReadAll(*source);
-    ADD_FAILURE() << "no error for " << path << " (expected \"" << problem << "\")";
-  } catch (const Error& error) {
-    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
-    EXPECT_NE(std::string(error.what()).find(path), std::string::npos) << error.what();
-    EXPECT_NE(std::string(error.what()).find(problem), std::string::npos) << error.what();
-  }
-}
-
 // ---------------------------------------------------------------- HDF5 ----
 
 // Writes a GADGET-style HDF5 snapshot file with the C API.

@@ -151,20 +151,6 @@ void ExpectMatchesSpec(const ParticleChunk& all, const GadgetSpec& spec) {
   }
 }
 
-// Expects OpenSnapshot + reading everything to fail with BadInput whose
-// message names `path` and contains `problem`.
-void ExpectBadInput(const std::string& path, const std::string& problem, ReadOptions options = {}) {
-  try {
-    auto source = OpenSnapshot(path, options);
-    ReadAll(*source);
-    ADD_FAILURE() << "no error for " << path << " (expected \"" << problem << "\")";
-  } catch (const Error& error) {
-    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
-    EXPECT_NE(std::string(error.what()).find(path), std::string::npos) << error.what();
-    EXPECT_NE(std::string(error.what()).find(problem), std::string::npos) << error.what();
-  }
-}
-
 struct Variant {
   int format;
   bool big_endian;

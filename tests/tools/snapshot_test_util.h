@@ -1,5 +1,5 @@
 // Helpers shared by the snapshot reader tests: draining a source into one
-// big batch, and a scratch directory that cleans up after itself.
+// big batch, expecting a clean BadInput error, and a scratch directory that cleans up after itself.
 #pragma once
 
 #include <unistd.h>
@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "index/particle_chunk.h"
+#include "storage/error.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -41,6 +42,20 @@ inline ParticleChunk ReadAll(ParticleSource& source, std::size_t* chunks = nullp
   EXPECT_EQ(chunk.size(), 0u) << "Next() returning false must leave the chunk empty";
   if (chunks != nullptr) *chunks = count;
   return all;
+}
+
+// Expects OpenSnapshot + reading everything to fail with BadInput whose
+// message names `path` and contains `problem`.
+inline void ExpectBadInput(const std::string& path, const std::string& problem, const ReadOptions& options = {}) {
+  try {
+    auto source = OpenSnapshot(path, options);
+    ReadAll(*source);
+    ADD_FAILURE() << "no error for " << path << " (expected \"" << problem << "\")";
+  } catch (const Error& error) {
+    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
+    EXPECT_NE(std::string(error.what()).find(path), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find(problem), std::string::npos) << error.what();
+  }
 }
 
 inline bool SameParticles(const ParticleChunk& a, const ParticleChunk& b) {
