@@ -16,6 +16,13 @@ packages=(
   libhdf5-dev libzstd-dev libxxhash-dev libfftw3-dev
   libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  # renderer: OpenGL 4.5 core through OSMesa (headless) or GLFW (windows), a GL
+  # loader generated at build time by glad, Dear ImGui, PNG output, Xvfb for the
+  # viewer's tests, EGL for headless rendering on a real GPU
+  libosmesa6-dev libglfw3-dev libglm-dev python3-glad libimgui-dev libpng-dev libegl-dev
+  xvfb xauth
+  # accuracy cross-checks against the Point Cloud Library
+  libpcl-dev
 )
 
 install_packages() {
