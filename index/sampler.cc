@@ -33,18 +33,8 @@ Density EstimateDensity(std::span<const double> position, std::span<const double
                         std::span<const std::uint64_t> tie_break, NodeKey key, const Cube& cube, int bits) {
   const std::size_t m = weight.size();
   const int level = key.level();
-  const CellCoord cell = key.cell();
   std::vector<std::uint32_t> fine(m);
-  for (std::size_t i = 0; i < m; ++i) {
-    const auto g = cube.GridCoords(&position[3 * i], level + bits);
-    // Coordinates relative to the node; the mask keeps the index in range
-    // even for a point that lies outside the node (a caller's error).
-    const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
-    const std::uint64_t x = (g[0] - (std::uint64_t{cell.x} << bits)) & mask;
-    const std::uint64_t y = (g[1] - (std::uint64_t{cell.y} << bits)) & mask;
-    const std::uint64_t z = (g[2] - (std::uint64_t{cell.z} << bits)) & mask;
-    fine[i] = static_cast<std::uint32_t>(x | (y << bits) | (z << (2 * bits)));
-  }
+  for (std::size_t i = 0; i < m; ++i) fine[i] = DensityCellIndex(&position[3 * i], key, cube, bits);
   // Summing in an order fixed by the points' values (not their positions in
   // the input) makes the sums, and so the sample, independent of input order.
   // A counting sort groups the points by fine cell in O(m); only the few
@@ -79,11 +69,6 @@ Density EstimateDensity(std::span<const double> position, std::span<const double
   return d;
 }
 
-double SmoothingLength(double w, double cell_weight, double cell_edge, double node_size) {
-  // (W / rho)^(1/3) = cell_edge * (W / cell_weight)^(1/3).
-  const double h = kSmoothingEta * cell_edge * std::cbrt(w / cell_weight);
-  return std::clamp(h, node_size / 65536.0, node_size);
-}
 
 void CheckInputs(std::span<const double> position, std::span<const double> weight, std::size_t ids,
                  const SamplerOptions& options) {
@@ -110,10 +95,32 @@ void CheckInputs(std::span<const double> position, std::span<const double> weigh
 
 }  // namespace
 
+double SmoothingLengthFor(double weight, double cell_weight, double cell_edge, double node_size) {
+  // (W / rho)^(1/3) = cell_edge * (W / cell_weight)^(1/3).
+  const double h = kSmoothingEta * cell_edge * std::cbrt(weight / cell_weight);
+  return std::clamp(h, node_size / 65536.0, node_size);
+}
+
+std::uint32_t DensityCellIndex(const double* position, NodeKey key, const Cube& cube, int bits) {
+  const auto g = cube.GridCoords(position, key.level() + bits);
+  const CellCoord cell = key.cell();
+  // Coordinates relative to the node; the mask keeps the index in range even
+  // for a point that lies outside the node (a caller's error).
+  const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
+  const std::uint64_t x = (g[0] - (std::uint64_t{cell.x} << bits)) & mask;
+  const std::uint64_t y = (g[1] - (std::uint64_t{cell.y} << bits)) & mask;
+  const std::uint64_t z = (g[2] - (std::uint64_t{cell.z} << bits)) & mask;
+  return static_cast<std::uint32_t>(x | (y << bits) | (z << (2 * bits)));
+}
+
 std::uint64_t SamplingId(const double* position) {
   std::uint64_t h = 0x6a09e667f3bcc908ull;
   for (int a = 0; a < 3; ++a) h = Mix(h ^ std::bit_cast<std::uint64_t>(position[a]));
   return h;
+}
+
+std::uint64_t LevelSeed(std::uint64_t seed, int level) {
+  return Mix(seed ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(level + 1)));
 }
 
 double PriorityUniform(std::uint64_t sampling_id, std::uint64_t seed) {
@@ -129,7 +136,7 @@ std::vector<double> LeafSmoothingLengths(std::span<const double> position, std::
   const Density d = EstimateDensity(position, weight, no_ids, key, cube, options.density_grid_bits);
   const double node_size = cube.NodeSize(key.level());
   std::vector<double> h(weight.size());
-  for (std::size_t i = 0; i < h.size(); ++i) h[i] = SmoothingLength(weight[i], d.cell_weight[i], d.cell_edge, node_size);
+  for (std::size_t i = 0; i < h.size(); ++i) h[i] = SmoothingLengthFor(weight[i], d.cell_weight[i], d.cell_edge, node_size);
   return h;
 }
 
@@ -150,7 +157,7 @@ Sample SampleNode(std::span<const double> position, std::span<const double> weig
     sample.estimate = sample.weight;
     sample.smoothing.resize(m);
     for (std::size_t i = 0; i < m; ++i) {
-      sample.smoothing[i] = SmoothingLength(weight[i], d.cell_weight[i], d.cell_edge, node_size);
+      sample.smoothing[i] = SmoothingLengthFor(weight[i], d.cell_weight[i], d.cell_edge, node_size);
     }
     return sample;
   }
@@ -159,7 +166,7 @@ Sample SampleNode(std::span<const double> position, std::span<const double> weig
   std::vector<double> importance(m), priority(m);
   for (std::size_t i = 0; i < m; ++i) {
     importance[i] = weight[i] * std::pow(d.cell_weight[i] / d.total, -options.alpha);
-    priority[i] = importance[i] / PriorityUniform(sampling_id[i], options.seed);
+    priority[i] = importance[i] / PriorityUniform(sampling_id[i], LevelSeed(options.seed, key.level()));
   }
   // Highest priority first; equal priorities (duplicate IDs) fall back to
   // the ID and then the input index, so the order is total.
@@ -190,7 +197,7 @@ Sample SampleNode(std::span<const double> position, std::span<const double> weig
   for (std::size_t j = 0; j < capacity; ++j) {
     const std::uint32_t i = sample.kept[j];
     sample.weight[j] *= scale;
-    sample.smoothing[j] = SmoothingLength(sample.weight[j], d.cell_weight[i], d.cell_edge, node_size);
+    sample.smoothing[j] = SmoothingLengthFor(sample.weight[j], d.cell_weight[i], d.cell_edge, node_size);
   }
   return sample;
 }
