@@ -1,0 +1,78 @@
+#include "index/lod_frontier.h"
+
+#include <cmath>
+#include <queue>
+#include <utility>
+
+#include "storage/error.h"
+
+namespace octocosm {
+
+LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, const ScreenErrorView& view,
+                              const LodOptions& options) {
+  if (!(options.pixel_threshold > 0) || !std::isfinite(options.pixel_threshold)) {
+    throw Error::InvalidArgument("the level-of-detail threshold must be > 0 pixels");
+  }
+  if (!(options.cull_margin >= 0) || !std::isfinite(options.cull_margin)) {
+    throw Error::InvalidArgument("the culling margin must be >= 0");
+  }
+  const Frustum frustum = Frustum::FromCamera(view.camera);
+  LodFrontier f;
+  if (hierarchy.empty()) return f;
+
+  const auto visible = [&](std::int32_t index) {
+    const NodeCube c = cube.NodeCubeOf(hierarchy.node(index).key);
+    const double m = options.cull_margin;
+    return frustum.MayIntersectBox({c.origin[0] - m, c.origin[1] - m, c.origin[2] - m},
+                                   {c.origin[0] + c.size + m, c.origin[1] + c.size + m, c.origin[2] + c.size + m});
+  };
+  const auto error = [&](std::int32_t index) {
+    const NodeHierarchy::Node& n = hierarchy.node(index);
+    return ScreenSpaceError(cube.NodeCubeOf(n.key), n.entry.point_count, view);
+  };
+
+  using Candidate = std::pair<double, std::int32_t>;  // (error, node): largest error first
+  std::priority_queue<Candidate> queue;
+  ++f.nodes_visited;
+  if (!visible(0)) {
+    ++f.nodes_culled;
+    return f;
+  }
+  queue.emplace(error(0), 0);
+  f.points = hierarchy.node(0).entry.point_count;
+  std::vector<std::int32_t> children;
+  while (!queue.empty()) {
+    const auto [node_error, index] = queue.top();
+    queue.pop();
+    const NodeHierarchy::Node& node = hierarchy.node(index);
+    f.load_order.push_back(index);
+    if (f.budget_reached || !(node_error > options.pixel_threshold) || node.is_leaf()) {
+      f.selected.push_back(index);
+      continue;
+    }
+    children.clear();
+    std::uint64_t child_points = 0;
+    for (std::int32_t c : node.children) {
+      if (c < 0) continue;
+      ++f.nodes_visited;
+      if (!visible(c)) {
+        ++f.nodes_culled;
+        continue;
+      }
+      children.push_back(c);
+      child_points += hierarchy.node(c).entry.point_count;
+    }
+    const std::uint64_t refined_points = f.points - node.entry.point_count + child_points;
+    if (options.point_budget > 0 && refined_points > options.point_budget) {
+      f.budget_reached = true;
+      f.selected.push_back(index);
+      continue;
+    }
+    f.points = refined_points;
+    f.refined.push_back(index);
+    for (std::int32_t c : children) queue.emplace(error(c), c);
+  }
+  return f;
+}
+
+}  // namespace octocosm

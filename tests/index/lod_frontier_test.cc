@@ -1,0 +1,147 @@
+// The level-of-detail frontier of a frame (index/lod_frontier.h) on trees
+// built in memory: a frontier, within its budget, coarse before fine.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <set>
+
+#include "index/lod_frontier.h"
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+// A random tree over the unit cube: inner nodes hold `capacity` points,
+// leaves fewer; each node below `depth` has each child with probability p.
+NodeHierarchy RandomTree(std::uint64_t seed, int depth, double p, std::uint64_t capacity = 1000) {
+  std::mt19937_64 rng(seed);
+  std::bernoulli_distribution keep(p);
+  std::uniform_int_distribution<std::uint64_t> leaf_points(1, capacity);
+  std::vector<IndexEntry> entries;
+  std::vector<NodeKey> frontier = {NodeKey::Root()};
+  while (!frontier.empty()) {
+    const NodeKey key = frontier.back();
+    frontier.pop_back();
+    bool has_child = false;
+    if (key.level() < depth) {
+      for (int o = 0; o < 8; ++o) {
+        if (keep(rng)) {
+          frontier.push_back(key.Child(o));
+          has_child = true;
+        }
+      }
+    }
+    entries.push_back({key.value(), 1, 100, has_child ? capacity : leaf_points(rng), 0, 1});
+  }
+  return NodeHierarchy::FromEntries(entries, "test");
+}
+
+ScreenErrorView ViewFrom(const std::array<double, 3>& position, double threshold) {
+  Camera camera;
+  camera.position = position;
+  camera.look_at = {0.5, 0.5, 0.5};
+  camera.near = 1e-4;
+  camera.far = 100;
+  return {camera, 720, threshold};
+}
+
+bool IsAncestor(const NodeHierarchy& h, std::int32_t a, std::int32_t b) {
+  for (std::int32_t n = h.node(b).parent; n >= 0; n = h.node(n).parent) {
+    if (n == a) return true;
+  }
+  return false;
+}
+
+TEST(LodFrontierTest, SelectionIsAFrontierCoveringEveryLeafInViewOnce) {
+  const NodeHierarchy h = RandomTree(1, 5, 0.6);
+  const Cube cube{{0, 0, 0}, 1, false};
+  const ScreenErrorView view = ViewFrom({0.5, 0.5, 2.5}, 1e-9);  // refine everything
+  const LodFrontier f = SelectLodFrontier(h, cube, view, {view.threshold_pixels, 0, 0});
+  std::set<std::int32_t> selected(f.selected.begin(), f.selected.end());
+  ASSERT_EQ(selected.size(), f.selected.size());
+  std::uint64_t points = 0;
+  for (std::int32_t s : f.selected) {
+    points += h.node(s).entry.point_count;
+    EXPECT_TRUE(h.node(s).is_leaf());  // a tiny threshold reaches the leaves
+    for (std::int32_t t : f.selected) EXPECT_FALSE(IsAncestor(h, s, t));
+  }
+  EXPECT_EQ(points, f.points);
+  // The whole cube is in view: every leaf is selected.
+  EXPECT_EQ(f.points, h.total_points_in_leaves());
+}
+
+TEST(LodFrontierTest, SmallerThresholdsRefineMore) {
+  const NodeHierarchy h = RandomTree(2, 6, 0.5);
+  const Cube cube{{0, 0, 0}, 1, false};
+  std::uint64_t last_points = 0;
+  std::set<std::int32_t> last_refined;
+  for (double threshold : {64.0, 16.0, 4.0, 1.0, 0.25}) {
+    const ScreenErrorView view = ViewFrom({0.2, 0.4, 1.7}, threshold);
+    const LodFrontier f = SelectLodFrontier(h, cube, view, {threshold, 0, 0});
+    std::set<std::int32_t> refined(f.refined.begin(), f.refined.end());
+    EXPECT_TRUE(std::includes(refined.begin(), refined.end(), last_refined.begin(), last_refined.end()));
+    EXPECT_GE(f.points, last_points);
+    last_points = f.points;
+    last_refined = refined;
+  }
+  EXPECT_GT(last_refined.size(), 10u);
+}
+
+TEST(LodFrontierTest, PointBudgetIsNeverExceededAndSpentCoarseFirst) {
+  const NodeHierarchy h = RandomTree(3, 6, 0.6);
+  const Cube cube{{0, 0, 0}, 1, false};
+  const ScreenErrorView view = ViewFrom({0.5, 0.5, 1.8}, 0.01);
+  for (std::uint64_t budget : {1000u, 5000u, 20000u, 100000u}) {
+    const LodFrontier f = SelectLodFrontier(h, cube, view, {0.01, budget, 0});
+    EXPECT_LE(f.points, budget);
+    EXPECT_TRUE(f.budget_reached);
+    // Coarse before fine: a node is taken after its parent.
+    std::set<std::int32_t> seen;
+    for (std::int32_t n : f.load_order) {
+      if (n != 0) {
+        EXPECT_TRUE(seen.count(h.node(n).parent)) << "node " << h.node(n).key.Path();
+      }
+      seen.insert(n);
+    }
+  }
+  // Without a budget the same view takes more.
+  EXPECT_GT(SelectLodFrontier(h, cube, view, {0.01, 0, 0}).points, 100000u);
+}
+
+TEST(LodFrontierTest, NodesOutOfViewAreCulled) {
+  const NodeHierarchy h = RandomTree(4, 4, 0.7);
+  const Cube cube{{0, 0, 0}, 1, false};
+  ScreenErrorView away = ViewFrom({0.5, 0.5, 3}, 1);
+  away.camera.look_at = {0.5, 0.5, 6};  // looking away from the cube
+  const LodFrontier none = SelectLodFrontier(h, cube, away, {1, 0, 0});
+  EXPECT_TRUE(none.selected.empty());
+  EXPECT_EQ(none.points, 0u);
+  // Inside the cube, looking at one corner: some children culled.
+  ScreenErrorView inside = ViewFrom({0.5, 0.5, 0.5}, 0.5);
+  inside.camera.look_at = {0.9, 0.9, 0.9};
+  const LodFrontier part = SelectLodFrontier(h, cube, inside, {0.5, 0, 0});
+  EXPECT_GT(part.nodes_culled, 0u);
+  EXPECT_LT(part.points, h.total_points_in_leaves());
+}
+
+TEST(LodFrontierTest, BadOptionsAreRejected) {
+  const NodeHierarchy h = RandomTree(5, 2, 0.5);
+  const Cube cube{{0, 0, 0}, 1, false};
+  EXPECT_THROW(SelectLodFrontier(h, cube, ViewFrom({0, 0, 3}, 1), {0, 0, 0}), Error);
+  EXPECT_THROW(SelectLodFrontier(h, cube, ViewFrom({0, 0, 3}, 1), {1, 0, -1}), Error);
+}
+
+TEST(NodeHierarchyTest, AnOrphanNodeIsCorruption) {
+  std::vector<IndexEntry> entries = {{NodeKey::Root().value(), 1, 1, 5, 0, 1},
+                                     {NodeKey::Root().Child(3).Child(1).value(), 1, 1, 5, 0, 1}};
+  EXPECT_THROW(NodeHierarchy::FromEntries(entries, "test"), Error);
+  entries[1].key = NodeKey::Root().Child(3).value();
+  const NodeHierarchy h = NodeHierarchy::FromEntries(entries, "test");
+  EXPECT_EQ(h.node(0).children[3], 1);
+  EXPECT_EQ(h.Find(NodeKey::Root().Child(3)), 1);
+  EXPECT_FALSE(h.Find(NodeKey::Root().Child(2)).has_value());
+  EXPECT_EQ(h.total_points_in_leaves(), 5u);
+}
+
+}  // namespace
+}  // namespace octocosm
