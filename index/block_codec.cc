@@ -450,13 +450,7 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
   if (column == nullptr) {
     throw Error::InvalidArgument(where + ": block has no column '" + ColumnName(id) + "' to decode");
   }
-  if (bytes.size() != column->length) {
-    throw Error::Corruption(where, ColumnWhat(id, "have " + std::to_string(bytes.size()) +
-                                                      " bytes, the directory says " + std::to_string(column->length)));
-  }
-  if (Checksum(bytes.data(), bytes.size()) != column->checksum) {
-    throw Error::Corruption(where, ColumnWhat(id, "checksum mismatch"));
-  }
+  VerifyColumnBytes(*column, bytes, where);
   out.octant_offsets = header.octant_offsets;
   const std::uint32_t n = header.point_count;
   const std::uint8_t* in = bytes.data();
@@ -542,6 +536,62 @@ DecodedBlock DecodeBlock(std::span<const std::uint8_t> block, ColumnSet wanted, 
     DecodeColumn(decoded.header, column.id, block.subspan(column.offset, column.length), cube, where, decoded.points);
   }
   return decoded;
+}
+
+void VerifyColumnBytes(const BlockColumn& column, std::span<const std::uint8_t> bytes, const std::string& where) {
+  if (bytes.size() != column.length) {
+    throw Error::Corruption(where, ColumnWhat(column.id, "have " + std::to_string(bytes.size()) +
+                                                             " bytes, the directory says " + std::to_string(column.length)));
+  }
+  if (Checksum(bytes.data(), bytes.size()) != column.checksum) {
+    throw Error::Corruption(where, ColumnWhat(column.id, "checksum mismatch"));
+  }
+}
+
+Bytes AssembleColumnSubset(const BlockHeader& header, ColumnSet keep,
+                           std::span<const std::span<const std::uint8_t>> column_bytes) {
+  if (column_bytes.size() != header.columns.size()) {
+    throw Error::InvalidArgument("AssembleColumnSubset: " + std::to_string(column_bytes.size()) + " spans for " +
+                                 std::to_string(header.columns.size()) + " columns");
+  }
+  std::vector<std::size_t> kept;
+  for (std::size_t c = 0; c < header.columns.size(); ++c) {
+    if (keep & ColumnBit(header.columns[c].id)) kept.push_back(c);
+  }
+  const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * kept.size() + 8;
+  std::size_t block_size = header_size;
+  for (std::size_t c : kept) {
+    if (column_bytes[c].size() != header.columns[c].length) {
+      throw Error::InvalidArgument(std::string("AssembleColumnSubset: column '") + ColumnName(header.columns[c].id) +
+                                   "' has the wrong length");
+    }
+    block_size += column_bytes[c].size();
+  }
+  Bytes block(block_size, 0);
+  std::uint8_t* b = block.data();
+  PutU32(b + 0, kBlockMagic);
+  PutU16(b + 4, kBlockVersion);
+  PutU16(b + 6, static_cast<std::uint16_t>(header_size));
+  PutU64(b + 8, block_size);
+  PutU64(b + 16, header.key.value());
+  PutU32(b + 24, header.point_count);
+  PutU16(b + 28, static_cast<std::uint16_t>(kept.size()));
+  for (int o = 0; o < 9; ++o) PutU32(b + 32 + 4 * o, header.octant_offsets[o]);
+  std::size_t offset = header_size;
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    const BlockColumn& column = header.columns[kept[k]];
+    std::uint8_t* entry = b + kBlockFixedHeaderSize + kBlockDirectoryEntrySize * k;
+    entry[0] = static_cast<std::uint8_t>(column.id);
+    entry[1] = kEncodingV1;
+    PutU64(entry + 8, offset);
+    PutU64(entry + 16, column.length);
+    PutU64(entry + 24, column.checksum);
+    std::memcpy(entry + 32, column.params.data(), column.params.size());
+    if (column.length > 0) std::memcpy(b + offset, column_bytes[kept[k]].data(), column.length);
+    offset += column.length;
+  }
+  PutU64(b + header_size - 8, Checksum(b, header_size - 8));
+  return block;
 }
 
 }  // namespace octocosm

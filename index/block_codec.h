@@ -166,4 +166,18 @@ struct DecodedBlock {
 DecodedBlock DecodeBlock(std::span<const std::uint8_t> block, ColumnSet wanted, NodeKey key, const Cube& cube,
                        const std::string& where);
 
+// Checks that `bytes` are the column `column` describes: its length and its
+// checksum. Throws Error::Corruption naming `where` and the column.
+void VerifyColumnBytes(const BlockColumn& column, std::span<const std::uint8_t> bytes, const std::string& where);
+
+// A block holding only the columns in `keep` of the block `header` describes:
+// the same key, point count and octant offsets, and each kept column's bytes,
+// parameters and checksum unchanged, so that it decodes and verifies like any
+// block. What a reader caches when it needs only some columns (the renderer).
+// column_bytes[i] holds the bytes of header.columns[i] when that column is
+// kept (verified by the caller, e.g. VerifyColumnBytes); others are ignored.
+// Throws Error::InvalidArgument when a kept column's bytes have the wrong length.
+Bytes AssembleColumnSubset(const BlockHeader& header, ColumnSet keep,
+                           std::span<const std::span<const std::uint8_t>> column_bytes);
+
 }  // namespace octocosm

@@ -1,25 +1,24 @@
 #include "index/column_reader.h"
 
 #include <algorithm>
+#include <functional>
 #include <string>
 
 #include "storage/error.h"
 
 namespace octocosm {
-DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
-                              ReadCounters& counters) {
+namespace {
+
+// Fetches the header and every wanted column of a block with as few reads as
+// the layout allows, and hands each wanted column's bytes (unverified) to
+// `visit` in directory order. Returns the verified header.
+BlockHeader FetchColumns(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                         ReadCounters& counters,
+                         const std::function<void(const BlockHeader&, std::size_t, std::span<const std::uint8_t>)>& visit) {
   const PageFileReader& file = dataset.store().page_file(epoch);
   const NodeKey key = NodeKey::FromValue(entry.key);
-  const Cube& cube = dataset.cube(epoch);
   const std::string where = dataset.Where(epoch, key);
   ++counters.blocks;
-  if ((wanted & kAllColumns) == kAllColumns) {
-    // Every column: one read, verified by the page file as well.
-    const Bytes block = file.ReadBlock(entry);
-    ++counters.reads;
-    counters.bytes += block.size();
-    return DecodeBlock(block, wanted, key, cube, where);
-  }
 
   // The directory has at most kBlockMaxColumns entries, so this prefix holds
   // the whole header of any block.
@@ -27,9 +26,7 @@ DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const
   file.ReadBlockRange(entry, 0, prefix);
   ++counters.reads;
   counters.bytes += prefix.size();
-  DecodedBlock decoded;
-  decoded.header = DecodeBlockHeader(prefix, key, where);
-  const BlockHeader& header = decoded.header;
+  const BlockHeader header = DecodeBlockHeader(prefix, key, where);
   if (header.block_size != entry.byte_length) {
     throw Error::Corruption(where, "block header says " + std::to_string(header.block_size) +
                                        " bytes, the index says " + std::to_string(entry.byte_length));
@@ -39,7 +36,6 @@ DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const
       throw Error::Corruption(where, std::string("block lacks the required column '") + ColumnName(required) + "'");
     }
   }
-  decoded.points.octant_offsets = header.octant_offsets;
 
   // Runs of wanted columns that are adjacent in the block, each fetched with
   // one read unless the prefix already holds it.
@@ -69,13 +65,75 @@ DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const
       counters.bytes += buffer.size();
       run = buffer;
     }
-    for (std::size_t c = i; c < end; ++c) {
-      DecodeColumn(header, columns[c].id, run.subspan(columns[c].offset - first, columns[c].length), cube, where,
-                   decoded.points);
-    }
+    for (std::size_t c = i; c < end; ++c) visit(header, c, run.subspan(columns[c].offset - first, columns[c].length));
     i = end;
   }
+  return header;
+}
+
+}  // namespace
+
+DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                              ReadCounters& counters) {
+  const NodeKey key = NodeKey::FromValue(entry.key);
+  const Cube& cube = dataset.cube(epoch);
+  const std::string where = dataset.Where(epoch, key);
+  if ((wanted & kAllColumns) == kAllColumns) {
+    // Every column: one read, verified by the page file as well.
+    ++counters.blocks;
+    const Bytes block = dataset.store().page_file(epoch).ReadBlock(entry);
+    ++counters.reads;
+    counters.bytes += block.size();
+    return DecodeBlock(block, wanted, key, cube, where);
+  }
+  DecodedBlock decoded;
+  decoded.header = FetchColumns(
+      dataset, epoch, entry, wanted, counters,
+      [&](const BlockHeader& header, std::size_t c, std::span<const std::uint8_t> bytes) {
+        DecodeColumn(header, header.columns[c].id, bytes, cube, where, decoded.points);
+      });
+  decoded.points.octant_offsets = decoded.header.octant_offsets;
   return decoded;
+}
+
+Bytes ReadBlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                      ReadCounters& counters) {
+  const std::string where = dataset.Where(epoch, NodeKey::FromValue(entry.key));
+  // The runs' buffers are reused between reads, so each column is copied out.
+  std::vector<Bytes> kept;
+  std::vector<std::span<const std::uint8_t>> spans;
+  const BlockHeader header = FetchColumns(
+      dataset, epoch, entry, wanted, counters,
+      [&](const BlockHeader& h, std::size_t c, std::span<const std::uint8_t> bytes) {
+        VerifyColumnBytes(h.columns[c], bytes, where);
+        if (spans.empty()) {
+          kept.resize(h.columns.size());
+          spans.resize(h.columns.size());
+        }
+        kept[c].assign(bytes.begin(), bytes.end());
+        spans[c] = kept[c];
+      });
+  spans.resize(header.columns.size());
+  return AssembleColumnSubset(header, wanted, spans);
+}
+
+Bytes ColumnSubsetSource::ReadBlock(const BlockId& id) const {
+  const std::optional<IndexEntry> entry = dataset_.store().Lookup(id);
+  if (!entry) {
+    throw Error::NotFound("block " + NodeKey::FromValue(id.key).Path() + " of epoch " + std::to_string(id.epoch));
+  }
+  ReadCounters counters;
+  Bytes block = ReadBlockSubset(dataset_, id.epoch, *entry, wanted_, counters);
+  std::lock_guard lock(mutex_);
+  counters_.blocks += counters.blocks;
+  counters_.reads += counters.reads;
+  counters_.bytes += counters.bytes;
+  return block;
+}
+
+ReadCounters ColumnSubsetSource::counters() const {
+  std::lock_guard lock(mutex_);
+  return counters_;
 }
 
 }  // namespace octocosm

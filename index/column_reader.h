@@ -6,9 +6,11 @@
 #pragma once
 
 #include <cstdint>
+#include <mutex>
 
 #include "index/block_codec.h"
 #include "index/dataset.h"
+#include "storage/block_source.h"
 
 namespace octocosm {
 
@@ -24,5 +26,27 @@ struct ReadCounters {
 // required column's presence is wrong, Error::Io when the OS fails.
 DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
                               ReadCounters& counters);
+
+// The same reads, but returns the wanted columns undecoded, as a block of
+// their own (AssembleColumnSubset): each column checksum-verified, nothing
+// decoded, for a consumer that decodes elsewhere (the GPU).
+Bytes ReadBlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                      ReadCounters& counters);
+
+// A BlockSource of column subsets (ReadBlockSubset), so that a BlockCache and
+// a Prefetcher can hold and fetch them. Thread-safe; counts what it read.
+class ColumnSubsetSource : public BlockSource {
+ public:
+  ColumnSubsetSource(const Dataset& dataset, ColumnSet wanted) : dataset_(dataset), wanted_(wanted) {}
+  Bytes ReadBlock(const BlockId& id) const override;
+  ColumnSet wanted() const { return wanted_; }
+  ReadCounters counters() const;
+
+ private:
+  const Dataset& dataset_;
+  ColumnSet wanted_;
+  mutable std::mutex mutex_;
+  mutable ReadCounters counters_;  // guarded by mutex_
+};
 
 }  // namespace octocosm

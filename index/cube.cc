@@ -95,4 +95,15 @@ int Cube::ChildOctant(const double* point, int level) const {
 
 bool Cube::Holds(NodeKey key, const double* point) const { return LeafKey(point, key.level()) == key; }
 
+void Cube::Wrap(double* point) const {
+  if (!periodic) return;
+  for (int a = 0; a < 3; ++a) {
+    double t = (point[a] - origin[a]) / size;
+    t -= std::floor(t);
+    double x = origin[a] + t * size;
+    if (x >= origin[a] + size) x = origin[a];  // t rounded up to 1
+    point[a] = x;
+  }
+}
+
 }  // namespace octocosm

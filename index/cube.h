@@ -78,6 +78,9 @@ struct Cube {
   // cell at level + 1 (x0 | y0 << 1 | z0 << 2). Valid also at kMaxLevel (the
   // octant inside a deepest node, used to order its points).
   int ChildOctant(const double* point, int level) const;
+  // In a periodic cube, moves the point into [origin, origin + size) on every
+  // axis (its image there): where ingest stores it. No effect otherwise.
+  void Wrap(double* point) const;
   // Whether the point belongs to `key` (its cell at key.level() is key.cell()).
   bool Holds(NodeKey key, const double* point) const;
 };

@@ -4,14 +4,28 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "index/block_codec.h"
 #include "index/cube.h"
 #include "index/morton.h"
+#include "index/sampler.h"
 #include "storage/store_reader.h"
 
 namespace octocosm {
+
+// What ingest recorded about the step from one epoch to the next
+// (docs/FORMAT.md 5.2, "to_next"): the least-squares scale s that turns the
+// mean of a particle's velocities at both ends into its displacement
+// (d ~ s (v_e + v_e+1) / 2), the fit's relative residual, and the largest
+// displacement of any particle.
+struct EpochLink {
+  double velocity_scale = 0;
+  double fit_residual = 1;
+  double max_displacement = 0;
+};
 
 class Dataset {
  public:
@@ -23,7 +37,18 @@ class Dataset {
   std::uint32_t epoch_count() const { return store_.epoch_count(); }
   const Cube& cube(std::uint32_t epoch) const { return cubes_.at(epoch); }
   std::uint64_t points(std::uint32_t epoch) const { return points_.at(epoch); }
+  // The total mass of the epoch (the root's weights).
+  double mass(std::uint32_t epoch) const { return masses_.at(epoch); }
+  // Optional columns the blocks carry.
+  bool has_velocity() const { return has_velocity_; }
+  bool has_displacement() const { return has_displacement_; }
+  // The columns the blocks may carry (from the attribute schema).
+  ColumnSet columns() const { return columns_; }
+  // The link from `epoch` to the next, when ingest recorded one.
+  const std::optional<EpochLink>& link_to_next(std::uint32_t epoch) const { return links_.at(epoch); }
   std::size_t capacity() const { return capacity_; }
+  // The subselection's settings the store was built with.
+  const SamplerOptions& sampler() const { return sampler_; }
   int max_level() const { return max_level_; }
   bool has_id_index() const { return !id_index_.empty(); }
   // The directory of the ID index store (empty when the dataset has no IDs).
@@ -37,7 +62,13 @@ class Dataset {
   StoreReader store_;
   std::vector<Cube> cubes_;
   std::vector<std::uint64_t> points_;
+  std::vector<double> masses_;
+  bool has_velocity_ = false;
+  bool has_displacement_ = false;
+  ColumnSet columns_ = 0;
+  std::vector<std::optional<EpochLink>> links_;
   std::size_t capacity_ = 0;
+  SamplerOptions sampler_;
   int max_level_ = kMaxLevel;
   std::string id_index_;
 };

@@ -1,8 +1,11 @@
 #include "index/particle_lookup.h"
 
 #include <map>
+#include <memory>
 #include <unordered_map>
 
+#include "index/query.h"
+#include "index/region.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -76,6 +79,23 @@ std::vector<std::optional<ParticleState>> ParticleLocator::Trajectory(std::uint6
     path.push_back(FindInEpoch(e, std::span<const std::uint64_t>(&id, 1), with_velocity)[0]);
   }
   return path;
+}
+
+std::vector<std::uint64_t> ParticleIdsInBox(const Dataset& dataset, std::uint32_t epoch, const std::array<double, 3>& lo,
+                                            const std::array<double, 3>& hi) {
+  if (!(dataset.columns() & ColumnBit(ColumnId::kId))) {
+    throw Error::InvalidArgument("the store holds no particle IDs (its input had none), so nothing can be selected by ID");
+  }
+  const std::unique_ptr<Region> box = MakeBoxRegion(lo, hi, dataset.cube(epoch));
+  QueryOptions options;
+  options.epoch = epoch;
+  options.level = kMaxLevel;  // every leaf: each particle once
+  options.columns = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kId);
+  std::vector<std::uint64_t> ids;
+  RunQuery(dataset, *box, options, [&](const QueryBatch& batch) {
+    ids.insert(ids.end(), batch.points.id.begin(), batch.points.id.end());
+  });
+  return ids;
 }
 
 }  // namespace octocosm

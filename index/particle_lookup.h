@@ -48,4 +48,11 @@ class ParticleLocator {
   ReadCounters reads_;
 };
 
+// The IDs of every particle of `epoch` inside the closed box [lo, hi]
+// (periodic boxes as in index/region.h), read from the leaves that meet it:
+// a selection by box. Throws Error::InvalidArgument when the store has no
+// particle IDs, as RunQuery otherwise.
+std::vector<std::uint64_t> ParticleIdsInBox(const Dataset& dataset, std::uint32_t epoch, const std::array<double, 3>& lo,
+                                            const std::array<double, 3>& hi);
+
 }  // namespace octocosm
