@@ -1,0 +1,95 @@
+#include "render/draw_plan.h"
+
+#include <unordered_map>
+
+namespace octocosm {
+namespace {
+
+enum class Role : std::uint8_t { kNone, kSelected, kRefined };
+
+class Planner {
+ public:
+  Planner(const NodeHierarchy& hierarchy, const std::function<bool(std::int32_t)>& loaded,
+          const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets)
+      : hierarchy_(hierarchy), loaded_(loaded), octant_offsets_(octant_offsets) {}
+
+  void SetRole(std::int32_t node, Role role) { roles_[node] = role; }
+
+  void Draw(std::int32_t node, DrawPlan& plan) {
+    const Role role = RoleOf(node);
+    if (role == Role::kSelected) {
+      if (loaded_(node)) Add(plan, node, 0, static_cast<std::uint32_t>(hierarchy_.node(node).entry.point_count));
+      return;
+    }
+    if (role != Role::kRefined) return;
+    const bool self_loaded = loaded_(node);
+    std::array<std::uint32_t, 9> offsets{};
+    if (self_loaded) offsets = octant_offsets_(node);
+    for (int o = 0; o < 8; ++o) {
+      const std::int32_t child = hierarchy_.node(node).children[static_cast<std::size_t>(o)];
+      if (child < 0 || RoleOf(child) == Role::kNone) continue;  // empty or out of view
+      if (Covered(child) || !self_loaded) {
+        Draw(child, plan);
+      } else if (offsets[o + 1] > offsets[o]) {
+        Add(plan, node, offsets[o], offsets[o + 1] - offsets[o]);
+        ++plan.stand_ins;
+      }
+    }
+  }
+
+ private:
+  Role RoleOf(std::int32_t node) const {
+    const auto it = roles_.find(node);
+    return it == roles_.end() ? Role::kNone : it->second;
+  }
+
+  bool Covered(std::int32_t node) {
+    const auto memo = covered_.find(node);
+    if (memo != covered_.end()) return memo->second;
+    bool covered = loaded_(node);
+    if (!covered && RoleOf(node) == Role::kRefined) {
+      covered = true;
+      for (std::int32_t child : hierarchy_.node(node).children) {
+        if (child >= 0 && RoleOf(child) != Role::kNone && !Covered(child)) {
+          covered = false;
+          break;
+        }
+      }
+    }
+    covered_[node] = covered;
+    return covered;
+  }
+
+  void Add(DrawPlan& plan, std::int32_t node, std::uint32_t first, std::uint32_t count) {
+    // Adjacent octant ranges of one node become one draw.
+    if (!plan.ranges.empty() && plan.ranges.back().node == node &&
+        plan.ranges.back().first + plan.ranges.back().count == first) {
+      plan.ranges.back().count += count;
+    } else {
+      plan.ranges.push_back({node, first, count});
+    }
+    plan.points += count;
+  }
+
+  const NodeHierarchy& hierarchy_;
+  const std::function<bool(std::int32_t)>& loaded_;
+  const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets_;
+  std::unordered_map<std::int32_t, Role> roles_;
+  std::unordered_map<std::int32_t, bool> covered_;
+};
+
+}  // namespace
+
+DrawPlan PlanDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
+                   const std::function<bool(std::int32_t)>& loaded,
+                   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets) {
+  DrawPlan plan;
+  if (frontier.selected.empty()) return plan;
+  Planner planner(hierarchy, loaded, octant_offsets);
+  for (std::int32_t n : frontier.selected) planner.SetRole(n, Role::kSelected);
+  for (std::int32_t n : frontier.refined) planner.SetRole(n, Role::kRefined);
+  planner.Draw(0, plan);
+  return plan;
+}
+
+}  // namespace octocosm

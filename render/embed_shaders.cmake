@@ -1,0 +1,22 @@
+# Writes OUTPUT, a header holding each file of SOURCES (a |-separated list) as a raw
+# string literal named kShader<Name> (file stem in CamelCase: splat.vert.glsl
+# -> kShaderSplatVert).
+string(REPLACE "|" ";" SOURCES "${SOURCES}")
+set(text "// Generated from render/shaders/*.glsl by render/embed_shaders.cmake. Do not edit.\n#pragma once\n\nnamespace octocosm::shaders {\n")
+foreach(source IN LISTS SOURCES)
+  get_filename_component(name ${source} NAME)
+  string(REGEX REPLACE "\\.glsl$" "" stem ${name})
+  string(REPLACE "." "_" stem ${stem})
+  string(REPLACE "_" ";" parts ${stem})
+  set(identifier "kShader")
+  foreach(part IN LISTS parts)
+    string(SUBSTRING ${part} 0 1 first)
+    string(TOUPPER ${first} first)
+    string(SUBSTRING ${part} 1 -1 rest)
+    string(APPEND identifier "${first}${rest}")
+  endforeach()
+  file(READ ${source} body)
+  string(APPEND text "\ninline constexpr const char* ${identifier} = R\"glsl(${body})glsl\";\n")
+endforeach()
+string(APPEND text "\n}  // namespace octocosm::shaders\n")
+file(WRITE ${OUTPUT} "${text}")

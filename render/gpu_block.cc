@@ -1,0 +1,115 @@
+#include "render/gpu_block.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "storage/coding.h"
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+// Columns that link an epoch to its neighbours (docs/FORMAT.md section 4).
+constexpr auto kNextVelocityColumn = static_cast<ColumnId>(8);
+constexpr auto kPrevDisplacementColumn = static_cast<ColumnId>(9);
+constexpr auto kPrevVelocityColumn = static_cast<ColumnId>(10);
+
+// The uniform block "Block" of shaders/splat_vert.glsl, std140.
+struct BlockUniforms {
+  float node[4];
+  std::int32_t columns[3][4];
+  float ranges[5][2][4];  // velocity, displacement, next_velocity, prev_displacement, prev_velocity: min, step
+};
+static_assert(sizeof(BlockUniforms) == 224);
+
+float ParamF32(const BlockColumn& c, int offset) { return std::bit_cast<float>(GetU32(c.params.data() + offset)); }
+double ParamF64(const BlockColumn& c, int offset) { return std::bit_cast<double>(GetU64(c.params.data() + offset)); }
+
+// The shader decodes q in [0, 65535] as min + q * step.
+void SetRange(const BlockColumn& c, float (&range)[2][4]) {
+  for (int a = 0; a < 3; ++a) {
+    const float lo = ParamF32(c, 4 * a), hi = ParamF32(c, 12 + 4 * a);
+    range[0][a] = lo;
+    range[1][a] = (hi - lo) / 65535.0f;
+  }
+}
+
+}  // namespace
+
+GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader& header, const NodeCube& node,
+                          const std::string& where) {
+  GpuBlock block;
+  block.point_count_ = header.point_count;
+  block.octant_offsets_ = header.octant_offsets;
+  block.node_ = node;
+
+  BlockUniforms u{};
+  for (auto& row : u.columns) {
+    for (std::int32_t& c : row) c = -1;
+  }
+  u.node[0] = static_cast<float>(node.size / 65536.0);
+
+  // Columns at 16-byte boundaries; offsets in 32-bit words for the shader.
+  std::size_t total = 0;
+  for (const BlockColumn& c : header.columns) total += (c.length + 15) / 16 * 16;
+  std::vector<std::uint8_t> staging(total, 0);
+  std::size_t at = 0;
+  for (const BlockColumn& c : header.columns) {
+    if (c.offset > bytes.size() || c.length > bytes.size() - c.offset) {
+      throw Error::Corruption(where, std::string("column '") + ColumnName(c.id) + "' lies outside the block's " +
+                                         std::to_string(bytes.size()) + " bytes");
+    }
+    if (c.length > 0) std::memcpy(staging.data() + at, bytes.data() + c.offset, static_cast<std::size_t>(c.length));
+    const auto word = static_cast<std::int32_t>(at / 4);
+    block.columns_ |= ColumnBit(c.id);
+    switch (c.id) {
+      case ColumnId::kPosition: u.columns[0][0] = word; break;
+      case ColumnId::kWeight:
+        u.columns[0][1] = word;
+        u.node[1] = static_cast<float>(ParamF64(c, 0));
+        break;
+      case ColumnId::kSmoothing:
+        u.columns[0][2] = word;
+        u.node[2] = static_cast<float>(std::log2(node.size) + ParamF32(c, 0));
+        u.node[3] = 1.0f / ParamF32(c, 4);
+        break;
+      case ColumnId::kType: u.columns[0][3] = word; break;
+      case ColumnId::kVelocity:
+        u.columns[1][0] = word;
+        SetRange(c, u.ranges[0]);
+        break;
+      case ColumnId::kId: u.columns[1][1] = word; break;
+      case ColumnId::kDisplacement:
+        u.columns[1][2] = word;
+        SetRange(c, u.ranges[1]);
+        break;
+      default:
+        if (c.id == kNextVelocityColumn) {
+          u.columns[1][3] = word;
+          SetRange(c, u.ranges[2]);
+        } else if (c.id == kPrevDisplacementColumn) {
+          u.columns[2][0] = word;
+          SetRange(c, u.ranges[3]);
+        } else if (c.id == kPrevVelocityColumn) {
+          u.columns[2][1] = word;
+          SetRange(c, u.ranges[4]);
+        }
+        break;
+    }
+    at += (c.length + 15) / 16 * 16;
+  }
+  const ColumnSet required = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                             ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType);
+  if ((block.columns_ & required) != required) {
+    throw Error::Corruption(where, "a block sent to the GPU lacks positions, weights, smoothing lengths or types");
+  }
+  block.buffer_ = MakeGlBuffer(at, staging.data(), 0);
+  block.parameters_ = MakeGlBuffer(sizeof u, &u, 0);
+  block.gpu_bytes_ = at + sizeof u;
+  return block;
+}
+
+}  // namespace octocosm

@@ -1,0 +1,37 @@
+#include "render/offscreen_renderer.h"
+
+#include <chrono>
+
+namespace octocosm {
+
+OffscreenRenderer::OffscreenRenderer(const Dataset& dataset, HeadlessBackend backend, const SceneOptions& options)
+    : context_(CreateHeadlessContext(backend)),
+      splat_(std::make_unique<SplatRenderer>()),
+      scene_(std::make_unique<SceneRenderer>(dataset, *splat_, options)),
+      description_(CurrentGlDescription()) {}
+
+OffscreenRenderer::~OffscreenRenderer() {
+  // GL objects go while their context is current.
+  context_->MakeCurrent();
+  scene_.reset();
+  splat_.reset();
+}
+
+Picture OffscreenRenderer::Render(const RenderView& view, double time, const ToneMapSettings& tone, bool read_hdr,
+                                  ExposureSmoother* smoother, double elapsed) {
+  const auto start = std::chrono::steady_clock::now();
+  Picture picture;
+  scene_->SetColorMode(tone.color);
+  picture.stats = scene_->Complete(view, time);
+  const ImageStatistics statistics = splat_->Measure();
+  const double exposure =
+      smoother && tone.exposure == 0 ? smoother->Update(AutomaticExposure(tone, statistics), elapsed) : 0.0;
+  picture.tone = ResolveToneMap(tone, statistics, exposure);
+  splat_->ToneMapToImage(picture.tone);
+  picture.rgb = splat_->ReadDisplay();
+  if (read_hdr) picture.hdr = splat_->ReadHdr();
+  picture.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return picture;
+}
+
+}  // namespace octocosm

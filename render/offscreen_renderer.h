@@ -1,0 +1,52 @@
+// Pictures of a dataset without a window: a headless GL context
+// (render/gl_context.h), the splat renderer and the scene renderer, used by
+// `octocosm render`, the tests and the benchmarks. One frame is drawn
+// completely (every selected block loaded), measured, tone mapped on the GPU
+// and read back.
+#pragma once
+
+#include <memory>
+#include <optional>
+
+#include "index/dataset.h"
+#include "render/gl_context.h"
+#include "render/scene_renderer.h"
+#include "render/splat_renderer.h"
+#include "render/tone_map.h"
+
+namespace octocosm {
+
+struct Picture {
+  RgbImage rgb;                  // tone mapped on the GPU
+  std::optional<HdrImage> hdr;   // the accumulation, when asked for
+  FrameStats stats;
+  ToneMapParameters tone;        // what the tone mapping used (the exposure, resolved)
+  double seconds = 0;            // the whole frame, GPU work included
+};
+
+class OffscreenRenderer {
+ public:
+  // Creates the context on this thread; every call must come from it.
+  OffscreenRenderer(const Dataset& dataset, HeadlessBackend backend, const SceneOptions& options);
+  ~OffscreenRenderer();
+
+  // Renders `view` at fractional epoch `time`. With a `smoother` (frames of a
+  // movie, `elapsed` seconds apart) an automatic exposure is smoothed over
+  // the frames instead of taken from this frame alone.
+  Picture Render(const RenderView& view, double time, const ToneMapSettings& tone, bool read_hdr,
+                 ExposureSmoother* smoother = nullptr, double elapsed = 0);
+
+  SceneRenderer& scene() { return *scene_; }
+  SplatRenderer& splat() { return *splat_; }
+  // The largest blob radius the GL implementation draws.
+  double max_blob_radius() const { return splat_->max_blob_radius(); }
+  std::string description() const { return description_; }
+
+ private:
+  std::unique_ptr<GlContext> context_;
+  std::unique_ptr<SplatRenderer> splat_;
+  std::unique_ptr<SceneRenderer> scene_;
+  std::string description_;
+};
+
+}  // namespace octocosm

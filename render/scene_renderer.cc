@@ -1,0 +1,292 @@
+#include "render/scene_renderer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+// Columns that link an epoch to its neighbours (docs/FORMAT.md section 4).
+constexpr auto kNextVelocityColumn = static_cast<ColumnId>(8);
+constexpr auto kPrevDisplacementColumn = static_cast<ColumnId>(9);
+constexpr auto kPrevVelocityColumn = static_cast<ColumnId>(10);
+
+// Hermite tangents come from the ingest's least-squares velocity scale; when
+// velocities explain less than half of the displacements (relative residual
+// above this), the curve would wander and linear paths are used instead.
+constexpr double kHermiteMaxResidual = 0.5;
+
+// Pixel sums of about 10^6 in float when all the mass is in view.
+constexpr double kMassUnitDivisor = 1e6;
+
+constexpr ColumnSet kCoreColumns = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                                   ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType);
+
+double Milliseconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since).count();
+}
+
+}  // namespace
+
+SceneRenderer::SceneRenderer(const Dataset& dataset, SplatRenderer& splat, const SceneOptions& options)
+    : dataset_(dataset), splat_(splat), options_(options) {
+  if (options.io_threads == 0) throw Error::InvalidArgument("the renderer needs at least one I/O thread");
+  hierarchies_.resize(dataset.epoch_count());
+  double mass = 0;
+  for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) mass = std::max(mass, dataset.mass(e));
+  mass_unit_ = mass > 0 && std::isfinite(mass) ? mass / kMassUnitDivisor : 1;
+}
+
+SceneRenderer::~SceneRenderer() {
+  // Workers first: they read through the cache, which reads through the source.
+  prefetcher_.reset();
+  cache_.reset();
+}
+
+const NodeHierarchy& SceneRenderer::hierarchy(std::uint32_t epoch) {
+  auto& h = hierarchies_.at(epoch);
+  if (!h) h = std::make_unique<NodeHierarchy>(NodeHierarchy::Load(dataset_, epoch));
+  return *h;
+}
+
+Interpolation SceneRenderer::InterpolationAvailable(std::uint32_t epoch) const {
+  if (epoch + 1 >= dataset_.epoch_count()) return Interpolation::kNone;
+  const ColumnSet have = dataset_.columns();
+  const ColumnSet linear = ColumnBit(ColumnId::kDisplacement) | ColumnBit(kPrevDisplacementColumn);
+  if ((have & linear) != linear) return Interpolation::kNone;
+  const ColumnSet hermite =
+      ColumnBit(ColumnId::kVelocity) | ColumnBit(kNextVelocityColumn) | ColumnBit(kPrevVelocityColumn);
+  const std::optional<EpochLink>& link = dataset_.link_to_next(epoch);
+  if ((have & hermite) == hermite && link && link->velocity_scale > 0 && link->fit_residual < kHermiteMaxResidual) {
+    return Interpolation::kHermite;
+  }
+  return Interpolation::kLinear;
+}
+
+ColumnSet SceneRenderer::ColumnsFor(Interpolation interpolation) const {
+  ColumnSet c = kCoreColumns;
+  if (ColorModeNeedsVelocity(options_.color)) c |= ColumnBit(ColumnId::kVelocity);
+  if (selection_ && selection_->size() > 0) c |= ColumnBit(ColumnId::kId);
+  if (interpolation != Interpolation::kNone) c |= ColumnBit(ColumnId::kDisplacement) | ColumnBit(kPrevDisplacementColumn);
+  if (interpolation == Interpolation::kHermite) {
+    c |= ColumnBit(ColumnId::kVelocity) | ColumnBit(kNextVelocityColumn) | ColumnBit(kPrevVelocityColumn);
+  }
+  return c & (dataset_.columns() | kCoreColumns);
+}
+
+void SceneRenderer::UseColumns(ColumnSet columns) {
+  if (columns == columns_ && cache_) return;
+  if (source_) {
+    const ReadCounters r = source_->counters();
+    retired_reads_.blocks += r.blocks;
+    retired_reads_.reads += r.reads;
+    retired_reads_.bytes += r.bytes;
+  }
+  prefetcher_.reset();
+  cache_.reset();
+  // Blocks on the GPU hold the old columns: the next frames upload afresh.
+  gpu_.clear();
+  gpu_bytes_ = 0;
+  columns_ = columns;
+  source_ = std::make_unique<ColumnSubsetSource>(dataset_, columns);
+  cache_ = std::make_unique<BlockCache>(source_.get(), options_.cpu_cache_bytes);
+  Prefetcher::Options prefetch;
+  prefetch.workers = options_.io_threads;
+  prefetcher_ = std::make_unique<Prefetcher>(*cache_, prefetch);
+}
+
+void SceneRenderer::SetSelection(std::span<const std::uint64_t> ids) {
+  if (ids.empty()) {
+    selection_.reset();
+    return;
+  }
+  auto selection = std::make_unique<SelectionSet>(ids);
+  selection->Upload();
+  selection_ = std::move(selection);
+}
+
+void SceneRenderer::SetColorMode(ColorMode color) { options_.color = color; }
+
+std::vector<SceneRenderer::Copy> SceneRenderer::PlanCopies(double time, FrameStats& stats) const {
+  const std::uint32_t last = dataset_.epoch_count() - 1;
+  time = std::clamp(std::isfinite(time) ? time : 0.0, 0.0, static_cast<double>(last));
+  const auto epoch = static_cast<std::uint32_t>(std::min(std::floor(time), static_cast<double>(last)));
+  const double t = time - epoch;
+  const Interpolation available = InterpolationAvailable(epoch);
+  const Interpolation interpolation =
+      static_cast<int>(options_.interpolation) < static_cast<int>(available) ? options_.interpolation : available;
+  stats.interpolation = t > 0 ? interpolation : Interpolation::kNone;
+  if (t > 0 && interpolation != Interpolation::kNone) {
+    return {Copy{epoch, +1, 1 - t, {}}, Copy{epoch + 1, -1, t, {}}};
+  }
+  return {Copy{t < 0.5 ? epoch : std::min(epoch + 1, last), +1, 1, {}}};
+}
+
+const SceneRenderer::Resident* SceneRenderer::Upload(const BlockId& id, const Bytes& bytes) {
+  const NodeKey key = NodeKey::FromValue(id.key);
+  const std::string where = dataset_.Where(id.epoch, key);
+  const BlockHeader header = DecodeBlockHeader(bytes, key, where);
+  if (header.block_size != bytes.size()) {
+    throw Error::Corruption(where, "a cached block of " + std::to_string(bytes.size()) + " bytes says it has " +
+                                       std::to_string(header.block_size));
+  }
+  Resident resident{GpuBlock::Upload(bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where), frame_};
+  gpu_bytes_ += resident.block.gpu_bytes();
+  return &gpu_.insert_or_assign(Key(id), std::move(resident)).first->second;
+}
+
+void SceneRenderer::EvictGpuBlocks() {
+  if (gpu_bytes_ <= options_.gpu_cache_bytes) return;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> candidates;  // (last frame, key)
+  for (const auto& [key, resident] : gpu_) {
+    if (resident.last_frame < frame_) candidates.emplace_back(resident.last_frame, key);
+  }
+  std::sort(candidates.begin(), candidates.end());
+  for (const auto& [last_frame, key] : candidates) {
+    if (gpu_bytes_ <= options_.gpu_cache_bytes) break;
+    auto it = gpu_.find(key);
+    gpu_bytes_ -= it->second.block.gpu_bytes();
+    gpu_.erase(it);
+  }
+}
+
+FrameStats SceneRenderer::Complete(const RenderView& view, double time) { return Render(view, time, true, false); }
+
+FrameStats SceneRenderer::Stream(const RenderView& view, double time, bool look_ahead) {
+  return Render(view, time, false, look_ahead);
+}
+
+FrameStats SceneRenderer::Render(const RenderView& view, double time, bool complete, bool look_ahead) {
+  FrameStats stats;
+  auto clock = std::chrono::steady_clock::now();
+  std::vector<Copy> copies = PlanCopies(time, stats);
+  const double t = copies.size() == 2 ? copies[1].weight : 0;
+  const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), options_.lod.pixel_threshold};
+  for (Copy& copy : copies) {
+    LodOptions lod = options_.lod;
+    if (lod.point_budget > 0) {
+      lod.point_budget = std::max<std::uint64_t>(1, static_cast<std::uint64_t>(std::ceil(static_cast<double>(lod.point_budget) * copy.weight)));
+    }
+    if (stats.interpolation != Interpolation::kNone) {
+      const std::uint32_t from = copy.direction > 0 ? copy.epoch : copy.epoch - 1;
+      const std::optional<EpochLink>& link = dataset_.link_to_next(from);
+      lod.cull_margin = link ? link->max_displacement : 0;
+    }
+    copy.frontier = SelectLodFrontier(hierarchy(copy.epoch), dataset_.cube(copy.epoch), error_view, lod);
+    stats.nodes_selected += copy.frontier.selected.size();
+    stats.points_selected += copy.frontier.points;
+    stats.budget_reached |= copy.frontier.budget_reached;
+  }
+  stats.epochs_drawn = static_cast<std::uint32_t>(copies.size());
+
+  // Blocks wanted, most important first: coarse before fine, the two copies
+  // interleaved; then, when playing, the next interval's.
+  UseColumns(ColumnsFor(stats.interpolation));
+  std::vector<BlockId> wanted;
+  std::vector<BlockId> needed;  // what this frame draws
+  const auto id_of = [&](const Copy& c, std::int32_t node) {
+    return BlockId{c.epoch, hierarchy(c.epoch).node(node).key.value()};
+  };
+  std::size_t longest = 0;
+  for (const Copy& c : copies) longest = std::max(longest, complete ? c.frontier.selected.size() : c.frontier.load_order.size());
+  for (std::size_t i = 0; i < longest; ++i) {
+    for (const Copy& c : copies) {
+      const auto& order = complete ? c.frontier.selected : c.frontier.load_order;
+      if (i < order.size()) needed.push_back(id_of(c, order[i]));
+    }
+  }
+  wanted = needed;
+  if (look_ahead && !complete) {
+    const std::uint32_t ahead = copies.back().epoch + 1;
+    if (ahead < dataset_.epoch_count()) {
+      LodOptions lod = options_.lod;
+      const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, lod);
+      for (std::int32_t node : next.load_order) wanted.push_back({ahead, hierarchy(ahead).node(node).key.value()});
+    }
+  }
+  prefetcher_->Submit(wanted);
+  stats.select_ms = Milliseconds(clock);
+
+  // Upload what has arrived (or, for a complete frame, wait for it).
+  clock = std::chrono::steady_clock::now();
+  for (const BlockId& id : needed) {
+    auto it = gpu_.find(Key(id));
+    if (it != gpu_.end()) {
+      it->second.last_frame = frame_;
+      continue;
+    }
+    if (complete) {
+      const PinnedBlock block = cache_->Get(id);
+      Upload(id, block.bytes());
+    } else {
+      if (stats.bytes_uploaded >= options_.upload_bytes_per_frame) continue;
+      const PinnedBlock block = cache_->TryGet(id);
+      if (!block) {
+        if (const std::optional<Error> error = prefetcher_->LastError(id)) last_error_ = error->what();
+        continue;
+      }
+      try {
+        Upload(id, block.bytes());
+      } catch (const Error& e) {
+        last_error_ = e.what();
+        cache_->Erase(id);
+        continue;
+      }
+    }
+    ++stats.blocks_uploaded;
+    stats.bytes_uploaded += gpu_.at(Key(id)).block.gpu_bytes();
+  }
+  stats.upload_ms = Milliseconds(clock);
+
+  // Draw.
+  clock = std::chrono::steady_clock::now();
+  FrameSettings settings;
+  settings.color = options_.color;
+  settings.mass_unit = mass_unit_;
+  settings.interpolation = stats.interpolation;
+  settings.t = t;
+  if (stats.interpolation == Interpolation::kHermite) settings.hermite_scale = dataset_.link_to_next(copies[0].epoch)->velocity_scale;
+  splat_.BeginFrame(view, settings);
+  splat_.SetSelection((columns_ & ColumnBit(ColumnId::kId)) ? selection_.get() : nullptr);
+  for (const Copy& c : copies) {
+    const NodeHierarchy& h = hierarchy(c.epoch);
+    const auto resident = [&](std::int32_t node) -> const Resident* {
+      const auto it = gpu_.find(Key(id_of(c, node)));
+      return it == gpu_.end() ? nullptr : &it->second;
+    };
+    for (std::int32_t node : c.frontier.selected) stats.blocks_missing += resident(node) == nullptr;
+    const DrawPlan plan = PlanDraws(
+        h, c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
+        [&](std::int32_t node) { return resident(node)->block.octant_offsets(); });
+    splat_.SetCopy(c.direction, c.weight);
+    for (const DrawRange& range : plan.ranges) splat_.Draw(resident(range.node)->block, range.first, range.count);
+    stats.points_drawn += plan.points;
+    stats.draws += plan.ranges.size();
+    stats.stand_ins += plan.stand_ins;
+  }
+  stats.draw_ms = Milliseconds(clock);
+
+  EvictGpuBlocks();
+  ++frame_;
+  stats.gpu_blocks = gpu_.size();
+  stats.gpu_bytes = gpu_bytes_;
+  return stats;
+}
+
+ReadCounters SceneRenderer::disk_reads() const {
+  ReadCounters r = retired_reads_;
+  if (source_) {
+    const ReadCounters now = source_->counters();
+    r.blocks += now.blocks;
+    r.reads += now.reads;
+    r.bytes += now.bytes;
+  }
+  return r;
+}
+
+CacheStats SceneRenderer::cache_stats() const { return cache_ ? cache_->Stats() : CacheStats{}; }
+
+}  // namespace octocosm

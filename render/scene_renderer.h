@@ -1,0 +1,149 @@
+// One frame of a dataset: the part of the renderer both front ends share
+// (`octocosm render`, headless, and `octocosm view`, in a window).
+//
+// Per frame, on the CPU: the level of detail of each epoch drawn
+// (index/lod_frontier.h: frustum culling, screen-space error, point budget),
+// the blocks that needs, requested from the block cache in priority order
+// (storage/prefetcher.h reads them on worker threads, only the columns the
+// frame needs: index/column_reader.h ColumnSubsetSource), uploads of blocks
+// that have arrived, and a draw plan (render/draw_plan.h) that lets loaded
+// parents stand in for children still on their way. Everything else happens
+// on the GPU (render/splat_renderer.h).
+//
+// Time. A frame shows a fractional epoch time = e + t. Where the store links
+// epochs (particle IDs: displacements and, with velocities, the neighbours'
+// velocities), both epoch e and e + 1 are drawn, e moved forward with weight
+// 1 - t and e + 1 moved back with weight t along the same curve (linear, or
+// cubic Hermite when velocities allow), so that each particle's position,
+// size and colour pass smoothly from one epoch to the next, t = 0 and t = 1
+// reproduce the epochs exactly, and mass is conserved in between. The point
+// budget is shared between the two in proportion to their weights. Without
+// links the nearest epoch is shown.
+//
+// Two ways to render: Complete() waits for every block the frame selects
+// (headless pictures, tests, benchmarks); Stream() never waits for the disk
+// (the viewer), drawing what is loaded and queueing the rest.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "index/column_reader.h"
+#include "index/dataset.h"
+#include "index/lod_frontier.h"
+#include "index/node_hierarchy.h"
+#include "render/draw_plan.h"
+#include "render/gpu_block.h"
+#include "render/selection_set.h"
+#include "render/splat_renderer.h"
+#include "storage/block_cache.h"
+#include "storage/prefetcher.h"
+
+namespace octocosm {
+
+struct SceneOptions {
+  LodOptions lod;                       // pixel threshold, point budget
+  ColorMode color = ColorMode::kDensity;
+  Interpolation interpolation = Interpolation::kHermite;  // the best the store supports, at most this
+  std::size_t cpu_cache_bytes = std::size_t{1} << 30;     // blocks read from disk, in memory
+  std::size_t gpu_cache_bytes = std::size_t{2} << 30;     // blocks on the GPU
+  std::size_t io_threads = 2;
+  // Streaming only: most bytes uploaded to the GPU in one frame, so a frame
+  // never stalls on a burst of arrivals.
+  std::size_t upload_bytes_per_frame = std::size_t{64} << 20;
+};
+
+struct FrameStats {
+  std::uint32_t epochs_drawn = 0;
+  std::uint64_t nodes_selected = 0;
+  std::uint64_t points_selected = 0;  // in the selected nodes
+  std::uint64_t points_drawn = 0;     // what was drawn (with stand-ins, while loading)
+  std::uint64_t draws = 0;
+  std::uint64_t stand_ins = 0;        // parent octants drawn for children not loaded yet
+  std::uint64_t blocks_missing = 0;   // selected blocks not on the GPU yet
+  std::uint64_t blocks_uploaded = 0;
+  std::uint64_t bytes_uploaded = 0;
+  std::uint64_t gpu_blocks = 0;       // resident on the GPU after the frame
+  std::uint64_t gpu_bytes = 0;
+  bool budget_reached = false;
+  Interpolation interpolation = Interpolation::kNone;
+  double select_ms = 0, upload_ms = 0, draw_ms = 0;
+};
+
+class SceneRenderer {
+ public:
+  // `dataset` and `splat` must outlive the SceneRenderer; the GL context of
+  // `splat` must be current whenever a method is called.
+  SceneRenderer(const Dataset& dataset, SplatRenderer& splat, const SceneOptions& options);
+  ~SceneRenderer();
+
+  // Draws the frame into the SplatRenderer's accumulation buffer (the caller
+  // measures and tone maps). `time` is clamped to [0, epochs - 1].
+  // Complete: waits for every selected block; throws the Error of a block
+  // that cannot be read. Stream: never waits for a read; a block that failed
+  // is reported by last_error() and skipped.
+  FrameStats Complete(const RenderView& view, double time);
+  FrameStats Stream(const RenderView& view, double time, bool look_ahead);
+
+  // Highlights these particle IDs (empty: none). Throws like SelectionSet.
+  void SetSelection(std::span<const std::uint64_t> ids);
+  std::size_t selection_size() const { return selection_ ? selection_->size() : 0; }
+  void SetColorMode(ColorMode color);
+  void SetLod(const LodOptions& lod) { options_.lod = lod; }
+  const SceneOptions& options() const { return options_; }
+
+  // The mass that the GPU's accumulation counts as 1 (render/splat_renderer.h).
+  double mass_unit() const { return mass_unit_; }
+  // The best interpolation available between `epoch` and the next.
+  Interpolation InterpolationAvailable(std::uint32_t epoch) const;
+  const NodeHierarchy& hierarchy(std::uint32_t epoch);
+  // Bytes read from the store so far, and the block cache's counters.
+  ReadCounters disk_reads() const;
+  CacheStats cache_stats() const;
+  const std::string& last_error() const { return last_error_; }
+
+ private:
+  struct Copy {
+    std::uint32_t epoch = 0;
+    int direction = 1;  // +1 moving forward from this epoch, -1 moving back from it
+    double weight = 1;
+    LodFrontier frontier;
+  };
+  struct Resident {
+    GpuBlock block;
+    std::uint64_t last_frame = 0;
+  };
+
+  FrameStats Render(const RenderView& view, double time, bool complete, bool look_ahead);
+  std::vector<Copy> PlanCopies(double time, FrameStats& stats) const;
+  ColumnSet ColumnsFor(Interpolation interpolation) const;
+  void UseColumns(ColumnSet columns);
+  const Resident* Upload(const BlockId& id, const Bytes& bytes);
+  static std::uint64_t Key(const BlockId& id) { return id.key ^ (std::uint64_t{id.epoch} << 58); }
+  void EvictGpuBlocks();
+
+  const Dataset& dataset_;
+  SplatRenderer& splat_;
+  SceneOptions options_;
+  double mass_unit_ = 1;
+  std::vector<std::unique_ptr<NodeHierarchy>> hierarchies_;
+  std::unique_ptr<SelectionSet> selection_;
+
+  ColumnSet columns_ = 0;
+  std::unique_ptr<ColumnSubsetSource> source_;
+  std::unique_ptr<BlockCache> cache_;
+  std::unique_ptr<Prefetcher> prefetcher_;
+  ReadCounters retired_reads_;  // of sources replaced when the columns changed
+
+  std::unordered_map<std::uint64_t, Resident> gpu_;  // by Key(BlockId)
+  std::size_t gpu_bytes_ = 0;
+  std::uint64_t frame_ = 0;
+  std::string last_error_;
+};
+
+}  // namespace octocosm

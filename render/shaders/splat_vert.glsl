@@ -1,0 +1,152 @@
+// One point of a block -> one blob (render/splat_kernel.h). The block's
+// columns are on the GPU as stored (index/block_codec.h): decoded here.
+// Positions are relative to the camera, so floats keep their precision near
+// it however far the data lie from the origin.
+
+layout(std140, binding = 0) uniform Frame {
+  vec4 u_right;     // camera basis (xyz)
+  vec4 u_up;
+  vec4 u_forward;
+  vec4 u_viewport;  // image width, height (pixels), guard margin (pixels), focal length (pixels)
+  vec4 u_limits;    // near, far, largest blob radius, 1 / mass unit
+  ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), selection on, copy direction (+1 / -1)
+  vec4 u_time;      // t in [0, 1], weight of this copy, Hermite velocity scale, unused
+};
+
+layout(std140, binding = 1) uniform Block {
+  vec4 b_node;        // quantum (node edge / 65536), weight unit, log2 of the smallest smoothing, 1 / codes per octave
+  ivec4 b_columns0;   // word offsets: position, weight, smoothing, type (-1: absent)
+  ivec4 b_columns1;   // velocity, id, displacement, next_velocity
+  ivec4 b_columns2;   // prev_displacement, prev_velocity
+  vec4 b_velocity[2];           // minimum, step ((max - min) / 65535)
+  vec4 b_displacement[2];
+  vec4 b_next_velocity[2];
+  vec4 b_prev_displacement[2];
+  vec4 b_prev_velocity[2];
+};
+
+layout(std430, binding = 0) readonly buffer BlockWords { uint words[]; };
+
+layout(std430, binding = 1) readonly buffer Selection {
+  uint selection_mask;   // slots - 1 (slots a power of two)
+  uint selection_count;
+  uint selection_pad0;
+  uint selection_pad1;
+  uvec2 selection_slots[];  // (low, high) words of a selected ID; (~0, ~0) empty
+};
+
+uniform vec3 u_origin;  // the node's lower corner minus the camera position
+uniform uint u_first;   // first point of this draw in the block
+
+flat out vec2 v_center;  // framebuffer coordinates
+flat out float v_radius;
+flat out vec4 v_value;   // the blob's amplitude times (1, a, a^2, selected)
+
+uint Word16(int column, uint index) {
+  uint w = words[column + int(index >> 1u)];
+  return (index & 1u) == 0u ? (w & 0xFFFFu) : (w >> 16u);
+}
+
+vec3 Word16x3(int column, uint i) {
+  return vec3(float(Word16(column, 3u * i)), float(Word16(column, 3u * i + 1u)), float(Word16(column, 3u * i + 2u)));
+}
+
+vec3 Ranged(int column, uint i, vec4 range[2]) { return range[0].xyz + Word16x3(column, i) * range[1].xyz; }
+
+// The lowbias32 integer hash; the same as SelectionSet's on the CPU.
+uint Mix32(uint x) {
+  x ^= x >> 16u;
+  x *= 0x7feb352du;
+  x ^= x >> 15u;
+  x *= 0x846ca68bu;
+  x ^= x >> 16u;
+  return x;
+}
+
+bool IsSelected(uvec2 id) {
+  uint slot = Mix32(id.x ^ Mix32(id.y)) & selection_mask;
+  for (uint probe = 0u; probe <= selection_mask; ++probe) {
+    uvec2 s = selection_slots[slot];
+    if (s == id) return true;
+    if (s == uvec2(0xFFFFFFFFu)) return false;
+    slot = (slot + 1u) & selection_mask;
+  }
+  return false;
+}
+
+float PixelSum(vec2 c, float r) {
+  float sum = 0.0;
+  int i0 = int(ceil(c.x - r - 0.5)), i1 = int(floor(c.x + r - 0.5));
+  int j0 = int(ceil(c.y - r - 0.5)), j1 = int(floor(c.y + r - 0.5));
+  for (int j = j0; j <= j1; ++j) {
+    float dy = (float(j) + 0.5 - c.y) / r;
+    for (int i = i0; i <= i1; ++i) {
+      float dx = (float(i) + 0.5 - c.x) / r;
+      sum += CubicKernel(sqrt(dx * dx + dy * dy));
+    }
+  }
+  return sum;
+}
+
+void Discard() {
+  gl_Position = vec4(2.0, 2.0, 2.0, 1.0);  // outside the clip volume: no fragments
+  gl_PointSize = 1.0;
+  v_center = vec2(0.0);
+  v_radius = 1.0;
+  v_value = vec4(0.0);
+}
+
+void main() {
+  uint i = u_first + uint(gl_VertexID);
+  vec3 p = u_origin + (Word16x3(b_columns0.x, i) + 0.5) * b_node.x;
+  bool has_velocity = b_columns1.x >= 0;
+  vec3 velocity = has_velocity ? Ranged(b_columns1.x, i, b_velocity) : vec3(0.0);
+
+  if (u_modes.y != 0) {
+    // Both epochs of an interval follow the same curve from p_e to p_e+1, so
+    // the two copies of a particle coincide at every t.
+    float t = u_time.x;
+    float t2 = t * t, t3 = t2 * t;
+    float h01 = u_modes.y == 2 ? 3.0 * t2 - 2.0 * t3 : t;
+    float h10 = t3 - 2.0 * t2 + t, h11 = t3 - t2;
+    if (u_modes.w > 0) {
+      p += h01 * Ranged(b_columns1.z, i, b_displacement);
+      if (u_modes.y == 2) p += u_time.z * (h10 * velocity + h11 * Ranged(b_columns1.w, i, b_next_velocity));
+    } else {
+      p += (1.0 - h01) * Ranged(b_columns2.x, i, b_prev_displacement);
+      if (u_modes.y == 2) p += u_time.z * (h10 * Ranged(b_columns2.y, i, b_prev_velocity) + h11 * velocity);
+    }
+  }
+
+  float depth = dot(p, u_forward.xyz);
+  if (!(depth >= u_limits.x && depth <= u_limits.y)) {
+    Discard();
+    return;
+  }
+  vec2 image = u_viewport.xy;
+  float margin = u_viewport.z, focal = u_viewport.w;
+  vec2 center = 0.5 * image + focal * vec2(dot(p, u_right.xyz), dot(p, u_up.xyz)) / depth;
+  float smoothing = exp2(b_node.z + float(Word16(b_columns0.z, i)) * b_node.w);
+  float radius = clamp(smoothing * focal / depth, 1.0, u_limits.z);
+  float weight = float(words[b_columns0.y + int(i)]) * b_node.y * u_limits.w * u_time.y;
+  float normalization = radius < kExactNormalizationRadius ? PixelSum(center, radius)
+                                                           : kKernelIntegral * radius * radius;
+
+  float a = 0.0;
+  int mode = u_modes.x;
+  if (mode == 1) a = length(velocity);
+  else if (mode == 2 || mode == 3) a = dot(velocity, u_forward.xyz);
+  else if (mode == 4) a = float((words[b_columns0.w + int(i >> 2u)] >> (8u * (i & 3u))) & 0xFFu);
+  float selected = 0.0;
+  if (u_modes.z != 0 && b_columns1.y >= 0) {
+    int id = b_columns1.y + 2 * int(i);
+    selected = IsSelected(uvec2(words[id], words[id + 1])) ? 1.0 : 0.0;
+  }
+
+  vec2 framebuffer = image + 2.0 * margin;
+  v_center = center + margin;
+  v_radius = radius;
+  v_value = (weight / normalization) * vec4(1.0, a, a * a, selected);
+  gl_Position = vec4(v_center / framebuffer * 2.0 - 1.0, 0.0, 1.0);
+  gl_PointSize = 2.0 * ceil(radius) + 1.0;
+}

@@ -1,0 +1,301 @@
+#include "render/splat_renderer.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "render/color_maps.h"
+#include "render/render_shaders.h"
+#include "render/splat_kernel.h"
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+constexpr const char* kVersion = "#version 450 core\n";
+constexpr std::size_t kStatisticsWords = 4 + 2 * kHistogramBins;
+
+GlProgram Build(const std::string& name, std::initializer_list<std::pair<GLenum, std::vector<const char*>>> stages) {
+  // Every stage is "#version" + its sources, concatenated.
+  std::vector<std::string> joined;
+  joined.reserve(stages.size());
+  for (const auto& [type, sources] : stages) {
+    std::string text = kVersion;
+    for (const char* s : sources) text += s;
+    joined.push_back(std::move(text));
+  }
+  std::vector<ShaderStage> built;
+  std::size_t i = 0;
+  for (const auto& stage : stages) built.push_back({stage.first, joined[i++].c_str()});
+  switch (built.size()) {
+    case 1: return BuildGlProgram(name, {built[0]});
+    case 2: return BuildGlProgram(name, {built[0], built[1]});
+    default: throw Error::InvalidArgument("a program has one or two stages here");
+  }
+}
+
+GLint Location(const GlProgram& program, const char* name) { return glGetUniformLocation(program.get(), name); }
+
+void SetMap(const GlProgram& program, const char* name, ColorMapId id) {
+  const auto& knots = ColorMapKnots(id);
+  glProgramUniform3fv(program.get(), Location(program, name), kColorMapKnots, knots[0].data());
+}
+
+float Unordered(std::uint32_t u) {
+  return std::bit_cast<float>((u & 0x80000000u) != 0 ? (u & 0x7FFFFFFFu) : ~u);
+}
+
+}  // namespace
+
+SplatRenderer::SplatRenderer() {
+  splat_ = Build("splat", {{GL_VERTEX_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatVert}},
+                           {GL_FRAGMENT_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatFrag}}});
+  tone_map_ = Build("tone map", {{GL_VERTEX_SHADER, {shaders::kShaderFullscreenVert}},
+                                 {GL_FRAGMENT_SHADER, {shaders::kShaderToneMapFrag}}});
+  statistics_ = Build("image statistics", {{GL_COMPUTE_SHADER, {shaders::kShaderImageStatsComp}}});
+  origin_location_ = Location(splat_, "u_origin");
+  first_location_ = Location(splat_, "u_first");
+
+  GLuint vao = 0;
+  glCreateVertexArrays(1, &vao);
+  empty_vao_ = GlVertexArray(vao);
+  frame_uniforms_ = MakeGlBuffer(sizeof(FrameUniforms), nullptr, GL_DYNAMIC_STORAGE_BIT);
+  statistics_buffer_ = MakeGlBuffer(kStatisticsWords * 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
+  const SelectionSet empty({});
+  no_selection_ = MakeGlBuffer(empty.words().size() * 4, empty.words().data(), 0);
+
+  GLfloat range[2] = {1, 1};
+  glGetFloatv(GL_POINT_SIZE_RANGE, range);
+  // A sprite of side 2 ceil(R) + 1 must fit the largest point size.
+  max_blob_radius_ = std::max(kMinBlobRadius, std::floor((double{range[1]} - 1) / 2));
+  CheckGlError("setting up the splat renderer");
+}
+
+void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& settings) {
+  if (view.max_blob_radius() > max_blob_radius_) {
+    throw Error::InvalidArgument("a blob radius of " + std::to_string(view.max_blob_radius()) +
+                                 " pixels exceeds what this OpenGL draws (" + std::to_string(max_blob_radius_) + ")");
+  }
+  if (!(settings.mass_unit > 0) || !std::isfinite(settings.mass_unit)) {
+    throw Error::InvalidArgument("the mass unit must be finite and > 0");
+  }
+  if (!(settings.t >= 0 && settings.t <= 1)) throw Error::InvalidArgument("interpolation time must be in [0, 1]");
+  margin_ = GuardMargin(view.max_blob_radius());
+  const int tw = view.width() + 2 * margin_, th = view.height() + 2 * margin_;
+  if (tw != texture_width_ || th != texture_height_) {
+    accumulation_fbo_.Reset();
+    accumulation_.Reset();
+    GLuint texture = 0;
+    glCreateTextures(GL_TEXTURE_2D, 1, &texture);
+    accumulation_ = GlTexture(texture);
+    glTextureStorage2D(texture, 1, GL_RGBA32F, tw, th);
+    // texelFetch needs a complete texture: no mipmaps, so no mipmap filter.
+    glTextureParameteri(texture, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(texture, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    GLuint fbo = 0;
+    glCreateFramebuffers(1, &fbo);
+    accumulation_fbo_ = GlFramebuffer(fbo);
+    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, texture, 0);
+    if (glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+      throw Error::NotSupported("OpenGL", "an RGBA32F framebuffer of " + std::to_string(tw) + "x" + std::to_string(th) +
+                                              " is not supported");
+    }
+    CheckGlError("allocating the accumulation buffer");
+    texture_width_ = tw;
+    texture_height_ = th;
+  }
+  in_frame_ = true;
+  width_ = view.width();
+  height_ = view.height();
+  camera_position_ = view.camera().position;
+  settings_ = settings;
+  copy_direction_ = 1;
+  copy_weight_ = 1;
+
+  auto put3 = [](float (&dst)[4], const std::array<double, 3>& v) {
+    for (int a = 0; a < 3; ++a) dst[a] = static_cast<float>(v[static_cast<std::size_t>(a)]);
+    dst[3] = 0;
+  };
+  put3(uniforms_.right, view.right());
+  put3(uniforms_.up, view.up());
+  put3(uniforms_.forward, view.forward());
+  uniforms_.viewport[0] = static_cast<float>(view.width());
+  uniforms_.viewport[1] = static_cast<float>(view.height());
+  uniforms_.viewport[2] = static_cast<float>(margin_);
+  uniforms_.viewport[3] = static_cast<float>(view.focal_pixels());
+  uniforms_.limits[0] = static_cast<float>(view.camera().near);
+  uniforms_.limits[1] = static_cast<float>(std::min(view.camera().far, 1e38));
+  uniforms_.limits[2] = static_cast<float>(view.max_blob_radius());
+  uniforms_.limits[3] = static_cast<float>(1 / settings.mass_unit);
+  uniforms_.modes[0] = static_cast<std::int32_t>(settings.color);
+  uniforms_.modes[1] = static_cast<std::int32_t>(settings.interpolation);
+  uniforms_.time[0] = static_cast<float>(settings.t);
+  uniforms_.time[2] = static_cast<float>(settings.hermite_scale);
+  SetSelection(nullptr);
+  SetCopy(1, 1);
+
+  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_fbo_.get());
+  glViewport(0, 0, texture_width_, texture_height_);
+  const float zero[4] = {0, 0, 0, 0};
+  glClearNamedFramebufferfv(accumulation_fbo_.get(), GL_COLOR, 0, zero);
+}
+
+void SplatRenderer::UploadFrameUniforms() {
+  uniforms_.modes[2] = selection_on_ ? 1 : 0;
+  uniforms_.modes[3] = copy_direction_;
+  uniforms_.time[1] = static_cast<float>(copy_weight_);
+  glNamedBufferSubData(frame_uniforms_.get(), 0, sizeof uniforms_, &uniforms_);
+}
+
+void SplatRenderer::SetCopy(int direction, double weight) {
+  copy_direction_ = direction >= 0 ? 1 : -1;
+  copy_weight_ = weight;
+  UploadFrameUniforms();
+}
+
+void SplatRenderer::SetSelection(const SelectionSet* selection) {
+  selection_on_ = selection != nullptr && selection->size() > 0 && selection->buffer() != 0;
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, selection_on_ ? selection->buffer() : no_selection_.get());
+  UploadFrameUniforms();
+}
+
+void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count) {
+  if (!in_frame_) throw Error::InvalidArgument("SplatRenderer::Draw outside a frame (call BeginFrame first)");
+  if (count == 0) return;
+  if (first > block.point_count() || count > block.point_count() - first) {
+    throw Error::InvalidArgument("SplatRenderer::Draw: points [" + std::to_string(first) + ", " +
+                                 std::to_string(first + count) + ") are outside a block of " +
+                                 std::to_string(block.point_count()));
+  }
+  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_fbo_.get());
+  glViewport(0, 0, texture_width_, texture_height_);
+  glEnable(GL_BLEND);
+  glBlendEquation(GL_FUNC_ADD);
+  glBlendFunc(GL_ONE, GL_ONE);
+  glDisable(GL_DEPTH_TEST);
+  glEnable(GL_PROGRAM_POINT_SIZE);
+  glUseProgram(splat_.get());
+  glBindVertexArray(empty_vao_.get());
+  glBindBufferBase(GL_UNIFORM_BUFFER, 0, frame_uniforms_.get());
+  glBindBufferBase(GL_UNIFORM_BUFFER, 1, block.parameters());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, block.buffer());
+  // The node's corner relative to the camera, in double before the float:
+  // the precision that matters is near the camera.
+  const NodeCube& node = block.node();
+  glUniform3f(origin_location_, static_cast<float>(node.origin[0] - camera_position_[0]),
+              static_cast<float>(node.origin[1] - camera_position_[1]),
+              static_cast<float>(node.origin[2] - camera_position_[2]));
+  glUniform1ui(first_location_, first);
+  glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(count));
+}
+
+ImageStatistics SplatRenderer::Measure() {
+  std::vector<std::uint32_t> words(kStatisticsWords, 0);
+  words[1] = 0xFFFFFFFFu;  // the ordered minimum starts at the largest value
+  glNamedBufferSubData(statistics_buffer_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
+  glUseProgram(statistics_.get());
+  glBindTextureUnit(0, accumulation_.get());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, statistics_buffer_.get());
+  glProgramUniform2i(statistics_.get(), Location(statistics_, "u_offset"), margin_, margin_);
+  glProgramUniform2i(statistics_.get(), Location(statistics_, "u_size"), width_, height_);
+  glProgramUniform1i(statistics_.get(), Location(statistics_, "u_color_mode"), static_cast<GLint>(settings_.color));
+  glProgramUniform1f(statistics_.get(), Location(statistics_, "u_mass_unit"), static_cast<float>(settings_.mass_unit));
+  glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+  for (int pass = 0; pass < 2; ++pass) {
+    glProgramUniform1i(statistics_.get(), Location(statistics_, "u_pass"), pass);
+    glDispatchCompute(static_cast<GLuint>((width_ + 15) / 16), static_cast<GLuint>((height_ + 15) / 16), 1);
+    glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+  }
+  glGetNamedBufferSubData(statistics_buffer_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
+  CheckGlError("measuring the image");
+  ImageStatistics s;
+  s.max_density = std::bit_cast<float>(words[0]);
+  if (s.max_density > 0 && settings_.color != ColorMode::kDensity) {
+    s.attribute_min = Unordered(words[1]);
+    s.attribute_max = Unordered(words[2]);
+  }
+  std::copy_n(words.begin() + 4, kHistogramBins, s.density.begin());
+  std::copy_n(words.begin() + 4 + kHistogramBins, kHistogramBins, s.attribute.begin());
+  return s;
+}
+
+void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
+  const GLuint program = tone_map_.get();
+  glProgramUniform2i(program, Location(tone_map_, "u_offset"), margin_, margin_);
+  glProgramUniform2i(program, Location(tone_map_, "u_viewport_origin"), x, y);
+  glProgramUniform1f(program, Location(tone_map_, "u_mass_unit"), static_cast<float>(settings_.mass_unit));
+  glProgramUniform1i(program, Location(tone_map_, "u_curve"), p.curve == ToneCurve::kAsinh ? 1 : 0);
+  glProgramUniform1f(program, Location(tone_map_, "u_exposure"), static_cast<float>(p.exposure));
+  glProgramUniform1f(program, Location(tone_map_, "u_floor"), static_cast<float>(p.floor));
+  glProgramUniform1i(program, Location(tone_map_, "u_color_mode"), static_cast<GLint>(p.color));
+  glProgramUniform1f(program, Location(tone_map_, "u_attribute_low"), static_cast<float>(p.attribute_low));
+  glProgramUniform1f(program, Location(tone_map_, "u_attribute_high"), static_cast<float>(p.attribute_high));
+  glProgramUniform3f(program, Location(tone_map_, "u_highlight"), static_cast<float>(p.highlight[0]),
+                     static_cast<float>(p.highlight[1]), static_cast<float>(p.highlight[2]));
+  SetMap(tone_map_, "u_density_map", p.density_map);
+  SetMap(tone_map_, "u_attribute_map", p.attribute_map);
+  glDisable(GL_BLEND);
+  glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+  glUseProgram(program);
+  glBindVertexArray(empty_vao_.get());
+  glBindTextureUnit(0, accumulation_.get());
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  CheckGlError("tone mapping");
+}
+
+void SplatRenderer::ToneMapToImage(const ToneMapParameters& parameters) {
+  if (display_width_ != width_ || display_height_ != height_) {
+    display_fbo_.Reset();
+    display_.Reset();
+    GLuint texture = 0;
+    glCreateTextures(GL_TEXTURE_2D, 1, &texture);
+    display_ = GlTexture(texture);
+    glTextureStorage2D(texture, 1, GL_RGBA8, width_, height_);
+    GLuint fbo = 0;
+    glCreateFramebuffers(1, &fbo);
+    display_fbo_ = GlFramebuffer(fbo);
+    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, texture, 0);
+    CheckGlError("allocating the display image");
+    display_width_ = width_;
+    display_height_ = height_;
+  }
+  glBindFramebuffer(GL_FRAMEBUFFER, display_fbo_.get());
+  glViewport(0, 0, width_, height_);
+  ToneMap(parameters, 0, 0);
+}
+
+void SplatRenderer::ToneMapToViewport(const ToneMapParameters& parameters, int x, int y) {
+  glViewport(x, y, width_, height_);
+  ToneMap(parameters, x, y);
+}
+
+HdrImage SplatRenderer::ReadHdr() {
+  HdrImage image{width_, height_, {}};
+  std::vector<float> texels(4 * static_cast<std::size_t>(width_) * height_);
+  glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_UPDATE_BARRIER_BIT);
+  glGetTextureSubImage(accumulation_.get(), 0, margin_, margin_, 0, width_, height_, 1, GL_RGBA, GL_FLOAT,
+                       static_cast<GLsizei>(texels.size() * sizeof(float)), texels.data());
+  CheckGlError("reading the accumulation buffer");
+  image.rgba.resize(texels.size());
+  for (std::size_t i = 0; i < texels.size(); ++i) image.rgba[i] = texels[i] * settings_.mass_unit;
+  return image;
+}
+
+RgbImage SplatRenderer::ReadDisplay() {
+  RgbImage image{width_, height_, {}};
+  std::vector<std::uint8_t> rgba(4 * static_cast<std::size_t>(width_) * height_);
+  glGetTextureSubImage(display_.get(), 0, 0, 0, 0, width_, height_, 1, GL_RGBA, GL_UNSIGNED_BYTE,
+                       static_cast<GLsizei>(rgba.size()), rgba.data());
+  CheckGlError("reading the display image");
+  image.rgb.resize(3 * static_cast<std::size_t>(width_) * height_);
+  for (std::size_t p = 0; p < static_cast<std::size_t>(width_) * height_; ++p) {
+    for (int c = 0; c < 3; ++c) image.rgb[3 * p + static_cast<std::size_t>(c)] = rgba[4 * p + static_cast<std::size_t>(c)];
+  }
+  return image;
+}
+
+void SplatRenderer::Finish() { glFinish(); }
+
+}  // namespace octocosm

@@ -1,0 +1,111 @@
+// The GPU half of the renderer: blobs into a float accumulation buffer, image
+// statistics, tone mapping, read-back. The CPU hands it blocks and ranges of
+// points (render/scene_renderer.h decides which); the shaders decode, move
+// (time interpolation), project, size, weigh, highlight and accumulate every
+// point. Needs a current OpenGL 4.5 core context (render/gl_context.h) for
+// its whole life.
+//
+// Accumulation: an RGBA32F texture (render/image.h gives the channels) larger
+// than the image by a guard margin on every side (render/splat_kernel.h
+// GuardMargin), because GL discards a point whose centre is outside the
+// viewport; blending adds, so the result does not depend on drawing order
+// beyond float rounding. Weights are divided by a mass unit on the GPU so
+// that pixel sums stay in a comfortable float range whatever the simulation's
+// mass units; every read-back multiplies it out again.
+#pragma once
+
+#include <cstdint>
+
+#include "render/gl_objects.h"
+#include "render/gpu_block.h"
+#include "render/image.h"
+#include "render/render_view.h"
+#include "render/selection_set.h"
+#include "render/tone_map.h"
+
+namespace octocosm {
+
+// How points move between two epochs (shaders/splat_vert.glsl).
+enum class Interpolation {
+  kNone,     // drawn where they are
+  kLinear,   // p + t d (forward copy), p' + (1 - t) d' (backward copy)
+  kHermite,  // the cubic Hermite curve with tangents scale * v at both ends
+};
+
+struct FrameSettings {
+  ColorMode color = ColorMode::kDensity;
+  double mass_unit = 1;  // > 0: the GPU accumulates mass / mass_unit
+  Interpolation interpolation = Interpolation::kNone;
+  double t = 0;              // in [0, 1]
+  double hermite_scale = 0;  // velocity -> displacement per interval (the ingest's fit)
+};
+
+class SplatRenderer {
+ public:
+  SplatRenderer();
+
+  // The largest blob radius this GL implementation can draw (its point size limit).
+  double max_blob_radius() const { return max_blob_radius_; }
+
+  // Starts a frame: sizes the accumulation buffer for the view and clears it.
+  // Throws Error::InvalidArgument when the view's largest blob radius exceeds
+  // max_blob_radius() or a setting is out of range.
+  void BeginFrame(const RenderView& view, const FrameSettings& settings);
+  // Which copy the next draws are, when interpolating: +1 the earlier epoch
+  // moving forward, -1 the later epoch moving back; `weight` scales their mass.
+  void SetCopy(int direction, double weight);
+  // Highlights the points whose ID is in `selection` (null: none). The
+  // selection must be uploaded and outlive the frame's draws.
+  void SetSelection(const SelectionSet* selection);
+  // Draws points [first, first + count) of `block`.
+  void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count);
+
+  // ImageStatistics of the frame so far (two compute passes, 8 KiB read back).
+  ImageStatistics Measure();
+  // Tone maps the frame into the internal display image (ReadDisplay), or
+  // into the viewport at (x, y) of the framebuffer bound for drawing.
+  void ToneMapToImage(const ToneMapParameters& parameters);
+  void ToneMapToViewport(const ToneMapParameters& parameters, int x, int y);
+
+  HdrImage ReadHdr();
+  RgbImage ReadDisplay();
+  // Waits until the GPU has finished every command (for timing).
+  void Finish();
+
+ private:
+  void UploadFrameUniforms();
+  void ToneMap(const ToneMapParameters& parameters, int x, int y);
+
+  GlProgram splat_;
+  GlProgram tone_map_;
+  GlProgram statistics_;
+  GlVertexArray empty_vao_;
+  GlBuffer frame_uniforms_;
+  GlBuffer statistics_buffer_;
+  GlBuffer no_selection_;
+  GlTexture accumulation_;
+  GlFramebuffer accumulation_fbo_;
+  GlTexture display_;
+  GlFramebuffer display_fbo_;
+  int texture_width_ = 0, texture_height_ = 0;
+  int display_width_ = 0, display_height_ = 0;
+  int margin_ = 0;
+  double max_blob_radius_ = 0;
+
+  // The current frame.
+  bool in_frame_ = false;
+  int width_ = 0, height_ = 0;
+  std::array<double, 3> camera_position_{};
+  FrameSettings settings_;
+  int copy_direction_ = 1;
+  double copy_weight_ = 1;
+  bool selection_on_ = false;
+  struct FrameUniforms {
+    float right[4], up[4], forward[4], viewport[4], limits[4];
+    std::int32_t modes[4];
+    float time[4];
+  } uniforms_{};
+  GLint origin_location_ = -1, first_location_ = -1;
+};
+
+}  // namespace octocosm
