@@ -15,5 +15,6 @@ void AddVerifyCommand(CLI::App& app);
 void AddSynthCommand(CLI::App& app);
 void AddQueryCommand(CLI::App& app);
 void AddFollowCommand(CLI::App& app);
+void AddRenderCommand(CLI::App& app);
 
 }  // namespace octocosm

@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
   octocosm::AddSynthCommand(app);
   octocosm::AddQueryCommand(app);
   octocosm::AddFollowCommand(app);
+  octocosm::AddRenderCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,36 @@
+#include "tools/read_flags.h"
+
+#include <CLI/CLI.hpp>
+
+#include "tools/cli_util.h"
+
+namespace octocosm {
+
+void AddReadFlags(CLI::App& command, ReadFlags& flags) {
+  command.add_option("--box-size", flags.box_size, "periodic box size, overriding the header's (0 = not periodic)");
+  command.add_option("--types", flags.types, "particle types to read, e.g. '1,2' (default: all)");
+  command.add_option("--format", flags.format, "input format")
+      ->check(CLI::IsMember({"auto", "gadget", "hdf5", "raw", "csv"}))
+      ->default_val("auto");
+  command.add_option("--raw-layout", flags.raw_layout, "record layout of raw binary input, e.g. 'xyz:f32,vel:f32x3,id:u64'");
+  command.add_option("--chunk-particles", flags.chunk_particles, "particles read per batch (small batches stay in CPU caches)")
+      ->default_val(std::size_t{1} << 16);
+  command.add_flag("--no-velocity", flags.no_velocity, "do not read velocities");
+  command.add_flag("--no-ids", flags.no_ids, "do not read particle IDs");
+}
+
+ReadOptions ReadOptionsFrom(const ReadFlags& flags) {
+  ReadOptions read;
+  read.format = flags.format;
+  read.read_velocity = !flags.no_velocity;
+  read.read_id = !flags.no_ids;
+  read.chunk_particles = flags.chunk_particles;
+  read.box_size_override = flags.box_size;
+  if (!flags.raw_layout.empty()) read.raw = RawLayout::Parse(flags.raw_layout);
+  if (!flags.types.empty()) {
+    for (double t : ParseNumberList(flags.types, "--types")) read.types.push_back(static_cast<int>(t));
+  }
+  return read;
+}
+
+}  // namespace octocosm
