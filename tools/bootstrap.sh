@@ -23,6 +23,8 @@ packages=(
   xvfb xauth
   # accuracy cross-checks against the Point Cloud Library
   libpcl-dev
+  # benchmarks draw their plots with gnuplot
+  gnuplot-nox
 )
 
 install_packages() {

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "storage/error.h"
@@ -93,6 +94,31 @@ void WritePfm(const std::string& path, const HdrImage& image) {
     }
     return true;
   });
+}
+
+HdrImage ReadPfm(const std::string& path) {
+  File file(std::fopen(path.c_str(), "rb"));
+  if (!file) throw Error::NotFound(path + ": cannot open the image");
+  char magic[3] = {};
+  int width = 0, height = 0;
+  double scale = 0;
+  if (std::fscanf(file.get(), "%2s %d %d %lf", magic, &width, &height, &scale) != 4 || std::string(magic) != "Pf" ||
+      std::fgetc(file.get()) != '\n') {
+    throw Error::BadInput(path, "not a greyscale PFM file (expected 'Pf', width, height, scale)");
+  }
+  if (width < 1 || height < 1 || width > 65536 || height > 65536 || !(scale < 0)) {
+    throw Error::BadInput(path, "a PFM of " + std::to_string(width) + "x" + std::to_string(height) + ", scale " +
+                                    std::to_string(scale) + ": only little-endian images up to 65536 pixels a side are read");
+  }
+  HdrImage image{width, height, std::vector<double>(4 * static_cast<std::size_t>(width) * height, 0.0)};
+  std::vector<float> row(static_cast<std::size_t>(width));
+  for (int j = 0; j < height; ++j) {
+    if (std::fread(row.data(), sizeof(float), row.size(), file.get()) != row.size()) {
+      throw Error::BadInput(path, "truncated: row " + std::to_string(j) + " of " + std::to_string(height) + " is missing");
+    }
+    for (int i = 0; i < width; ++i) image.rgba[4 * (static_cast<std::size_t>(j) * width + i)] = row[static_cast<std::size_t>(i)];
+  }
+  return image;
 }
 
 RgbImage ReadPng(const std::string& path) {

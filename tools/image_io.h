@@ -14,6 +14,10 @@ void WritePng(const std::string& path, const RgbImage& image);
 // Greyscale PFM ("Pf", little endian, rows bottom to top as PFM has them) of
 // channel 0 of the accumulation: mass per pixel.
 void WritePfm(const std::string& path, const HdrImage& image);
+// Reads a greyscale little-endian PFM (as WritePfm writes) into channel 0 of
+// an accumulation image (the other channels 0). Throws Error::NotFound /
+// Error::BadInput naming the file.
+HdrImage ReadPfm(const std::string& path);
 // Reads a PNG written by WritePng (8-bit RGB or RGBA), for tests and tools.
 // Throws Error::NotFound / Error::BadInput naming the file.
 RgbImage ReadPng(const std::string& path);

@@ -76,8 +76,10 @@ struct CellMass {
 
 }  // namespace
 
-HdrImage RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input, const RenderView& view,
-                         const ReferenceRenderOptions& options, ReferenceRenderStats* stats) {
+std::vector<HdrImage> RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input,
+                                      std::span<const RenderView> views, const ReferenceRenderOptions& options,
+                                      ReferenceRenderStats* stats) {
+  if (views.empty()) return {};
   const auto start = std::chrono::steady_clock::now();
   const unsigned threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   const LeafCells cells(dataset, epoch, input);
@@ -119,12 +121,14 @@ HdrImage RenderReference(const Dataset& dataset, std::uint32_t epoch, const std:
   }
   pairs = {};
 
-  // Pass 2: draw, each thread into its own rasterizer.
-  std::vector<ReferenceRasterizer> rasterizers(threads, ReferenceRasterizer(view));
+  // Pass 2: draw, each thread into its own rasterizer per view.
+  std::vector<std::vector<ReferenceRasterizer>> rasterizers(threads);
+  for (auto& per_thread : rasterizers) {
+    for (const RenderView& view : views) per_thread.emplace_back(view);
+  }
   source->Rewind();
   while (source->Next(chunk)) {
     ParallelRanges(chunk.size(), threads, [&](unsigned part, std::size_t begin, std::size_t end) {
-      ReferenceRasterizer& r = rasterizers[part];
       for (std::size_t i = begin; i < end; ++i) {
         double p[3] = {chunk.position[3 * i], chunk.position[3 * i + 1], chunk.position[3 * i + 2]};
         cells.cube().Wrap(p);
@@ -132,22 +136,33 @@ HdrImage RenderReference(const Dataset& dataset, std::uint32_t epoch, const std:
         const std::uint64_t key = cells.CellKey(p, &leaf);
         const double cell_mass = masses[static_cast<std::size_t>(std::lower_bound(keys.begin(), keys.end(), key) - keys.begin())];
         const double h = cells.SmoothingLength(leaf, chunk.mass[i], cell_mass);
-        const double a = options.color == ColorMode::kDensity
-                             ? 0.0
-                             : PointAttribute(options.color, chunk.has_velocity() ? &chunk.velocity[3 * i] : nullptr,
-                                              chunk.type[i], view);
         const bool selected = options.selection && chunk.has_id() && options.selection->Contains(chunk.id[i]);
-        r.Add(p, chunk.mass[i], h, a, selected);
+        for (std::size_t v = 0; v < views.size(); ++v) {
+          const double a = options.color == ColorMode::kDensity
+                               ? 0.0
+                               : PointAttribute(options.color, chunk.has_velocity() ? &chunk.velocity[3 * i] : nullptr,
+                                                chunk.type[i], views[v]);
+          rasterizers[part][v].Add(p, chunk.mass[i], h, a, selected);
+        }
       }
     });
   }
-  for (unsigned t = 1; t < threads; ++t) rasterizers[0].Merge(rasterizers[t]);
+  std::vector<HdrImage> images;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    for (unsigned t = 1; t < threads; ++t) rasterizers[0][v].Merge(rasterizers[t][v]);
+    images.push_back(rasterizers[0][v].image());
+  }
   if (stats) {
     stats->particles = particles;
-    stats->points_drawn = rasterizers[0].points_drawn();
+    stats->points_drawn = rasterizers[0][0].points_drawn();
     stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
-  return rasterizers[0].image();
+  return images;
+}
+
+HdrImage RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input, const RenderView& view,
+                         const ReferenceRenderOptions& options, ReferenceRenderStats* stats) {
+  return std::move(RenderReference(dataset, epoch, input, std::span<const RenderView>(&view, 1), options, stats)[0]);
 }
 
 }  // namespace octocosm

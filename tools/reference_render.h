@@ -15,7 +15,9 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "index/dataset.h"
 #include "render/image.h"
@@ -39,10 +41,15 @@ struct ReferenceRenderStats {
   double seconds = 0;
 };
 
-// Renders snapshot `input` as epoch `epoch` of `dataset`. Throws
-// Error::BadInput (naming the snapshot) when a particle lies where the store
-// has no leaf, i.e. the snapshot is not the one the epoch was ingested from,
-// or was read with other flags; Error from the readers otherwise.
+// Renders snapshot `input` as epoch `epoch` of `dataset`, one image per
+// view from the same two passes. Throws Error::BadInput (naming the
+// snapshot) when a particle lies where the store has no leaf, i.e. the
+// snapshot is not the one the epoch was ingested from, or was read with
+// other flags; Error from the readers otherwise. `stats` counts points drawn
+// in the first view.
+std::vector<HdrImage> RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input,
+                                      std::span<const RenderView> views, const ReferenceRenderOptions& options,
+                                      ReferenceRenderStats* stats = nullptr);
 HdrImage RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input, const RenderView& view,
                          const ReferenceRenderOptions& options, ReferenceRenderStats* stats = nullptr);
 

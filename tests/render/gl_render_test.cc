@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "index/particle_lookup.h"
+#include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
 #include "render/reference_rasterizer.h"
 #include "tests/support/temp_dir.h"
@@ -108,13 +109,6 @@ double RelativeL1(const HdrImage& a, const HdrImage& b, int channel = 0) {
     norm += std::fabs(b.rgba[i]);
   }
   return diff / norm;
-}
-
-double Psnr(const DisplayImage& a, const DisplayImage& b) {
-  double se = 0;
-  for (std::size_t i = 0; i < a.rgb.size(); ++i) se += (a.rgb[i] - b.rgb[i]) * (a.rgb[i] - b.rgb[i]);
-  const double mse = se / static_cast<double>(a.rgb.size());
-  return mse > 0 ? 10 * std::log10(1 / mse) : 200;
 }
 
 // At full detail the GPU draws every particle, from 16-bit node-relative

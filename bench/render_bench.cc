@@ -1,0 +1,349 @@
+// octocosm-bench-render: run time against error (issue 5, section 9).
+//
+// On a generated clustered set (default 10^8 points, `octocosm synth scale`,
+// ingested with the default options), three views at 1280x720 — the whole
+// box, a mid zoom onto the densest halo, a deep zoom into it — are drawn:
+//   - by the reference renderer (every particle of the snapshot, on the CPU,
+//     in double precision: `octocosm render --reference`), timed;
+//   - by the GPU renderer at full detail (every leaf in view), timed;
+//   - by the GPU renderer at every pixel threshold x point budget of the
+//     sweep, cold (block cache and OS page cache dropped) and warm (blocks on
+//     the GPU), with points drawn, bytes read, and PSNR and SSIM of the picture
+//     against the reference's, both tone mapped with the reference's exposure.
+// It prints a table, writes it as CSV, and draws error against time with
+// gnuplot (Debian's gnuplot-nox) as render_bench.png. Optionally: the frame
+// time with 10^6 selected IDs against none.
+//
+// Generated data, the store and the reference images stay in --dir and are
+// reused by later runs (delete them to start afresh).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "index/node_hierarchy.h"
+#include "render/image_metrics.h"
+#include "render/offscreen_renderer.h"
+#include "storage/error.h"
+#include "tools/camera_flags.h"
+#include "tools/cli_util.h"
+#include "tools/image_io.h"
+#include "tools/ingest/ingest.h"
+#include "tools/reference_render.h"
+#include "tools/synth/scale_generator.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Flags {
+  std::string dir = "render-bench";
+  double points = 1e8;
+  double box = 500;
+  int width = 1280, height = 720;
+  std::string thresholds = "8,4,2,1,0.5", budgets = "0,1e6,4e6", views = "overview,mid,deep";
+  std::string backend = "osmesa";
+  bool full = true, selection = false, prepare_only = false;
+  unsigned threads = 0;
+};
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+struct NamedView {
+  std::string name;
+  Camera camera;
+};
+
+// The densest leaf (most points per volume among leaves that are at least an
+// eighth full): the core of the most concentrated halo.
+std::array<double, 3> DensestLeafCentre(const Dataset& dataset) {
+  const NodeHierarchy h = NodeHierarchy::Load(dataset, 0);
+  const Cube& cube = dataset.cube(0);
+  double best = -1;
+  std::array<double, 3> centre{};
+  for (const NodeHierarchy::Node& n : h.nodes()) {
+    if (!n.is_leaf() || n.entry.point_count * 8 < dataset.capacity()) continue;
+    const NodeCube c = cube.NodeCubeOf(n.key);
+    const double density = static_cast<double>(n.entry.point_count) / (c.size * c.size * c.size);
+    if (density > best) {
+      best = density;
+      centre = {c.origin[0] + c.size / 2, c.origin[1] + c.size / 2, c.origin[2] + c.size / 2};
+    }
+  }
+  return centre;
+}
+
+std::vector<NamedView> Views(const Dataset& dataset, const std::vector<std::string>& names) {
+  const Cube& cube = dataset.cube(0);
+  const std::array<double, 3> halo = DensestLeafCentre(dataset);
+  std::vector<NamedView> views;
+  for (const std::string& name : names) {
+    Camera c;
+    c.fov_y_degrees = 60;
+    if (name == "overview") {
+      c.position = OverviewPosition(cube, c.fov_y_degrees);
+      c.look_at = {cube.origin[0] + cube.size / 2, cube.origin[1] + cube.size / 2, cube.origin[2] + cube.size / 2};
+    } else if (name == "mid" || name == "deep") {
+      // A halo seen slightly from above, from 6% or 0.6% of the box away.
+      const double distance = cube.size * (name == "mid" ? 0.06 : 0.006);
+      c.look_at = halo;
+      c.position = {halo[0] + 0.3 * distance, halo[1] + 0.4 * distance, halo[2] + 0.866 * distance};
+    } else {
+      throw Error::InvalidArgument("--views: unknown view '" + name + "' (overview, mid, deep)");
+    }
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) d2 += (c.position[a] - c.look_at[a]) * (c.position[a] - c.look_at[a]);
+    c.near = std::sqrt(d2) * 1e-4;
+    c.far = std::sqrt(d2) + 2 * cube.size;
+    views.push_back({name, c});
+  }
+  return views;
+}
+
+std::vector<std::string> Split(const std::string& text) {
+  std::vector<std::string> parts;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = text.find(',', start);
+    parts.push_back(text.substr(start, comma == std::string::npos ? std::string::npos : comma - start));
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return parts;
+}
+
+struct Row {
+  std::string view, mode;
+  double threshold = 0;
+  std::uint64_t budget = 0, points = 0, nodes = 0, bytes = 0;
+  double cold = 0, warm = 0, psnr = 0, ssim = 0;
+};
+
+// Renders `view` twice with fresh caches: cold (nothing in memory, the OS
+// page cache of the store dropped) and warm (every block on the GPU).
+Row Measure(const Dataset& dataset, const SceneOptions& options, const RenderView& view, HeadlessBackend backend,
+            const ToneMapParameters& tone, const DisplayImage& reference) {
+  dataset.store().DropCaches();
+  OffscreenRenderer renderer(dataset, backend, options);
+  ToneMapSettings settings;
+  settings.exposure = tone.exposure;
+  const Picture cold = renderer.Render(view, 0, settings, false);
+  const std::uint64_t bytes = renderer.scene().disk_reads().bytes;
+  const Picture warm = renderer.Render(view, 0, settings, true);
+  Row row;
+  row.points = warm.stats.points_drawn;
+  row.nodes = warm.stats.nodes_selected;
+  row.bytes = bytes;
+  row.cold = cold.seconds;
+  row.warm = warm.seconds;
+  const DisplayImage picture = ToneMap(*warm.hdr, tone);
+  row.psnr = Psnr(picture, reference);
+  row.ssim = Ssim(picture, reference);
+  return row;
+}
+
+void PrintRow(const Row& r) {
+  std::printf("%-9s %-6s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f\n", r.view.c_str(), r.mode.c_str(),
+              r.threshold, static_cast<unsigned long long>(r.budget), static_cast<unsigned long long>(r.points),
+              static_cast<unsigned long long>(r.nodes), HumanBytes(static_cast<double>(r.bytes)).c_str(), r.cold, r.warm,
+              r.psnr, r.ssim);
+  std::fflush(stdout);
+}
+
+void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<NamedView>& views) {
+  const fs::path data = dir / "render_bench.csv", script = dir / "render_bench.gp", png = dir / "render_bench.png";
+  {
+    std::ofstream csv(data);
+    csv << "view,mode,threshold,budget,points,nodes,bytes_read,cold_s,warm_s,psnr_db,ssim\n";
+    for (const Row& r : rows) {
+      csv << r.view << ',' << r.mode << ',' << r.threshold << ',' << r.budget << ',' << r.points << ',' << r.nodes << ','
+          << r.bytes << ',' << r.cold << ',' << r.warm << ',' << r.psnr << ',' << r.ssim << '\n';
+    }
+  }
+  std::ofstream gp(script);
+  gp << "set terminal pngcairo size 1400,560 font ',11'\nset output '" << png.string() << "'\n"
+     << "set datafile separator ','\nset logscale x\nset grid\nset key bottom right\nset key autotitle columnhead\n"
+     << "set multiplot layout 1,2 title 'octocosm: level of detail against the reference (all particles, CPU)'\n"
+     << "set xlabel 'frame time, warm (s)'\nset ylabel 'PSNR (dB)'\nset arrow from graph 0, first 40 to graph 1, first 40 nohead dt 2\n";
+  auto series = [&](const char* column) {
+    std::string plot = "plot ";
+    for (std::size_t v = 0; v < views.size(); ++v) {
+      if (v) plot += ", ";
+      const std::string name = "'" + views[v].name + "'";
+      plot += "'" + data.string() + "' using (strcol(1) eq " + name + " && strcol(2) eq 'lod' ? $9 : 1/0):" + column +
+              " with points pt 7 ps 1.2 lc " + std::to_string(v + 1) + " title " + name + ", '" + data.string() +
+              "' using (strcol(1) eq " + name + " && strcol(2) eq 'full' ? $9 : 1/0):" + column + " with points pt 6 ps 2.5 lc " +
+              std::to_string(v + 1) + " title " + "'" + views[v].name + ", full detail'";
+    }
+    return plot + "\n";
+  };
+  gp << series("10");
+  gp << "unset arrow\nset ylabel 'SSIM'\nset arrow from graph 0, first 0.98 to graph 1, first 0.98 nohead dt 2\n" << series("11");
+  gp << "unset multiplot\n";
+  gp.close();
+  const std::string command = "gnuplot " + script.string() + " 2>&1";
+  if (std::system(command.c_str()) != 0) {
+    std::printf("plot: gnuplot failed or is missing (install gnuplot-nox); data in %s, script in %s\n", data.c_str(),
+                script.c_str());
+  } else {
+    std::printf("plot: %s (data %s)\n", png.c_str(), data.c_str());
+  }
+}
+
+void Run(const Flags& f) {
+  const fs::path dir = f.dir;
+  fs::create_directories(dir);
+  const HeadlessBackend backend = ParseHeadlessBackend(f.backend);
+  const std::string snapshot = (dir / "snap" / "snap").string();
+  if (!fs::exists(dir / "snap" / "snap.0")) {
+    synth::ScaleOptions s;
+    s.output_directory = (dir / "snap").string();
+    s.particle_count = static_cast<std::uint64_t>(f.points);
+    s.box_size_mpc_h = f.box;
+    const auto start = std::chrono::steady_clock::now();
+    synth::RunScaleGenerator(s);
+    std::printf("generated %.3g points in %.1f s\n", f.points, Seconds(start));
+  }
+  const fs::path store = dir / "store";
+  if (!fs::exists(store / "manifest.json")) {
+    IngestOptions o;
+    o.inputs = {snapshot};
+    o.output = store.string();
+    o.quiet = true;
+    const IngestReport report = Ingest(o);
+    std::printf("ingested %llu points in %.1f s\n", static_cast<unsigned long long>(report.input_points), report.seconds);
+  }
+  const Dataset dataset = Dataset::Open(store.string());
+  const std::vector<NamedView> views = Views(dataset, Split(f.views));
+  std::vector<RenderView> render_views;
+  for (const NamedView& v : views) render_views.emplace_back(v.camera, f.width, f.height);
+
+  // The reference pictures, rendered once and kept.
+  std::vector<HdrImage> references(views.size());
+  bool missing = false;
+  for (std::size_t v = 0; v < views.size(); ++v) missing |= !fs::exists(dir / ("reference-" + views[v].name + ".pfm"));
+  double reference_seconds = 0;
+  if (missing) {
+    ReferenceRenderOptions options;
+    options.threads = f.threads;
+    ReferenceRenderStats stats;
+    references = RenderReference(dataset, 0, snapshot, render_views, options, &stats);
+    reference_seconds = stats.seconds / static_cast<double>(views.size());
+    std::ofstream(dir / "reference-seconds.txt") << reference_seconds << "\n";
+    for (std::size_t v = 0; v < views.size(); ++v) WritePfm((dir / ("reference-" + views[v].name + ".pfm")).string(), references[v]);
+  } else {
+    for (std::size_t v = 0; v < views.size(); ++v) references[v] = ReadPfm((dir / ("reference-" + views[v].name + ".pfm")).string());
+    std::ifstream(dir / "reference-seconds.txt") >> reference_seconds;
+  }
+  std::printf("reference: %llu points, %.1f s a view on the CPU\n", static_cast<unsigned long long>(dataset.points(0)),
+              reference_seconds);
+  if (f.prepare_only) return;
+
+  std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s\n", "view", "mode", "threshold", "budget", "points",
+              "nodes", "read", "cold s", "warm s", "PSNR", "SSIM");
+  std::vector<Row> rows;
+  const std::vector<std::string> thresholds = Split(f.thresholds), budgets = Split(f.budgets);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    const ToneMapParameters tone = ResolveToneMap({}, MeasureImage(references[v], ColorMode::kDensity));
+    const DisplayImage reference = ToneMap(references[v], tone);
+    WritePng((dir / ("reference-" + views[v].name + ".png")).string(), ToBytes(reference));
+    if (f.full) {
+      SceneOptions options;
+      options.lod.pixel_threshold = 1e-9;
+      options.gpu_cache_bytes = std::size_t{64} << 30;
+      Row row = Measure(dataset, options, render_views[v], backend, tone, reference);
+      row.view = views[v].name;
+      row.mode = "full";
+      rows.push_back(row);
+      PrintRow(row);
+    }
+    for (const std::string& t : thresholds) {
+      for (const std::string& b : budgets) {
+        SceneOptions options;
+        options.lod.pixel_threshold = std::stod(t);
+        options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
+        Row row = Measure(dataset, options, render_views[v], backend, tone, reference);
+        row.view = views[v].name;
+        row.mode = "lod";
+        row.threshold = options.lod.pixel_threshold;
+        row.budget = options.lod.point_budget;
+        rows.push_back(row);
+        PrintRow(row);
+      }
+    }
+  }
+  std::printf("\nreference: %.1f s a view (CPU, all points, double precision)\n", reference_seconds);
+  std::printf("targets: PSNR >= 40 dB and SSIM >= 0.98 at >= 20x less time than the full rendering\n");
+  for (const NamedView& v : views) {
+    const Row* full = nullptr;
+    const Row* best = nullptr;  // fastest LOD row meeting the quality targets
+    for (const Row& r : rows) {
+      if (r.view != v.name) continue;
+      if (r.mode == "full") full = &r;
+      if (r.mode == "lod" && r.psnr >= 40 && r.ssim >= 0.98 && (!best || r.warm < best->warm)) best = &r;
+    }
+    if (!best) {
+      std::printf("  %-9s no level of detail in the sweep meets PSNR 40 dB and SSIM 0.98\n", v.name.c_str());
+      continue;
+    }
+    std::printf("  %-9s threshold %g, budget %llu: PSNR %.1f dB, SSIM %.4f, %.3f s warm", v.name.c_str(), best->threshold,
+                static_cast<unsigned long long>(best->budget), best->psnr, best->ssim, best->warm);
+    if (full) std::printf(": %.1fx less than the full GPU rendering (%.2f s)", full->warm / best->warm, full->warm);
+    std::printf(", %.0fx less than the reference\n", reference_seconds / best->warm);
+  }
+  Plot(dir, rows, views);
+
+  if (f.selection) {
+    // The selection's cost: the same frame with 10^6 IDs highlighted.
+    std::vector<std::uint64_t> ids;
+    for (std::uint64_t id = 1; ids.size() < 1000000; id += 2) ids.push_back(id);
+    SceneOptions options;
+    options.lod.pixel_threshold = 1;
+    OffscreenRenderer renderer(dataset, backend, options);
+    const RenderView& view = render_views[0];
+    renderer.Render(view, 0, {}, false);
+    const double plain = renderer.Render(view, 0, {}, false).seconds;
+    renderer.scene().SetSelection(ids);
+    renderer.Render(view, 0, {}, false);  // reads the ID column
+    const double selected = renderer.Render(view, 0, {}, false).seconds;
+    std::printf("selection: %s, threshold 1: %.3f s without, %.3f s with 10^6 IDs (%+.1f%%)\n", views[0].name.c_str(),
+                plain, selected, 100 * (selected / plain - 1));
+  }
+}
+
+}  // namespace
+}  // namespace octocosm
+
+int main(int argc, char** argv) {
+  octocosm::Flags f;
+  CLI::App app{"octocosm-bench-render: frame time, bytes read, PSNR and SSIM of levels of detail against the reference"};
+  app.add_option("--dir", f.dir, "working directory: generated snapshot, store, reference images, results (reused)");
+  app.add_option("--points", f.points, "particles of the generated set")->default_val(1e8);
+  app.add_option("--box", f.box, "box side of the generated set, Mpc/h")->default_val(500);
+  app.add_option("--width", f.width, "image width")->default_val(1280);
+  app.add_option("--height", f.height, "image height")->default_val(720);
+  app.add_option("--thresholds", f.thresholds, "pixel thresholds of the sweep")->default_val("8,4,2,1,0.5");
+  app.add_option("--budgets", f.budgets, "point budgets of the sweep (0: none)")->default_val("0,1e6,4e6");
+  app.add_option("--views", f.views, "views: overview, mid, deep")->default_val("overview,mid,deep");
+  app.add_option("--backend", f.backend, "osmesa or egl")->default_val("osmesa");
+  app.add_option("--threads", f.threads, "threads of the reference renderer (default: all)");
+  app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");
+  app.add_flag("--selection", f.selection, "also time a frame with 10^6 selected IDs");
+  app.add_flag("--prepare-only", f.prepare_only, "generate, ingest and render the references, then stop (no timings)");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    octocosm::Run(f);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "octocosm-bench-render: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
