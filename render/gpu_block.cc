@@ -3,6 +3,8 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <optional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -16,6 +18,46 @@ namespace {
 constexpr auto kNextVelocityColumn = static_cast<ColumnId>(8);
 constexpr auto kPrevDisplacementColumn = static_cast<ColumnId>(9);
 constexpr auto kPrevVelocityColumn = static_cast<ColumnId>(10);
+
+// Attribute locations of shaders/splat_vert.glsl.
+enum Attribute : GLuint {
+  kPositionAttribute = 0,
+  kWeightAttribute,
+  kSmoothingAttribute,
+  kTypeAttribute,
+  kVelocityAttribute,
+  kIdAttribute,
+  kDisplacementAttribute,
+  kNextVelocityAttribute,
+  kPrevDisplacementAttribute,
+  kPrevVelocityAttribute,
+};
+
+// How a column is read as a vertex attribute.
+struct AttributeFormat {
+  GLuint location;
+  GLint components;
+  GLenum type;
+  bool integer;  // glVertexArrayAttribIFormat (uint in the shader) or float
+  GLsizei stride;
+};
+
+std::optional<AttributeFormat> FormatOf(ColumnId id) {
+  switch (id) {
+    case ColumnId::kPosition: return AttributeFormat{kPositionAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+    case ColumnId::kWeight: return AttributeFormat{kWeightAttribute, 1, GL_UNSIGNED_INT, true, 4};
+    case ColumnId::kSmoothing: return AttributeFormat{kSmoothingAttribute, 1, GL_UNSIGNED_SHORT, false, 2};
+    case ColumnId::kType: return AttributeFormat{kTypeAttribute, 1, GL_UNSIGNED_BYTE, true, 1};
+    case ColumnId::kVelocity: return AttributeFormat{kVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+    case ColumnId::kId: return AttributeFormat{kIdAttribute, 2, GL_UNSIGNED_INT, true, 8};
+    case ColumnId::kDisplacement: return AttributeFormat{kDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+    default: break;
+  }
+  if (id == kNextVelocityColumn) return AttributeFormat{kNextVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+  if (id == kPrevDisplacementColumn) return AttributeFormat{kPrevDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+  if (id == kPrevVelocityColumn) return AttributeFormat{kPrevVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+  return std::nullopt;
+}
 
 // The uniform block "Block" of shaders/splat_vert.glsl, std140.
 struct BlockUniforms {
@@ -52,10 +94,11 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
   }
   u.node[0] = static_cast<float>(node.size / 65536.0);
 
-  // Columns at 16-byte boundaries; offsets in 32-bit words for the shader.
+  // Columns at 16-byte boundaries.
   std::size_t total = 0;
   for (const BlockColumn& c : header.columns) total += (c.length + 15) / 16 * 16;
   std::vector<std::uint8_t> staging(total, 0);
+  std::vector<std::pair<ColumnId, std::size_t>> offsets;  // where each column landed
   std::size_t at = 0;
   for (const BlockColumn& c : header.columns) {
     if (c.offset > bytes.size() || c.length > bytes.size() - c.offset) {
@@ -63,38 +106,40 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
                                          std::to_string(bytes.size()) + " bytes");
     }
     if (c.length > 0) std::memcpy(staging.data() + at, bytes.data() + c.offset, static_cast<std::size_t>(c.length));
-    const auto word = static_cast<std::int32_t>(at / 4);
+    // The shader only asks whether a column is present (>= 0).
+    constexpr std::int32_t kPresent = 0;
     block.columns_ |= ColumnBit(c.id);
+    offsets.emplace_back(c.id, at);
     switch (c.id) {
-      case ColumnId::kPosition: u.columns[0][0] = word; break;
+      case ColumnId::kPosition: u.columns[0][0] = kPresent; break;
       case ColumnId::kWeight:
-        u.columns[0][1] = word;
+        u.columns[0][1] = kPresent;
         u.node[1] = static_cast<float>(ParamF64(c, 0));
         break;
       case ColumnId::kSmoothing:
-        u.columns[0][2] = word;
+        u.columns[0][2] = kPresent;
         u.node[2] = static_cast<float>(std::log2(node.size) + ParamF32(c, 0));
         u.node[3] = 1.0f / ParamF32(c, 4);
         break;
-      case ColumnId::kType: u.columns[0][3] = word; break;
+      case ColumnId::kType: u.columns[0][3] = kPresent; break;
       case ColumnId::kVelocity:
-        u.columns[1][0] = word;
+        u.columns[1][0] = kPresent;
         SetRange(c, u.ranges[0]);
         break;
-      case ColumnId::kId: u.columns[1][1] = word; break;
+      case ColumnId::kId: u.columns[1][1] = kPresent; break;
       case ColumnId::kDisplacement:
-        u.columns[1][2] = word;
+        u.columns[1][2] = kPresent;
         SetRange(c, u.ranges[1]);
         break;
       default:
         if (c.id == kNextVelocityColumn) {
-          u.columns[1][3] = word;
+          u.columns[1][3] = kPresent;
           SetRange(c, u.ranges[2]);
         } else if (c.id == kPrevDisplacementColumn) {
-          u.columns[2][0] = word;
+          u.columns[2][0] = kPresent;
           SetRange(c, u.ranges[3]);
         } else if (c.id == kPrevVelocityColumn) {
-          u.columns[2][1] = word;
+          u.columns[2][1] = kPresent;
           SetRange(c, u.ranges[4]);
         }
         break;
@@ -108,6 +153,22 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
   }
   block.buffer_ = MakeGlBuffer(at, staging.data(), 0);
   block.parameters_ = MakeGlBuffer(sizeof u, &u, 0);
+  GLuint vao = 0;
+  glCreateVertexArrays(1, &vao);
+  block.vertex_array_ = GlVertexArray(vao);
+  for (const auto& [id, offset] : offsets) {
+    const std::optional<AttributeFormat> f = FormatOf(id);
+    if (!f) continue;  // a column the renderer does not draw with
+    glVertexArrayVertexBuffer(vao, f->location, block.buffer_.get(), static_cast<GLintptr>(offset), f->stride);
+    if (f->integer) {
+      glVertexArrayAttribIFormat(vao, f->location, f->components, f->type, 0);
+    } else {
+      glVertexArrayAttribFormat(vao, f->location, f->components, f->type, GL_FALSE, 0);
+    }
+    glVertexArrayAttribBinding(vao, f->location, f->location);
+    glEnableVertexArrayAttrib(vao, f->location);
+  }
+  CheckGlError("uploading a block");
   block.gpu_bytes_ = at + sizeof u;
   return block;
 }

@@ -56,7 +56,6 @@ SplatRenderer::SplatRenderer() {
                                  {GL_FRAGMENT_SHADER, {shaders::kShaderToneMapFrag}}});
   statistics_ = Build("image statistics", {{GL_COMPUTE_SHADER, {shaders::kShaderImageStatsComp}}});
   origin_location_ = Location(splat_, "u_origin");
-  first_location_ = Location(splat_, "u_first");
 
   GLuint vao = 0;
   glCreateVertexArrays(1, &vao);
@@ -143,6 +142,7 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
 }
 
 void SplatRenderer::UploadFrameUniforms() {
+  draw_state_set_ = false;
   uniforms_.modes[2] = selection_on_ ? 1 : 0;
   uniforms_.modes[3] = copy_direction_;
   uniforms_.time[1] = static_cast<float>(copy_weight_);
@@ -169,29 +169,33 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
                                  std::to_string(first + count) + ") are outside a block of " +
                                  std::to_string(block.point_count()));
   }
-  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_fbo_.get());
-  glViewport(0, 0, texture_width_, texture_height_);
-  glEnable(GL_BLEND);
-  glBlendEquation(GL_FUNC_ADD);
-  glBlendFunc(GL_ONE, GL_ONE);
-  glDisable(GL_DEPTH_TEST);
-  glEnable(GL_PROGRAM_POINT_SIZE);
-  glUseProgram(splat_.get());
-  glBindVertexArray(empty_vao_.get());
-  glBindBufferBase(GL_UNIFORM_BUFFER, 0, frame_uniforms_.get());
+  if (!draw_state_set_) {
+    // Once per frame: state changes between draws make drivers (llvmpipe
+    // among them) flush the work queued so far.
+    glBindFramebuffer(GL_FRAMEBUFFER, accumulation_fbo_.get());
+    glViewport(0, 0, texture_width_, texture_height_);
+    glEnable(GL_BLEND);
+    glBlendEquation(GL_FUNC_ADD);
+    glBlendFunc(GL_ONE, GL_ONE);
+    glDisable(GL_DEPTH_TEST);
+    glEnable(GL_PROGRAM_POINT_SIZE);
+    glUseProgram(splat_.get());
+    glBindBufferBase(GL_UNIFORM_BUFFER, 0, frame_uniforms_.get());
+    draw_state_set_ = true;
+  }
+  glBindVertexArray(block.vertex_array());
   glBindBufferBase(GL_UNIFORM_BUFFER, 1, block.parameters());
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, block.buffer());
   // The node's corner relative to the camera, in double before the float:
   // the precision that matters is near the camera.
   const NodeCube& node = block.node();
   glUniform3f(origin_location_, static_cast<float>(node.origin[0] - camera_position_[0]),
               static_cast<float>(node.origin[1] - camera_position_[1]),
               static_cast<float>(node.origin[2] - camera_position_[2]));
-  glUniform1ui(first_location_, first);
-  glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(count));
+  glDrawArrays(GL_POINTS, static_cast<GLint>(first), static_cast<GLsizei>(count));
 }
 
 ImageStatistics SplatRenderer::Measure() {
+  draw_state_set_ = false;
   std::vector<std::uint32_t> words(kStatisticsWords, 0);
   words[1] = 0xFFFFFFFFu;  // the ordered minimum starts at the largest value
   glNamedBufferSubData(statistics_buffer_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
@@ -222,6 +226,7 @@ ImageStatistics SplatRenderer::Measure() {
 }
 
 void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
+  draw_state_set_ = false;
   const GLuint program = tone_map_.get();
   glProgramUniform2i(program, Location(tone_map_, "u_offset"), margin_, margin_);
   glProgramUniform2i(program, Location(tone_map_, "u_viewport_origin"), x, y);

@@ -100,12 +100,13 @@ class SplatRenderer {
   int copy_direction_ = 1;
   double copy_weight_ = 1;
   bool selection_on_ = false;
+  bool draw_state_set_ = false;  // the splat pass's GL state is bound (reset by anything else)
   struct FrameUniforms {
     float right[4], up[4], forward[4], viewport[4], limits[4];
     std::int32_t modes[4];
     float time[4];
   } uniforms_{};
-  GLint origin_location_ = -1, first_location_ = -1;
+  GLint origin_location_ = -1;
 };
 
 }  // namespace octocosm

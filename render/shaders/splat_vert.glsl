@@ -1,7 +1,8 @@
 // One point of a block -> one blob (render/splat_kernel.h). The block's
-// columns are on the GPU as stored (index/block_codec.h): decoded here.
-// Positions are relative to the camera, so floats keep their precision near
-// it however far the data lie from the origin.
+// columns are on the GPU as stored (index/block_codec.h), fetched as vertex
+// attributes (render/gpu_block.h) and decoded here. Positions are relative to
+// the camera, so floats keep their precision near it however far the data
+// lie from the origin.
 
 layout(std140, binding = 0) uniform Frame {
   vec4 u_right;     // camera basis (xyz)
@@ -15,7 +16,7 @@ layout(std140, binding = 0) uniform Frame {
 
 layout(std140, binding = 1) uniform Block {
   vec4 b_node;        // quantum (node edge / 65536), weight unit, log2 of the smallest smoothing, 1 / codes per octave
-  ivec4 b_columns0;   // word offsets: position, weight, smoothing, type (-1: absent)
+  ivec4 b_columns0;   // present (>= 0) or absent (-1): position, weight, smoothing, type
   ivec4 b_columns1;   // velocity, id, displacement, next_velocity
   ivec4 b_columns2;   // prev_displacement, prev_velocity
   vec4 b_velocity[2];           // minimum, step ((max - min) / 65535)
@@ -25,7 +26,19 @@ layout(std140, binding = 1) uniform Block {
   vec4 b_prev_velocity[2];
 };
 
-layout(std430, binding = 0) readonly buffer BlockWords { uint words[]; };
+// The columns, as stored: u16 x 3 positions and ranged vectors (as floats
+// 0..65535), u32 weight units, u16 smoothing codes, u8 types, u64 IDs (as
+// two words, low first). Absent columns read as zero and are not used.
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in uint a_weight;
+layout(location = 2) in float a_smoothing;
+layout(location = 3) in uint a_type;
+layout(location = 4) in vec3 a_velocity;
+layout(location = 5) in uvec2 a_id;
+layout(location = 6) in vec3 a_displacement;
+layout(location = 7) in vec3 a_next_velocity;
+layout(location = 8) in vec3 a_prev_displacement;
+layout(location = 9) in vec3 a_prev_velocity;
 
 layout(std430, binding = 1) readonly buffer Selection {
   uint selection_mask;   // slots - 1 (slots a power of two)
@@ -36,22 +49,12 @@ layout(std430, binding = 1) readonly buffer Selection {
 };
 
 uniform vec3 u_origin;  // the node's lower corner minus the camera position
-uniform uint u_first;   // first point of this draw in the block
 
 flat out vec2 v_center;  // framebuffer coordinates
 flat out float v_radius;
 flat out vec4 v_value;   // the blob's amplitude times (1, a, a^2, selected)
 
-uint Word16(int column, uint index) {
-  uint w = words[column + int(index >> 1u)];
-  return (index & 1u) == 0u ? (w & 0xFFFFu) : (w >> 16u);
-}
-
-vec3 Word16x3(int column, uint i) {
-  return vec3(float(Word16(column, 3u * i)), float(Word16(column, 3u * i + 1u)), float(Word16(column, 3u * i + 2u)));
-}
-
-vec3 Ranged(int column, uint i, vec4 range[2]) { return range[0].xyz + Word16x3(column, i) * range[1].xyz; }
+vec3 Ranged(vec3 code, vec4 range[2]) { return range[0].xyz + code * range[1].xyz; }
 
 // The lowbias32 integer hash; the same as SelectionSet's on the CPU.
 uint Mix32(uint x) {
@@ -97,10 +100,8 @@ void Discard() {
 }
 
 void main() {
-  uint i = u_first + uint(gl_VertexID);
-  vec3 p = u_origin + (Word16x3(b_columns0.x, i) + 0.5) * b_node.x;
-  bool has_velocity = b_columns1.x >= 0;
-  vec3 velocity = has_velocity ? Ranged(b_columns1.x, i, b_velocity) : vec3(0.0);
+  vec3 p = u_origin + (a_position + 0.5) * b_node.x;
+  vec3 velocity = b_columns1.x >= 0 ? Ranged(a_velocity, b_velocity) : vec3(0.0);
 
   if (u_modes.y != 0) {
     // Both epochs of an interval follow the same curve from p_e to p_e+1, so
@@ -110,11 +111,11 @@ void main() {
     float h01 = u_modes.y == 2 ? 3.0 * t2 - 2.0 * t3 : t;
     float h10 = t3 - 2.0 * t2 + t, h11 = t3 - t2;
     if (u_modes.w > 0) {
-      p += h01 * Ranged(b_columns1.z, i, b_displacement);
-      if (u_modes.y == 2) p += u_time.z * (h10 * velocity + h11 * Ranged(b_columns1.w, i, b_next_velocity));
+      p += h01 * Ranged(a_displacement, b_displacement);
+      if (u_modes.y == 2) p += u_time.z * (h10 * velocity + h11 * Ranged(a_next_velocity, b_next_velocity));
     } else {
-      p += (1.0 - h01) * Ranged(b_columns2.x, i, b_prev_displacement);
-      if (u_modes.y == 2) p += u_time.z * (h10 * Ranged(b_columns2.y, i, b_prev_velocity) + h11 * velocity);
+      p += (1.0 - h01) * Ranged(a_prev_displacement, b_prev_displacement);
+      if (u_modes.y == 2) p += u_time.z * (h10 * Ranged(a_prev_velocity, b_prev_velocity) + h11 * velocity);
     }
   }
 
@@ -126,9 +127,9 @@ void main() {
   vec2 image = u_viewport.xy;
   float margin = u_viewport.z, focal = u_viewport.w;
   vec2 center = 0.5 * image + focal * vec2(dot(p, u_right.xyz), dot(p, u_up.xyz)) / depth;
-  float smoothing = exp2(b_node.z + float(Word16(b_columns0.z, i)) * b_node.w);
+  float smoothing = exp2(b_node.z + a_smoothing * b_node.w);
   float radius = clamp(smoothing * focal / depth, 1.0, u_limits.z);
-  float weight = float(words[b_columns0.y + int(i)]) * b_node.y * u_limits.w * u_time.y;
+  float weight = float(a_weight) * b_node.y * u_limits.w * u_time.y;
   float normalization = radius < kExactNormalizationRadius ? PixelSum(center, radius)
                                                            : kKernelIntegral * radius * radius;
 
@@ -136,12 +137,9 @@ void main() {
   int mode = u_modes.x;
   if (mode == 1) a = length(velocity);
   else if (mode == 2 || mode == 3) a = dot(velocity, u_forward.xyz);
-  else if (mode == 4) a = float((words[b_columns0.w + int(i >> 2u)] >> (8u * (i & 3u))) & 0xFFu);
+  else if (mode == 4) a = float(a_type);
   float selected = 0.0;
-  if (u_modes.z != 0 && b_columns1.y >= 0) {
-    int id = b_columns1.y + 2 * int(i);
-    selected = IsSelected(uvec2(words[id], words[id + 1])) ? 1.0 : 0.0;
-  }
+  if (u_modes.z != 0 && b_columns1.y >= 0) selected = IsSelected(a_id) ? 1.0 : 0.0;
 
   vec2 framebuffer = image + 2.0 * margin;
   v_center = center + margin;
