@@ -40,6 +40,6 @@ double KernelNormalization(double cx, double cy, double radius) {
 
 int GuardMargin(double max_radius) { return static_cast<int>(std::ceil(max_radius)) + 1; }
 
-double SpriteSize(double radius) { return 2 * std::ceil(radius) + 1; }
+double SpriteSize(double radius) { return 2 * radius + kSpriteGuard; }
 
 }  // namespace octocosm

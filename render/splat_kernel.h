@@ -30,8 +30,12 @@
 // each point's weight to that relative error (to rounding below 4 px).
 // R >= 1 guarantees N > 0: every point lies within sqrt(2)/2 of a pixel
 // centre. R_max bounds the cost of one blob and is what a GL point can cover:
-// the GPU draws a point sprite of 2 ceil(R) + 1 pixels, and GL guarantees
-// sprites only up to an implementation limit (255 pixels on llvmpipe).
+// the GPU draws a point sprite of side 2 R + kSpriteGuard pixels (GL shades
+// the pixels whose centres lie in the sprite's square; the guard covers the
+// rasterizer's sub-pixel rounding of the centre, 1/256 pixel on common
+// hardware), and GL guarantees sprites only up to an implementation limit
+// (255 pixels on llvmpipe). The square is tight: a 1-pixel blob shades at
+// most 4 pixels, not the 9 of a sprite rounded up to whole pixels.
 #pragma once
 
 namespace octocosm {
@@ -39,6 +43,7 @@ namespace octocosm {
 inline constexpr double kMinBlobRadius = 1;             // pixels
 inline constexpr double kDefaultMaxBlobRadius = 127;    // pixels: a 255-pixel sprite
 inline constexpr double kExactNormalizationRadius = 4;  // pixels
+inline constexpr double kSpriteGuard = 1.0 / 16;         // pixels
 inline constexpr double kKernelIntegral = 0.54977871437821381673;  // 7 pi / 40: integral of W over the unit disc
 
 // W(q) above.

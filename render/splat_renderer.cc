@@ -67,8 +67,8 @@ SplatRenderer::SplatRenderer() {
 
   GLfloat range[2] = {1, 1};
   glGetFloatv(GL_POINT_SIZE_RANGE, range);
-  // A sprite of side 2 ceil(R) + 1 must fit the largest point size.
-  max_blob_radius_ = std::max(kMinBlobRadius, std::floor((double{range[1]} - 1) / 2));
+  // A sprite of side SpriteSize(R) must fit the largest point size.
+  max_blob_radius_ = std::max(kMinBlobRadius, std::floor((double{range[1]} - kSpriteGuard) / 2));
   CheckGlError("setting up the splat renderer");
 }
 

@@ -146,5 +146,5 @@ void main() {
   v_radius = radius;
   v_value = (weight / normalization) * vec4(1.0, a, a * a, selected);
   gl_Position = vec4(v_center / framebuffer * 2.0 - 1.0, 0.0, 1.0);
-  gl_PointSize = 2.0 * ceil(radius) + 1.0;
+  gl_PointSize = 2.0 * radius + kSpriteGuard;
 }
