@@ -90,6 +90,9 @@ KeyComparison CompareLeafKeys(const Cube& cube, std::uint64_t seed) {
 
   SubtreeOptions options;
   options.capacity = 50;
+  // The density grid shapes samples, not the tree; a coarse one keeps the
+  // many small leaves cheap (each estimate walks every fine cell).
+  options.sampler.density_grid_bits = 2;
   const std::vector<NodeKey> octocosm = BuildLevelSamples(points, cube, options).Leaves();
   const std::vector<NodeKey> pcl = PclOctreeLeaves(points.position, cube, options.capacity, kMaxLevel);
   KeyComparison result;
