@@ -28,7 +28,6 @@ namespace {
 namespace fs = std::filesystem;
 using namespace testing_support;
 
-using IngestTest = IngestFixture;
 
 struct Particle {
   double x[3];
@@ -68,12 +67,21 @@ std::string WriteRaw(const fs::path& path, const std::vector<Particle>& particle
   return path.string();
 }
 
+class IngestTest : public IngestFixture {
+ protected:
+  // Options for inputs written by WriteRaw.
+  IngestOptions RawOptions(std::vector<std::string> inputs, const std::string& out) const {
+    IngestOptions o = Options(std::move(inputs), out);
+    o.read.format = "raw";
+    o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+    return o;
+  }
+};
+
 TEST_F(IngestTest, EveryParticleInExactlyOneLeafWeightsExactPositionsWithinHalfAQuantum) {
   const auto particles = Clustered(60000, 1, 100.0);
   const std::string input = WriteRaw(dir_ / "in.raw", particles);
-  IngestOptions o = Options({input}, "store");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({input}, "store");
   o.tree.capacity = 1000;
   o.max_chunk_points = 8000;  // forces many chunks and re-splits of dense cells
   const IngestReport report = Ingest(o);
@@ -102,9 +110,7 @@ TEST_F(IngestTest, EveryParticleInExactlyOneLeafWeightsExactPositionsWithinHalfA
 TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
   const auto particles = Clustered(30000, 2, 10.0);
   const std::string input = WriteRaw(dir_ / "in.raw", particles);
-  IngestOptions whole = Options({input}, "whole");
-  whole.read.format = "raw";
-  whole.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions whole = RawOptions({input}, "whole");
   whole.tree.capacity = 500;
   IngestOptions chunked = whole;
   chunked.output = (dir_ / "chunked").string();
@@ -127,9 +133,7 @@ TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
 TEST_F(IngestTest, StoreIsOneWholeBuildWhereverTheChunksAreCut) {
   const auto particles = Clustered(30000, 9, 10.0);
   const std::string input = WriteRaw(dir_ / "in.raw", particles);
-  IngestOptions o = Options({input}, "store");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({input}, "store");
   o.tree.capacity = 500;
   const Cube cube = Cube::FromBounds({0, 0, 0}, {10, 10, 10});
   o.cube = cube;
@@ -182,9 +186,7 @@ TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) 
     }
   }
   std::shuffle(epoch1.begin(), epoch1.end(), rng);  // a different file order
-  IngestOptions o = Options({WriteRaw(dir_ / "e0.raw", epoch0), WriteRaw(dir_ / "e1.raw", epoch1)}, "series");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({WriteRaw(dir_ / "e0.raw", epoch0), WriteRaw(dir_ / "e1.raw", epoch1)}, "series");
   o.read.box_size_override = box;
   o.tree.capacity = 800;
   Ingest(o);
@@ -225,9 +227,7 @@ TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
   const auto e0 = Clustered(20000, 5, 20.0);
   auto e1 = e0;
   for (auto& p : e1) p.x[0] = std::min(p.x[0] * 0.9 + 1.0, 19.9);
-  IngestOptions big = Options({WriteRaw(dir_ / "e0.raw", e0), WriteRaw(dir_ / "e1.raw", e1)}, "big");
-  big.read.format = "raw";
-  big.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions big = RawOptions({WriteRaw(dir_ / "e0.raw", e0), WriteRaw(dir_ / "e1.raw", e1)}, "big");
   big.tree.capacity = 700;
   IngestOptions small = big;
   small.output = (dir_ / "small").string();
@@ -245,9 +245,7 @@ TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
 TEST_F(IngestTest, MalformedInputLeavesNoStoreAndNoTemporaryFiles) {
   auto particles = Clustered(5000, 6, 1.0);
   particles[1234].x[1] = std::nan("");
-  IngestOptions o = Options({WriteRaw(dir_ / "nan.raw", particles)}, "store");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({WriteRaw(dir_ / "nan.raw", particles)}, "store");
   try {
     Ingest(o);
     FAIL() << "NaN coordinates must be rejected";
