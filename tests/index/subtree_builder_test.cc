@@ -379,6 +379,9 @@ TEST(SubtreeBuilder, RootEstimatesRegionMassesWithoutBias) {
       options.capacity = 200;
       options.sampler.alpha = alpha;
       options.sampler.seed = static_cast<std::uint64_t>(seed);
+      // A coarse density grid: each node's estimate walks every fine cell,
+      // which at the default 32^3 made this test slow under ASan.
+      options.sampler.density_grid_bits = 3;
       ParticleChunk work = input;
       const NodePoints root = BuildSubtree(work, NodeKey::Root(), kCube, options, [&](NodeKey key, NodePoints&&) {
         depth = std::max(depth, key.level());
