@@ -87,7 +87,7 @@ TEST_P(SharedDataCrossCheck, EveryLeafKeyEqualsPclAdaptiveOctreeLeaf) {
   EXPECT_EQ(mismatches, 0u);
 }
 
-// On the real particle distributions (two mass species in three of them) and
+// On the real particle distributions (two or three mass species in each) and
 // a dyadic cube: at every sampled level the store's level keeps more of the
 // sparse voxels than pcl::RandomSample with as many points (at least the
 // snapshot's coverage floor times as many), and its voxel mass estimates are
