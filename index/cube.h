@@ -9,10 +9,12 @@
 // quantized position inside a node block, its fine density cell) goes through
 // one function, GridCoords, so that they can never disagree with each other:
 //
-//   t    = (x - origin) * (1 / size)            the point's unit coordinate
+//   t    = (x - origin) / size                  the point's unit coordinate
 //   t    = t - floor(t)                         only in a periodic cube
 //   grid = clamp(floor(t * 2^bits), 0, 2^bits - 1)
 //
+// The division is correctly rounded, so a point exactly on a cell face (t
+// exactly a multiple of 2^-bits) goes to the cell above it in any cube.
 // Multiplying by 2^bits is exact in binary floating point, so the grid
 // coordinate at `bits` is exactly the grid coordinate at `bits + k` shifted
 // right by k: a point's cell at level L is the prefix of its cell at every

@@ -37,6 +37,39 @@ TEST(Cube, FacesGoToTheCellAbove_UpperFaceToTheLast) {
   EXPECT_EQ(cube.CellOf(on_face, 3), (CellCoord{4, 2, 1}));
 }
 
+// A point exactly on an inner cell face belongs to the cell above, whatever
+// the cube's size: the sizes here are not powers of two (a product with a
+// rounded 1 / size put about 2% of such points into the cell below), with
+// the lower corner at zero and far from it.
+TEST(Cube, PointsExactlyOnInnerFacesGoToTheCellAboveInAnyCube) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> mantissa(0.5, 1);
+  int checked = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    // 24-bit mantissas (float32 sizes, as many snapshots have) make most faces exact.
+    const double size = std::ldexp(std::round(std::ldexp(mantissa(rng), 24)), static_cast<int>(rng() % 40) - 34);
+    for (const double origin : {0.0, -1e6, 3.5e8}) {
+      const Cube cube{{origin, origin, origin}, size, false};
+      for (int level = 1; level <= kMaxLevel; ++level) {
+        const std::uint64_t k = 1 + rng() % ((std::uint64_t{1} << level) - 1);
+        // The face k * size / 2^L, taken only where the coordinate and its
+        // difference from the origin are exact (else no point lies on it).
+        const double product = static_cast<double>(k) * size;
+        const double offset = std::ldexp(product, -level);
+        const double x = origin + offset;
+        if (std::fma(static_cast<double>(k), size, -product) != 0 || x - origin != offset) continue;
+        const double p[3] = {x, origin, x};
+        const CellCoord c = cube.CellOf(p, level);
+        ASSERT_EQ(c.x, k) << "size " << size << " origin " << origin << " level " << level;
+        ASSERT_EQ(c.y, 0u);
+        ASSERT_EQ(c.z, k);
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 5000);
+}
+
 TEST(Cube, PointsSlightlyOutsideAreClampedNeverOutOfRange) {
   const Cube cube{{0, 0, 0}, 1, false};
   const double below[3] = {-1e-17, -1e-300, -0.0};

@@ -16,6 +16,7 @@
 #include "index/block_codec.h"
 #include "index/dataset.h"
 #include "index/id_index.h"
+#include "index/subtree_builder.h"
 #include "storage/error.h"
 #include "tools/snapshot/snapshot_source.h"
 #include "tests/tools/ingest_fixture.h"
@@ -27,7 +28,6 @@ namespace {
 namespace fs = std::filesystem;
 using namespace testing_support;
 
-using IngestTest = IngestFixture;
 
 struct Particle {
   double x[3];
@@ -67,12 +67,21 @@ std::string WriteRaw(const fs::path& path, const std::vector<Particle>& particle
   return path.string();
 }
 
+class IngestTest : public IngestFixture {
+ protected:
+  // Options for inputs written by WriteRaw.
+  IngestOptions RawOptions(std::vector<std::string> inputs, const std::string& out) const {
+    IngestOptions o = Options(std::move(inputs), out);
+    o.read.format = "raw";
+    o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+    return o;
+  }
+};
+
 TEST_F(IngestTest, EveryParticleInExactlyOneLeafWeightsExactPositionsWithinHalfAQuantum) {
   const auto particles = Clustered(60000, 1, 100.0);
   const std::string input = WriteRaw(dir_ / "in.raw", particles);
-  IngestOptions o = Options({input}, "store");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({input}, "store");
   o.tree.capacity = 1000;
   o.max_chunk_points = 8000;  // forces many chunks and re-splits of dense cells
   const IngestReport report = Ingest(o);
@@ -101,9 +110,7 @@ TEST_F(IngestTest, EveryParticleInExactlyOneLeafWeightsExactPositionsWithinHalfA
 TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
   const auto particles = Clustered(30000, 2, 10.0);
   const std::string input = WriteRaw(dir_ / "in.raw", particles);
-  IngestOptions whole = Options({input}, "whole");
-  whole.read.format = "raw";
-  whole.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions whole = RawOptions({input}, "whole");
   whole.tree.capacity = 500;
   IngestOptions chunked = whole;
   chunked.output = (dir_ / "chunked").string();
@@ -115,6 +122,55 @@ TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
   const TreeCheck a = CheckTree(Dataset::Open(whole.output), 0);
   const TreeCheck b = CheckTree(Dataset::Open(chunked.output), 0);
   EXPECT_EQ(FirstDifference(a, b), "") << "the same data must give the same blocks whatever the memory budget";
+}
+
+// Chunks are cells of a fixed level; where the data are sparse, a node above
+// them can hold no more than `capacity` particles, and the tree must make it
+// a leaf, not an inner node over chunk-sized children (the points stored
+// twice, and the tree depending on where the chunks were cut: on the thread
+// count, through the chunk size). Whatever the chunking, the store must hold
+// exactly the blocks of one in-memory build of all the particles.
+TEST_F(IngestTest, StoreIsOneWholeBuildWhereverTheChunksAreCut) {
+  const auto particles = Clustered(30000, 9, 10.0);
+  const std::string input = WriteRaw(dir_ / "in.raw", particles);
+  IngestOptions o = RawOptions({input}, "store");
+  o.tree.capacity = 500;
+  const Cube cube = Cube::FromBounds({0, 0, 0}, {10, 10, 10});
+  o.cube = cube;
+  // The reference: every particle in one BuildSubtree, every node encoded.
+  ParticleChunk all;
+  for (const Particle& p : particles) {
+    all.position.insert(all.position.end(), p.x, p.x + 3);
+    all.mass.push_back(p.mass);
+    all.type.push_back(0);
+    all.id.push_back(p.id);
+  }
+  std::map<std::uint64_t, Bytes> reference;
+  BuildSubtree(all, NodeKey::Root(), cube, o.tree,
+               [&](NodeKey key, NodePoints&& node) { reference[key.value()] = EncodeBlock(node, key, cube); });
+  std::size_t sparse_top = 0;  // leaves at levels 1-2: the nodes chunks used to cut below
+  for (const auto& [key, bytes] : reference) {
+    const NodeKey k = NodeKey::FromValue(key);
+    const auto child = reference.lower_bound(k.Child(0).value());
+    const bool leaf = child == reference.end() || child->first > k.Child(7).value();
+    sparse_top += leaf && k.level() >= 1 && k.level() <= 2;
+  }
+  ASSERT_GT(sparse_top, 3u) << "the data must have sparse nodes above the chunks";
+  for (const std::uint64_t max_chunk : {0, 400, 3000}) {
+    for (const unsigned threads : {1u, 2u}) {
+      SCOPED_TRACE("max_chunk_points " + std::to_string(max_chunk) + ", threads " + std::to_string(threads));
+      o.output = (dir_ / ("store-" + std::to_string(max_chunk) + "-" + std::to_string(threads))).string();
+      o.max_chunk_points = max_chunk;
+      o.threads = threads;
+      const IngestReport report = Ingest(o);
+      const TreeCheck check = CheckTree(Dataset::Open(o.output), 0);
+      ASSERT_EQ(check.blocks.size(), reference.size()) << report.epochs[0].chunks << " chunks";
+      for (const auto& [key, bytes] : reference) {
+        ASSERT_TRUE(check.blocks.count(key)) << NodeKey::FromValue(key).Path();
+        ASSERT_EQ(check.blocks.at(key).front(), bytes) << NodeKey::FromValue(key).Path();
+      }
+    }
+  }
 }
 
 TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) {
@@ -130,9 +186,7 @@ TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) 
     }
   }
   std::shuffle(epoch1.begin(), epoch1.end(), rng);  // a different file order
-  IngestOptions o = Options({WriteRaw(dir_ / "e0.raw", epoch0), WriteRaw(dir_ / "e1.raw", epoch1)}, "series");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({WriteRaw(dir_ / "e0.raw", epoch0), WriteRaw(dir_ / "e1.raw", epoch1)}, "series");
   o.read.box_size_override = box;
   o.tree.capacity = 800;
   Ingest(o);
@@ -173,9 +227,7 @@ TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
   const auto e0 = Clustered(20000, 5, 20.0);
   auto e1 = e0;
   for (auto& p : e1) p.x[0] = std::min(p.x[0] * 0.9 + 1.0, 19.9);
-  IngestOptions big = Options({WriteRaw(dir_ / "e0.raw", e0), WriteRaw(dir_ / "e1.raw", e1)}, "big");
-  big.read.format = "raw";
-  big.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions big = RawOptions({WriteRaw(dir_ / "e0.raw", e0), WriteRaw(dir_ / "e1.raw", e1)}, "big");
   big.tree.capacity = 700;
   IngestOptions small = big;
   small.output = (dir_ / "small").string();
@@ -193,9 +245,7 @@ TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
 TEST_F(IngestTest, MalformedInputLeavesNoStoreAndNoTemporaryFiles) {
   auto particles = Clustered(5000, 6, 1.0);
   particles[1234].x[1] = std::nan("");
-  IngestOptions o = Options({WriteRaw(dir_ / "nan.raw", particles)}, "store");
-  o.read.format = "raw";
-  o.read.raw = RawLayout::Parse("xyz:f64,mass:f64,id:u64");
+  IngestOptions o = RawOptions({WriteRaw(dir_ / "nan.raw", particles)}, "store");
   try {
     Ingest(o);
     FAIL() << "NaN coordinates must be rejected";

@@ -303,7 +303,7 @@ TEST(RawReader, RoundTripWithAllColumnsBigEndian) {
     for (int k = 0; k < 3; ++k) Append<double>(bytes, i * 3.0 + k, true);
     for (int k = 0; k < 3; ++k) Append<float>(bytes, static_cast<float>(-k), true);
     Append<std::uint32_t>(bytes, 0xdeadbeef, true);  // skipped
-    Append<float>(bytes, 0.5f * static_cast<float>(i), true);
+    Append<float>(bytes, 0.5f * static_cast<float>(i + 1), true);
     Append<std::uint64_t>(bytes, (std::uint64_t{1} << 50) + static_cast<std::uint64_t>(i), true);
   }
   WriteFile(dir.File("particles.bin"), bytes);
@@ -319,7 +319,7 @@ TEST(RawReader, RoundTripWithAllColumnsBigEndian) {
   for (std::size_t i = 0; i < 5; ++i) {
     EXPECT_EQ(all.position[3 * i + 2], static_cast<double>(i) * 3.0 + 2);
     EXPECT_EQ(all.velocity[3 * i + 1], -1.0f);
-    EXPECT_EQ(all.mass[i], 0.5 * static_cast<double>(i));
+    EXPECT_EQ(all.mass[i], 0.5 * static_cast<double>(i + 1));
     EXPECT_EQ(all.id[i], (std::uint64_t{1} << 50) + i);
   }
 }
@@ -355,6 +355,24 @@ TEST(RawReader, MalformedInputs) {
   for (float v : {1.0f, 2.0f, 3.0f, 4.0f, INFINITY, 6.0f}) Append<float>(bytes, v);
   WriteFile(dir.File("inf.bin"), bytes);
   ExpectBadInput(dir.File("inf.bin"), "record 1 has a non-finite coordinate", options);
+  // Masses must be finite and > 0, velocities finite: the octree's weights
+  // and columns cannot take anything else.
+  ReadOptions with_mass = options;
+  with_mass.raw = RawLayout::Parse("xyz:f32,vel:f32,mass:f64");
+  const auto record = [](float v, double mass) {
+    std::string r;
+    for (float x : {1.0f, 2.0f, 3.0f, v, 0.0f, 0.0f}) Append<float>(r, x);
+    Append<double>(r, mass);
+    return r;
+  };
+  WriteFile(dir.File("nan_mass.bin"), record(0, 1) + record(0, NAN));
+  ExpectBadInput(dir.File("nan_mass.bin"), "record 1 has mass nan; masses must be finite and > 0", with_mass);
+  WriteFile(dir.File("zero_mass.bin"), record(0, 0));
+  ExpectBadInput(dir.File("zero_mass.bin"), "record 0 has mass 0; masses must be finite and > 0", with_mass);
+  WriteFile(dir.File("negative_mass.bin"), record(0, -2));
+  ExpectBadInput(dir.File("negative_mass.bin"), "record 0 has mass -2", with_mass);
+  WriteFile(dir.File("inf_velocity.bin"), record(0, 1) + record(0, 1) + record(-INFINITY, 1));
+  ExpectBadInput(dir.File("inf_velocity.bin"), "record 2 has a non-finite velocity (-inf, 0, 0)", with_mass);
 
   ReadOptions no_layout;
   no_layout.format = "raw";
@@ -413,6 +431,12 @@ TEST(CsvReader, MalformedRowsNameTheLine) {
   ExpectBadInput(dir.File("fields.csv"), "line 4: 3 fields, but the header row names 4");
   WriteFile(dir.File("nan.csv"), "x,y,z\n1,2,3\n1,nan,3\n");
   ExpectBadInput(dir.File("nan.csv"), "line 3: non-finite coordinate");
+  WriteFile(dir.File("mass.csv"), "x,y,z,mass\n1,2,3,1\n1,2,3,inf\n");
+  ExpectBadInput(dir.File("mass.csv"), "line 3: mass inf; masses must be finite and > 0");
+  WriteFile(dir.File("zero.csv"), "x,y,z,mass\n1,2,3,0\n");
+  ExpectBadInput(dir.File("zero.csv"), "line 2: mass 0.000000; masses must be finite and > 0");
+  WriteFile(dir.File("velocity.csv"), "x,y,z,vx,vy,vz\n1,2,3,0,nan,0\n");
+  ExpectBadInput(dir.File("velocity.csv"), "line 2: non-finite velocity");
   WriteFile(dir.File("noz.csv"), "x,y,mass\n1,2,3\n");
   ExpectBadInput(dir.File("noz.csv"), "line 1: the header row must name columns x, y and z");
   WriteFile(dir.File("id.csv"), "x,y,z,id\n1,2,3,-4\n");

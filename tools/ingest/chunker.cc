@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <numeric>
 #include <optional>
+#include <unordered_map>
 
 #include "storage/error.h"
 
@@ -37,6 +38,12 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
   }
 }
 
+void AppendAll(const ParticleChunk& from, ParticleChunk& to) {
+  std::vector<std::uint32_t> everything(from.size());
+  std::iota(everything.begin(), everything.end(), 0u);
+  AppendPoints(from, everything, to);
+}
+
 }  // namespace
 
 ParticleChunk Chunk::TakePoints() {
@@ -50,9 +57,7 @@ ParticleChunk Chunk::TakePoints() {
   std::remove(path.c_str());
   path.clear();
   if (all.size() == 0) return from_file;
-  std::vector<std::uint32_t> everything(all.size());
-  std::iota(everything.begin(), everything.end(), 0u);
-  AppendPoints(all, everything, from_file);
+  AppendAll(all, from_file);
   return from_file;
 }
 
@@ -151,7 +156,53 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
 }
 
 std::vector<Chunk> Chunker::Split(NodeKey root, const PointPass& pass) {
-  return SplitAt(root, options_.split_levels, pass);
+  std::vector<Chunk> chunks = SplitAt(root, options_.split_levels, pass);
+  if (options_.leaf_capacity == 0) return chunks;
+  return MergeLeafSubtrees(root, std::move(chunks));
+}
+
+std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks) {
+  // Points under every node between the region and the chunks.
+  std::unordered_map<std::uint64_t, std::uint64_t> below;
+  for (const Chunk& chunk : chunks) {
+    for (int level = root.level(); level < chunk.key.level(); ++level) {
+      below[chunk.key.AncestorAt(level).value()] += chunk.point_count;
+    }
+  }
+  std::vector<Chunk> result;
+  for (std::size_t i = 0; i < chunks.size();) {
+    // The highest node above this chunk that the tree makes a leaf, if any.
+    NodeKey leaf;
+    for (int level = root.level(); level < chunks[i].key.level(); ++level) {
+      const NodeKey ancestor = chunks[i].key.AncestorAt(level);
+      if (below.at(ancestor.value()) <= options_.leaf_capacity) {
+        leaf = ancestor;
+        break;
+      }
+    }
+    if (leaf == NodeKey()) {
+      result.push_back(std::move(chunks[i++]));
+      continue;
+    }
+    // Its chunks follow each other: they come in depth-first order.
+    Chunk merged;
+    merged.key = leaf;
+    bool spilled = false;
+    for (; i < chunks.size() && leaf.IsAncestorOrSelf(chunks[i].key); ++i) {
+      spilled |= !chunks[i].path.empty();
+      merged.point_count += chunks[i].point_count;
+      AppendAll(chunks[i].TakePoints(), merged.points);
+    }
+    if (spilled) {  // back to a file: memory was short when its parts spilled
+      merged.path = NewChunkPath();
+      ParticleFileWriter writer(merged.path, options_.columns);
+      writer.Append(merged.points);
+      writer.Close();
+      merged.points = ParticleChunk();
+    }
+    result.push_back(std::move(merged));
+  }
+  return result;
 }
 
 std::vector<Chunk> Chunker::SplitAt(NodeKey root, int levels, const PointPass& pass) {

@@ -11,6 +11,15 @@
 // file or buffer, until every chunk fits or the depth limit is reached (a
 // chunk at the depth limit is kept whole: its points coincide to within the
 // finest cell).
+//
+// Chunks are cells of a fixed level, so a node above them may hold few
+// points: a sparse corner of the data. The octree makes a node with at most
+// `leaf_capacity` points a leaf (index/subtree_builder.h), and a chunk cut
+// below such a node would make it an inner node instead, its points stored
+// twice and the tree dependent on where the chunks were cut (on the thread
+// count and the memory budget). So when the points are distributed, the
+// chunks under each highest node holding at most `leaf_capacity` points are
+// merged into one chunk for that node.
 #pragma once
 
 #include <cstdint>
@@ -42,6 +51,7 @@ struct ChunkerOptions {
   std::uint64_t max_chunk_points = 10'000'000;
   int split_levels = 2;                  // levels below the region at which points are bucketed (1..6)
   int max_level = kMaxLevel;             // the tree's depth limit
+  std::uint64_t leaf_capacity = 0;       // the tree's node capacity; 0 = chunks are never merged
   std::size_t memory_bytes = 256u << 20;  // buffers of all chunks together
   std::string temp_dir;                  // spilled chunk files are created here
   ParticleColumns columns;               // the optional columns the points carry
@@ -61,6 +71,7 @@ class Chunker {
  private:
   std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);
+  std::vector<Chunk> MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks);
   std::string NewChunkPath();
 
   Cube cube_;

@@ -388,6 +388,7 @@ IngestReport Ingest(const IngestOptions& options) {
     chunker_options.max_chunk_points = max_chunk;
     chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
     chunker_options.max_level = options.tree.max_level;
+    chunker_options.leaf_capacity = options.tree.capacity;
     // Capped: measured on this project's machines, buffering gigabytes of
     // points costs more in first-touch page faults than spilling them to
     // temporary files that stay in the OS page cache (docs/BENCHMARKS.md).

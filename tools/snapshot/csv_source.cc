@@ -169,9 +169,17 @@ class CsvSource final : public SegmentedSource {
     }
     chunk.position.insert(chunk.position.end(), position, position + 3);
     if (header_.has_velocity) {
-      for (Column c : {kVx, kVy, kVz}) chunk.velocity.push_back(static_cast<float>(ParseReal(c)));
+      for (Column c : {kVx, kVy, kVz}) {
+        const auto v = static_cast<float>(ParseReal(c));
+        if (!std::isfinite(v)) FailAt("non-finite velocity; velocities must be finite numbers");
+        chunk.velocity.push_back(v);
+      }
     }
-    chunk.mass.push_back(index_[kMass] >= 0 ? ParseReal(kMass) : 1.0);
+    const double mass = index_[kMass] >= 0 ? ParseReal(kMass) : 1.0;
+    if (!std::isfinite(mass) || !(mass > 0)) {
+      FailAt("mass " + std::to_string(mass) + "; masses must be finite and > 0");
+    }
+    chunk.mass.push_back(mass);
     if (header_.has_id) {
       std::string_view text = fields_[static_cast<std::size_t>(index_[kId])];
       std::uint64_t id = 0;

@@ -33,7 +33,7 @@ bool SegmentedSource::Next(ParticleChunk& chunk) {
         std::min<std::uint64_t>({left, chunk_particles_ - chunk.size(), kMaxParticlesPerRead}));
     std::size_t first = chunk.size();
     AppendRange(segment, segment_offset_, count, chunk);
-    CheckFinite(segment, segment_offset_, chunk, first);
+    CheckValues(segment, segment_offset_, chunk, first);
     segment_offset_ += count;
   }
   return chunk.size() > 0;
@@ -58,16 +58,27 @@ void SegmentedSource::CountSegments(std::size_t type_count) {
   }
 }
 
-void SegmentedSource::CheckFinite(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
+void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
                                   std::size_t first) const {
   for (std::size_t i = first; i < chunk.size(); ++i) {
     const double* p = &chunk.position[3 * i];
-    if (std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])) continue;
+    const float* v = chunk.has_velocity() ? &chunk.velocity[3 * i] : nullptr;
+    const bool position_ok = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+    const bool velocity_ok = v == nullptr || (std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]));
+    const bool mass_ok = std::isfinite(chunk.mass[i]) && chunk.mass[i] > 0;
+    if (position_ok && velocity_ok && mass_ok) continue;
     std::ostringstream message;
     message << DescribeParticle(segment, begin + (i - first));
     if (chunk.has_id()) message << " (ID " << chunk.id[i] << ")";
-    message << " has a non-finite coordinate (" << p[0] << ", " << p[1] << ", " << p[2]
-            << "); positions must be finite numbers";
+    if (!position_ok) {
+      message << " has a non-finite coordinate (" << p[0] << ", " << p[1] << ", " << p[2]
+              << "); positions must be finite numbers";
+    } else if (!velocity_ok) {
+      message << " has a non-finite velocity (" << v[0] << ", " << v[1] << ", " << v[2]
+              << "); velocities must be finite numbers";
+    } else {
+      message << " has mass " << chunk.mass[i] << "; masses must be finite and > 0";
+    }
     throw Error::BadInput(header_.files.at(segment.file), message.str());
   }
 }

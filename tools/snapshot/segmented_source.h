@@ -1,6 +1,8 @@
 // The part of a ParticleSource that every format shares: walking a list of
 // contiguous runs of particles ("segments": one particle type in one file) in
-// chunk-sized steps, and rejecting non-finite coordinates. A format supplies
+// chunk-sized steps, and rejecting values the octree cannot take (non-finite
+// coordinates or velocities, masses that are not finite and > 0), naming the
+// file and the particle rather than failing deep in the build. A format supplies
 // only AppendRange(), which reads part of one segment.
 #pragma once
 
@@ -44,7 +46,7 @@ class SegmentedSource : public ParticleSource {
   std::vector<Segment> segments_;
 
  private:
-  void CheckFinite(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
+  void CheckValues(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
                    std::size_t first) const;
 
   std::size_t chunk_particles_;
