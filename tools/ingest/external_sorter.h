@@ -8,16 +8,15 @@
 #pragma once
 
 #include <algorithm>
-#include <cerrno>
 #include <cstdint>
 #include <cstdio>
-#include <memory>
 #include <queue>
 #include <string>
 #include <type_traits>
 #include <vector>
 
 #include "storage/error.h"
+#include "tools/ingest/record_file.h"
 
 namespace octocosm {
 
@@ -70,30 +69,15 @@ class ExternalSorter {
       const std::size_t run = heap_.top().second;
       heap_.pop();
       out = runs_[run].current;
-      if (runs_[run].Advance()) heap_.push({runs_[run].current.key, run});
+      if (runs_[run].file.Next(runs_[run].current)) heap_.push({runs_[run].current.key, run});
       return true;
     }
 
    private:
     friend class ExternalSorter;
     struct RunCursor {
-      std::unique_ptr<std::FILE, int (*)(std::FILE*)> file{nullptr, &std::fclose};
-      std::string path;
-      std::vector<Record> batch;
-      std::size_t index = 0, filled = 0;
+      RecordFileReader<Record> file;
       Record current{};
-      bool Advance() {
-        if (index == filled) {
-          filled = std::fread(batch.data(), sizeof(Record), batch.size(), file.get());
-          index = 0;
-          if (filled == 0) {
-            if (std::ferror(file.get())) throw IoErrorFromErrno(path, "reading a sort run", errno);
-            return false;
-          }
-        }
-        current = batch[index++];
-        return true;
-      }
     };
     using HeapItem = std::pair<std::uint64_t, std::size_t>;  // (key, run); ties by run keep input order
     const std::vector<Record>* memory_ = nullptr;
@@ -111,14 +95,10 @@ class ExternalSorter {
     }
     // Read buffers share the run budget: a merge of many runs reads small batches.
     const std::size_t batch = std::max<std::size_t>(run_records_ / run_paths_.size() / 4, 1024);
-    reader.runs_.resize(run_paths_.size());
+    reader.runs_.reserve(run_paths_.size());
     for (std::size_t r = 0; r < run_paths_.size(); ++r) {
-      auto& cursor = reader.runs_[r];
-      cursor.path = run_paths_[r];
-      cursor.file.reset(std::fopen(cursor.path.c_str(), "rb"));
-      if (!cursor.file) throw IoErrorFromErrno(cursor.path, "opening a sort run", errno);
-      cursor.batch.resize(batch);
-      if (cursor.Advance()) reader.heap_.push({cursor.current.key, r});
+      auto& cursor = reader.runs_.emplace_back(typename Reader::RunCursor{{run_paths_[r], "a sort run", batch}, {}});
+      if (cursor.file.Next(cursor.current)) reader.heap_.push({cursor.current.key, r});
     }
     return reader;
   }
@@ -131,13 +111,10 @@ class ExternalSorter {
   void WriteRun() {
     SortBuffer();
     const std::string path = prefix_ + "-run-" + std::to_string(run_paths_.size());
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
-    if (!file) throw IoErrorFromErrno(path, "creating a sort run", errno);
+    RecordFileWriter<Record> file(path, "a sort run");
     run_paths_.push_back(path);
-    if (std::fwrite(buffer_.data(), sizeof(Record), buffer_.size(), file.get()) != buffer_.size() ||
-        std::fflush(file.get()) != 0) {
-      throw IoErrorFromErrno(path, "writing a sort run (is the temporary directory full?)", errno);
-    }
+    file.Write(buffer_);
+    file.Close();
     buffer_.clear();
   }
 
