@@ -46,7 +46,8 @@ double GetF64(const std::uint8_t* in) { return std::bit_cast<double>(GetU64(in))
 std::uint64_t Checksum(const std::uint8_t* data, std::size_t size) { return XXH3_64bits(data, size); }
 
 constexpr std::uint8_t kEncodingV1 = 1;
-constexpr std::uint8_t kMaxColumnId = 7;
+// Column ids run from 1 to the number of columns.
+constexpr std::uint8_t kMaxColumnId = static_cast<std::uint8_t>(kColumnIds.size());
 
 bool IsRequired(ColumnId id) {
   return id == ColumnId::kPosition || id == ColumnId::kWeight || id == ColumnId::kSmoothing || id == ColumnId::kType;
@@ -60,7 +61,10 @@ std::uint64_t BytesPerPoint(ColumnId id) {
     case ColumnId::kVelocity: return 6;
     case ColumnId::kId: return 8;
     case ColumnId::kType: return 1;
-    case ColumnId::kDisplacement: return 6;
+    case ColumnId::kDisplacement:
+    case ColumnId::kNextVelocity:
+    case ColumnId::kPrevDisplacement:
+    case ColumnId::kPrevVelocity: return 6;
   }
   return 0;
 }
@@ -249,8 +253,19 @@ const char* ColumnName(ColumnId id) {
     case ColumnId::kId: return "id";
     case ColumnId::kType: return "type";
     case ColumnId::kDisplacement: return "displacement";
+    case ColumnId::kNextVelocity: return "next_velocity";
+    case ColumnId::kPrevDisplacement: return "prev_displacement";
+    case ColumnId::kPrevVelocity: return "prev_velocity";
   }
   return "unknown";
+}
+
+std::string ColumnNames(ColumnSet columns) {
+  std::string names;
+  for (const ColumnId id : kColumnIds) {
+    if (columns & ColumnBit(id)) names += (names.empty() ? "" : ",") + std::string(ColumnName(id));
+  }
+  return names;
 }
 
 const BlockColumn* BlockHeader::Find(ColumnId id) const {
@@ -269,20 +284,23 @@ Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
   CheckLength("position", points.position.size(), 3 * n);
   CheckLength("smoothing", points.smoothing.size(), n);
   CheckLength("type", points.type.size(), n);
-  if (!points.velocity.empty()) CheckLength("velocity", points.velocity.size(), 3 * n);
   if (!points.id.empty()) CheckLength("id", points.id.size(), n);
-  if (!points.displacement.empty()) CheckLength("displacement", points.displacement.size(), 3 * n);
+  for (const ColumnId id : kVectorColumnIds) {
+    const std::vector<float>& column = *VectorColumnOf(points, id);
+    if (!column.empty()) CheckLength(ColumnName(id), column.size(), 3 * n);
+  }
   const auto& off = points.octant_offsets;
   if (off[0] != 0 || off[8] != n || !std::is_sorted(off.begin(), off.end())) {
     throw Error::InvalidArgument("EncodeBlock: octant_offsets of node " + key.Path() +
                                  " are not a partition of the points (use OrderByOctant)");
   }
 
-  std::vector<ColumnId> ids = {ColumnId::kPosition, ColumnId::kWeight, ColumnId::kSmoothing};
-  if (!points.velocity.empty()) ids.push_back(ColumnId::kVelocity);
-  if (!points.id.empty()) ids.push_back(ColumnId::kId);
-  ids.push_back(ColumnId::kType);
-  if (!points.displacement.empty()) ids.push_back(ColumnId::kDisplacement);
+  std::vector<ColumnId> ids;
+  for (const ColumnId id : kColumnIds) {
+    const std::vector<float>* vector = VectorColumnOf(points, id);
+    const bool present = vector != nullptr ? !vector->empty() : id == ColumnId::kId ? !points.id.empty() : IsRequired(id);
+    if (present) ids.push_back(id);
+  }
 
   const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * ids.size() + 8;
   std::size_t block_size = header_size;
@@ -318,14 +336,17 @@ Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
         PutF32(params, kSmoothingLog2Min);
         PutF32(params + 4, kSmoothingPerOctave);
         break;
-      case ColumnId::kVelocity: EncodeRanged3("velocity", points.velocity, out, params); break;
       case ColumnId::kId:
         for (std::size_t i = 0; i < n; ++i) PutU64(out + 8 * i, points.id[i]);
         break;
       case ColumnId::kType:
         if (n > 0) std::memcpy(out, points.type.data(), n);
         break;
-      case ColumnId::kDisplacement: EncodeRanged3("displacement", points.displacement, out, params); break;
+      case ColumnId::kVelocity:
+      case ColumnId::kDisplacement:
+      case ColumnId::kNextVelocity:
+      case ColumnId::kPrevDisplacement:
+      case ColumnId::kPrevVelocity: EncodeRanged3(ColumnName(id), *VectorColumnOf(points, id), out, params); break;
     }
     entry[0] = static_cast<std::uint8_t>(id);
     entry[1] = kEncodingV1;
@@ -512,13 +533,16 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
       }
       break;
     }
-    case ColumnId::kVelocity: DecodeRanged3(*column, n, bytes, where, out.velocity); break;
     case ColumnId::kId:
       out.id.resize(n);
       for (std::uint32_t i = 0; i < n; ++i) out.id[i] = GetU64(in + 8 * std::size_t{i});
       break;
     case ColumnId::kType: out.type.assign(in, in + n); break;
-    case ColumnId::kDisplacement: DecodeRanged3(*column, n, bytes, where, out.displacement); break;
+    case ColumnId::kVelocity:
+    case ColumnId::kDisplacement:
+    case ColumnId::kNextVelocity:
+    case ColumnId::kPrevDisplacement:
+    case ColumnId::kPrevVelocity: DecodeRanged3(*column, n, bytes, where, *VectorColumnOf(out, id)); break;
   }
 }
 

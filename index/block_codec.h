@@ -59,6 +59,12 @@
 //   5  id            8n      no        u64 per point.
 //   6  type          n       yes       u8 per point (GADGET particle type).
 //   7  displacement  6n      no        like velocity: the minimal-image offset to the next epoch.
+//   8  next_velocity 6n      no        like velocity: the particle's velocity at the next epoch.
+//   9  prev_displacement 6n  no        like velocity: the minimal-image offset to the previous epoch.
+//  10  prev_velocity 6n      no        like velocity: the particle's velocity at the previous epoch.
+//
+// Columns 8-10 were added to version 1 before any store left this project
+// (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
 //
 // Decoding is safe for untrusted bytes: every offset, length, count and
 // parameter is checked, and any mismatch throws Error::Corruption naming the
@@ -88,7 +94,15 @@ enum class ColumnId : std::uint8_t {
   kId = 5,
   kType = 6,
   kDisplacement = 7,
+  kNextVelocity = 8,
+  kPrevDisplacement = 9,
+  kPrevVelocity = 10,
 };
+
+// The block column of each vector column (index/particle_chunk.h), indexed by VectorColumn.
+inline constexpr std::array<ColumnId, kVectorColumnCount> kVectorColumnIds = {
+    ColumnId::kVelocity, ColumnId::kDisplacement, ColumnId::kNextVelocity, ColumnId::kPrevDisplacement,
+    ColumnId::kPrevVelocity};
 
 // A set of columns, one bit per ColumnId.
 using ColumnSet = std::uint32_t;
@@ -96,9 +110,28 @@ constexpr ColumnSet ColumnBit(ColumnId id) { return ColumnSet{1} << static_cast<
 inline constexpr ColumnSet kAllColumns = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
                                          ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kVelocity) |
                                          ColumnBit(ColumnId::kId) | ColumnBit(ColumnId::kType) |
-                                         ColumnBit(ColumnId::kDisplacement);
+                                         ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kNextVelocity) |
+                                         ColumnBit(ColumnId::kPrevDisplacement) | ColumnBit(ColumnId::kPrevVelocity);
+
+// Every column id, in the order blocks store them.
+inline constexpr std::array<ColumnId, 10> kColumnIds = {
+    ColumnId::kPosition, ColumnId::kWeight,       ColumnId::kSmoothing,        ColumnId::kVelocity,
+    ColumnId::kId,       ColumnId::kType,         ColumnId::kDisplacement,     ColumnId::kNextVelocity,
+    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity};
 
 const char* ColumnName(ColumnId id);
+// The names of the columns in `columns`, comma-separated, in block order.
+std::string ColumnNames(ColumnSet columns);
+
+// The vector column of `points` (NodePoints, const or not) that block column
+// `id` holds, or nullptr when `id` is not a vector column.
+template <typename Points>
+auto VectorColumnOf(Points& points, ColumnId id) -> decltype(&points.velocity) {
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (kVectorColumnIds[v] == id) return VectorColumns(points)[v];
+  }
+  return nullptr;
+}
 
 inline constexpr std::uint32_t kBlockMagic = 0x4B42434F;
 inline constexpr std::uint16_t kBlockVersion = 1;
@@ -135,7 +168,7 @@ struct BlockHeader {
 // the contract: a column of the wrong length, a point outside the node cube,
 // points not grouped by child octant as octant_offsets says (see
 // OrderByOctant), a weight that is not finite and >= 0 (or all zero with
-// points present), a non-finite velocity or displacement, or more than
+// points present), a non-finite value in a vector column, or more than
 // 2^32 - 1 points.
 Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube);
 

@@ -33,22 +33,22 @@ Dataset Dataset::Open(const std::string& directory) {
       dataset.masses_.push_back(epoch.value("mass", 0.0));
       std::optional<EpochLink> link;
       if (epoch.contains("to_next")) {
-        const auto& t = epoch.at("to_next");
-        link = EpochLink{t.value("velocity_scale", 0.0), t.value("fit_residual", 1.0), t.value("max_displacement", 0.0)};
+        const auto& to_next = epoch.at("to_next");
+        link = EpochLink{to_next.at("velocity_scale").get<double>(), to_next.at("fit_residual").get<double>(),
+                         to_next.at("least_squares_scale").get<double>(), to_next.at("inlier_fraction").get<double>(),
+                         to_next.at("matched").get<std::uint64_t>(), to_next.value("max_displacement", 0.0)};
       }
       dataset.links_.push_back(link);
     }
-    dataset.has_velocity_ = meta.value("has_velocity", false);
-    dataset.has_displacement_ = meta.value("has_displacement", false);
-    dataset.columns_ = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
-                       ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType);
-    const nlohmann::json& schema = dataset.store_.attribute_schema();
-    if (schema.is_object() && schema.contains("columns")) {
-      for (const auto& column : schema.at("columns")) {
-        const int id = column.at("id").get<int>();
-        if (id > 0 && id < 32) dataset.columns_ |= ColumnSet{1} << id;
-      }
-    }
+    // Flags a store may lack (written before the column existed) mean "absent".
+    const auto flag = [&](const char* name, ColumnId id) { return meta.value(name, false) ? ColumnBit(id) : 0; };
+    dataset.every_epoch_columns_ = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                                   ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType) |
+                                   flag("has_velocity", ColumnId::kVelocity) | flag("has_id", ColumnId::kId);
+    dataset.forward_columns_ =
+        flag("has_displacement", ColumnId::kDisplacement) | flag("has_next_velocity", ColumnId::kNextVelocity);
+    dataset.backward_columns_ =
+        flag("has_prev_displacement", ColumnId::kPrevDisplacement) | flag("has_prev_velocity", ColumnId::kPrevVelocity);
     const std::string ids = meta.value("id_index", "");
     if (!ids.empty()) dataset.id_index_ = (std::filesystem::path(directory) / ids).string();
   } catch (const nlohmann::json::exception& e) {
@@ -61,6 +61,14 @@ Dataset Dataset::Open(const std::string& directory) {
     throw Error::Corruption(manifest, "dataset metadata has an impossible capacity or depth limit");
   }
   return dataset;
+}
+
+ColumnSet Dataset::columns(std::uint32_t epoch) const {
+  if (epoch >= epoch_count()) throw Error::InvalidArgument("epoch " + std::to_string(epoch) + " is not in the store");
+  ColumnSet columns = every_epoch_columns_;
+  if (epoch + 1 < epoch_count()) columns |= forward_columns_;
+  if (epoch > 0) columns |= backward_columns_;
+  return columns;
 }
 
 std::string Dataset::Where(std::uint32_t epoch, NodeKey key) const {

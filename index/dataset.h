@@ -16,15 +16,17 @@
 
 namespace octocosm {
 
-// What ingest recorded about the step from one epoch to the next
-// (docs/FORMAT.md 5.2, "to_next"): the least-squares scale s that turns the
-// mean of a particle's velocities at both ends into its displacement
-// (d ~ s (v_e + v_e+1) / 2), the fit's relative residual, and the largest
-// displacement of any particle.
+// How an epoch links to the next, as ingest fitted it (docs/FORMAT.md 5.2,
+// `to_next`; tools/ingest/epoch_join.h, VelocityScaleFit). A renderer moves a
+// particle between epochs e and e + 1 along the cubic Hermite curve from p_e
+// to p_e+1 with tangents velocity_scale * v_e and velocity_scale * v_e+1.
 struct EpochLink {
-  double velocity_scale = 0;
-  double fit_residual = 1;
-  double max_displacement = 0;
+  double velocity_scale = 0;       // s; 0 when it could not be fitted (no velocities)
+  double fit_residual = 1;         // relative residual of d ~ s (v_e + v_e+1) / 2 over all; 1 = no fit
+  double least_squares_scale = 0;  // the plain least-squares s over all particles
+  double inlier_fraction = 0;      // share of the velocity weight that agrees with s
+  std::uint64_t matched = 0;       // particles found in both epochs
+  double max_displacement = 0;     // the largest |d| of any matched particle; 0 when not recorded
 };
 
 class Dataset {
@@ -39,17 +41,17 @@ class Dataset {
   std::uint64_t points(std::uint32_t epoch) const { return points_.at(epoch); }
   // The total mass of the epoch (the root's weights).
   double mass(std::uint32_t epoch) const { return masses_.at(epoch); }
-  // Optional columns the blocks carry.
-  bool has_velocity() const { return has_velocity_; }
-  bool has_displacement() const { return has_displacement_; }
-  // The columns the blocks may carry (from the attribute schema).
-  ColumnSet columns() const { return columns_; }
-  // The link from `epoch` to the next, when ingest recorded one.
-  const std::optional<EpochLink>& link_to_next(std::uint32_t epoch) const { return links_.at(epoch); }
+  // The columns some block of some epoch carries.
+  ColumnSet columns() const { return every_epoch_columns_ | forward_columns_ | backward_columns_; }
   std::size_t capacity() const { return capacity_; }
   // The subselection's settings the store was built with.
   const SamplerOptions& sampler() const { return sampler_; }
   int max_level() const { return max_level_; }
+  // The columns every block of `epoch` carries, as the manifest declares them.
+  ColumnSet columns(std::uint32_t epoch) const;
+  // How `epoch` links to the next; empty for the last epoch and for a series
+  // without IDs.
+  const std::optional<EpochLink>& link_to_next(std::uint32_t epoch) const { return links_.at(epoch); }
   bool has_id_index() const { return !id_index_.empty(); }
   // The directory of the ID index store (empty when the dataset has no IDs).
   const std::string& id_index_directory() const { return id_index_; }
@@ -63,10 +65,10 @@ class Dataset {
   std::vector<Cube> cubes_;
   std::vector<std::uint64_t> points_;
   std::vector<double> masses_;
-  bool has_velocity_ = false;
-  bool has_displacement_ = false;
-  ColumnSet columns_ = 0;
   std::vector<std::optional<EpochLink>> links_;
+  ColumnSet every_epoch_columns_ = 0;  // the columns of every epoch
+  ColumnSet forward_columns_ = 0;      // of every epoch but the last
+  ColumnSet backward_columns_ = 0;     // of every epoch but the first
   std::size_t capacity_ = 0;
   SamplerOptions sampler_;
   int max_level_ = kMaxLevel;

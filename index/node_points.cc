@@ -40,10 +40,9 @@ void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube) {
   points.position = Gather(points.position, order, 3);
   points.weight = Gather(points.weight, order, 1);
   points.smoothing = Gather(points.smoothing, order, 1);
-  points.velocity = Gather(points.velocity, order, 3);
   points.id = Gather(points.id, order, 1);
   points.type = Gather(points.type, order, 1);
-  points.displacement = Gather(points.displacement, order, 3);
+  for (std::vector<float>* column : VectorColumns(points)) *column = Gather(*column, order, 3);
 }
 
 }  // namespace octocosm

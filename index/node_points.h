@@ -16,6 +16,7 @@
 
 #include "index/cube.h"
 #include "index/morton.h"
+#include "index/particle_chunk.h"
 
 namespace octocosm {
 
@@ -23,10 +24,13 @@ struct NodePoints {
   std::vector<double> position;        // x,y,z interleaved, 3 * size(); absolute coordinates
   std::vector<double> weight;          // size(); the mass each point stands for; they sum to the subtree mass
   std::vector<double> smoothing;       // size(); smoothing length h, absolute units
-  std::vector<float> velocity;         // 3 * size(), or empty
   std::vector<std::uint64_t> id;       // size(), or empty
   std::vector<std::uint8_t> type;      // size()
-  std::vector<float> displacement;     // 3 * size(), or empty: minimal-image offset to the next epoch
+  std::vector<float> velocity;         // the vector columns (VectorColumn, index/particle_chunk.h): 3 * size() or empty
+  std::vector<float> displacement;
+  std::vector<float> next_velocity;
+  std::vector<float> prev_displacement;
+  std::vector<float> prev_velocity;
   std::array<std::uint32_t, 9> octant_offsets{};
 
   std::size_t size() const { return weight.size(); }

@@ -3,32 +3,59 @@
 // arrays) so that a stage that does not need a column never touches it.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
 
 namespace octocosm {
 
+// The optional columns of three floats per point, which ParticleChunk and
+// NodePoints carry alike and every stage treats alike (VectorColumns lists
+// them), in the order blocks store them. Each is empty or holds 3 * size()
+// values, x,y,z interleaved. The epoch links (all but velocity) come from
+// joining a series' epochs by particle ID (tools/ingest/epoch_join.h).
+enum class VectorColumn : std::uint8_t {
+  kVelocity,          // the particle's velocity, in input units
+  kDisplacement,      // minimal-image offset to the same particle's position at the next epoch
+  kNextVelocity,      // its velocity at the next epoch
+  kPrevDisplacement,  // minimal-image offset to its position at the previous epoch
+  kPrevVelocity,      // its velocity at the previous epoch
+};
+inline constexpr std::size_t kVectorColumnCount = 5;
+
 struct ParticleChunk {
   std::vector<double> position;       // x,y,z interleaved: 3 * size(); absolute, in input units
-  std::vector<float> velocity;        // 3 * size(), or empty when the input has none
   std::vector<double> mass;           // size(); always filled (from a mass column, a mass table, or 1)
   std::vector<std::uint64_t> id;      // size(), or empty when the input has no IDs
   std::vector<std::uint8_t> type;     // size(); particle type (GADGET PartType), 0 when the format has none
-  std::vector<float> displacement;    // 3 * size(), or empty: minimal-image offset to the same ID's next-epoch position
+  std::vector<float> velocity;        // the vector columns (VectorColumn): 3 * size() or empty
+  std::vector<float> displacement;
+  std::vector<float> next_velocity;
+  std::vector<float> prev_displacement;
+  std::vector<float> prev_velocity;
 
   std::size_t size() const { return mass.size(); }
   bool has_velocity() const { return !velocity.empty(); }
   bool has_id() const { return !id.empty(); }
 
-  void clear() {
-    position.clear();
-    velocity.clear();
-    mass.clear();
-    id.clear();
-    type.clear();
-    displacement.clear();
-  }
+  void clear();
 };
+
+// The vector columns of a ParticleChunk or NodePoints (const or not), indexed
+// by VectorColumn.
+template <typename Points>
+auto VectorColumns(Points& points) -> std::array<decltype(&points.velocity), kVectorColumnCount> {
+  return {&points.velocity, &points.displacement, &points.next_velocity, &points.prev_displacement,
+          &points.prev_velocity};
+}
+
+inline void ParticleChunk::clear() {
+  position.clear();
+  mass.clear();
+  id.clear();
+  type.clear();
+  for (std::vector<float>* column : VectorColumns(*this)) column->clear();
+}
 
 }  // namespace octocosm

@@ -22,10 +22,9 @@ void KeepPoints(NodePoints& points, const std::vector<std::uint32_t>& keep) {
   KeepColumn(points.position, 3, keep);
   KeepColumn(points.weight, 1, keep);
   KeepColumn(points.smoothing, 1, keep);
-  KeepColumn(points.velocity, 3, keep);
   KeepColumn(points.id, 1, keep);
   KeepColumn(points.type, 1, keep);
-  KeepColumn(points.displacement, 3, keep);
+  for (std::vector<float>* column : VectorColumns(points)) KeepColumn(*column, 3, keep);
 }
 
 std::vector<IndexEntry> SelectNodes(const Dataset& dataset, const Region& region, const QueryOptions& options,

@@ -26,10 +26,12 @@ void CheckOptions(const SubtreeOptions& options, NodeKey region) {
 
 void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube) {
   const std::size_t n = particles.size();
-  if (particles.position.size() != 3 * n || particles.type.size() != n ||
-      (particles.has_velocity() && particles.velocity.size() != 3 * n) ||
-      (particles.has_id() && particles.id.size() != n) ||
-      (!particles.displacement.empty() && particles.displacement.size() != 3 * n)) {
+  bool lengths_agree = particles.position.size() == 3 * n && particles.type.size() == n &&
+                       (!particles.has_id() || particles.id.size() == n);
+  for (const std::vector<float>* column : VectorColumns(particles)) {
+    lengths_agree &= column->empty() || column->size() == 3 * n;
+  }
+  if (!lengths_agree) {
     throw Error::InvalidArgument("subtree builder: particle columns of region " + region.Path() +
                                  " have inconsistent lengths for " + std::to_string(n) + " particles");
   }
@@ -51,16 +53,44 @@ void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& 
   }
 }
 
+// The vector columns a set of points carries, one bit per VectorColumn.
+template <typename Points>
+unsigned PresentVectorColumns(const Points& points) {
+  unsigned present = 0;
+  const auto columns = VectorColumns(points);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) present |= columns[v]->empty() ? 0u : 1u << v;
+  return present;
+}
+
+// Reserves room for `n` points in the vector columns of `to` that `like` carries.
+template <typename Like>
+void ReserveVectors(const Like& like, std::size_t n, NodePoints& to) {
+  const auto source = VectorColumns(like);
+  const auto target = VectorColumns(to);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (!source[v]->empty()) target[v]->reserve(3 * n);
+  }
+}
+
+// Appends point `i` of `from`'s vector columns to the same columns of `to`
+// (those `from` carries).
+template <typename From, typename To>
+void AppendVectors(const From& from, std::size_t i, To& to) {
+  const auto source = VectorColumns(from);
+  const auto target = VectorColumns(to);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (!source[v]->empty()) target[v]->insert(target[v]->end(), &(*source[v])[3 * i], &(*source[v])[3 * i] + 3);
+  }
+}
+
 void SwapParticles(ParticleChunk& c, std::size_t i, std::size_t j) {
   for (int a = 0; a < 3; ++a) std::swap(c.position[3 * i + a], c.position[3 * j + a]);
   std::swap(c.mass[i], c.mass[j]);
   std::swap(c.type[i], c.type[j]);
-  if (c.has_velocity()) {
-    for (int a = 0; a < 3; ++a) std::swap(c.velocity[3 * i + a], c.velocity[3 * j + a]);
-  }
   if (c.has_id()) std::swap(c.id[i], c.id[j]);
-  if (!c.displacement.empty()) {
-    for (int a = 0; a < 3; ++a) std::swap(c.displacement[3 * i + a], c.displacement[3 * j + a]);
+  for (std::vector<float>* column : VectorColumns(c)) {
+    if (column->empty()) continue;
+    for (int a = 0; a < 3; ++a) std::swap((*column)[3 * i + a], (*column)[3 * j + a]);
   }
 }
 
@@ -121,21 +151,15 @@ NodePoints MakeLeaf(ParticleChunk& c, std::size_t begin, std::size_t end, NodeKe
   leaf.position.resize(3 * n);
   leaf.weight.resize(n);
   leaf.type.resize(n);
-  if (c.has_velocity()) leaf.velocity.resize(3 * n);
   if (c.has_id()) leaf.id.resize(n);
-  if (!c.displacement.empty()) leaf.displacement.resize(3 * n);
+  ReserveVectors(c, n, leaf);
   for (std::size_t k = 0; k < n; ++k) {
     const std::size_t i = order[k];
     for (int a = 0; a < 3; ++a) leaf.position[3 * k + a] = c.position[3 * i + a];
     leaf.weight[k] = c.mass[i];
     leaf.type[k] = c.type[i];
-    if (c.has_velocity()) {
-      for (int a = 0; a < 3; ++a) leaf.velocity[3 * k + a] = c.velocity[3 * i + a];
-    }
     if (c.has_id()) leaf.id[k] = c.id[i];
-    if (!c.displacement.empty()) {
-      for (int a = 0; a < 3; ++a) leaf.displacement[3 * k + a] = c.displacement[3 * i + a];
-    }
+    AppendVectors(c, i, leaf);
   }
   for (int o = 0; o < 9; ++o) leaf.octant_offsets[o] = static_cast<std::uint32_t>(bounds[o] - begin);
   leaf.smoothing = LeafSmoothingLengths(leaf.position, leaf.weight, key, cube, options.sampler);
@@ -154,15 +178,12 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
     if (first < 0) first = o;
     const NodePoints& a = children[first];
     const NodePoints& b = children[o];
-    if (a.velocity.empty() != b.velocity.empty() || a.id.empty() != b.id.empty() ||
-        a.displacement.empty() != b.displacement.empty()) {
+    if (a.id.empty() != b.id.empty() || PresentVectorColumns(a) != PresentVectorColumns(b)) {
       throw Error::InvalidArgument("subtree builder: children of node " + key.Path() +
-                                   " disagree on whether points carry velocities, IDs and displacements");
+                                   " disagree on which columns their points carry");
     }
   }
-  const bool has_velocity = first >= 0 && !children[first].velocity.empty();
   const bool has_id = first >= 0 && !children[first].id.empty();
-  const bool has_displacement = first >= 0 && !children[first].displacement.empty();
 
   // The sampler needs only positions, weights and sampling IDs; the other
   // columns are copied straight from the children for the kept points.
@@ -190,6 +211,7 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   const std::size_t kept = sample.kept.size();
   node.position.reserve(3 * kept);
   node.type.reserve(kept);
+  if (first >= 0) ReserveVectors(children[first], kept, node);
   node.weight = sample.weight;
   node.smoothing = sample.smoothing;
   int octant = 0;
@@ -202,13 +224,8 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
     const std::size_t k = i - child_begin[octant];
     for (int a = 0; a < 3; ++a) node.position.push_back(child.position[3 * k + a]);
     node.type.push_back(child.type[k]);
-    if (has_velocity) {
-      for (int a = 0; a < 3; ++a) node.velocity.push_back(child.velocity[3 * k + a]);
-    }
     if (has_id) node.id.push_back(child.id[k]);
-    if (has_displacement) {
-      for (int a = 0; a < 3; ++a) node.displacement.push_back(child.displacement[3 * k + a]);
-    }
+    AppendVectors(child, k, node);
   }
   while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(kept);
   return node;

@@ -49,9 +49,9 @@ struct SubtreeOptions {
 using NodeSink = std::function<void(NodeKey, NodePoints&&)>;
 
 // Builds the subtree of `region` from `particles`, which must all lie in the
-// region (Cube::Holds) with finite positions and finite masses > 0; columns
-// present in `particles` (velocity, id, displacement) are carried into every
-// node: a kept point keeps its particle's values. The
+// region (Cube::Holds) with finite positions and finite masses > 0; the
+// optional columns present in `particles` (id and the vector columns) are
+// carried into every node: a kept point keeps its particle's values. The
 // particles are reordered in place. Returns the region's own node (the same
 // points the sink received for it), for BuildTopLevels; an empty input
 // returns an empty node and calls no sink. Throws Error::InvalidArgument on

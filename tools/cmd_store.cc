@@ -45,6 +45,13 @@ void PrintInfo(const std::string& directory) {
                 points ? static_cast<double>(info.file_size) / static_cast<double>(points) : 0.0);
     std::printf("  cube origin (%.9g, %.9g, %.9g) size %.9g%s, depth %d\n", cube.origin[0], cube.origin[1], cube.origin[2],
                 cube.size, cube.periodic ? " (periodic box)" : "", levels.empty() ? 0 : levels.rbegin()->first);
+    std::printf("  columns %s\n", ColumnNames(dataset.columns(e)).c_str());
+    if (const auto& link = dataset.link_to_next(e)) {
+      std::printf("  to the next epoch: %llu particles in both, velocity scale %.6g (fit residual %.3g, agreed by %.0f%% "
+                  "of the velocity weight; least squares over all %.6g)\n",
+                  static_cast<unsigned long long>(link->matched), link->velocity_scale, link->fit_residual,
+                  100 * link->inlier_fraction, link->least_squares_scale);
+    }
     std::printf("  %5s %10s %14s %12s\n", "level", "nodes", "points", "bytes");
     for (const auto& [level, s] : levels) {
       std::printf("  %5d %10llu %14llu %12s\n", level, static_cast<unsigned long long>(s.nodes),

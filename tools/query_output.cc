@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cstring>
 #include <sstream>
+#include <type_traits>
 #include <vector>
 
 #include "storage/error.h"
@@ -26,19 +27,58 @@ struct Field {
   const char* ply_type;
 };
 
+// The names of each vector column's three fields, indexed by VectorColumn.
+constexpr std::array<std::array<const char*, 3>, kVectorColumnCount> kVectorFieldNames = {{
+    {"vx", "vy", "vz"},
+    {"dx", "dy", "dz"},
+    {"nvx", "nvy", "nvz"},
+    {"pdx", "pdy", "pdz"},
+    {"pvx", "pvy", "pvz"},
+}};
+
+const std::array<const char*, 3>* VectorFieldNames(ColumnId id) {
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (kVectorColumnIds[v] == id) return &kVectorFieldNames[v];
+  }
+  return nullptr;
+}
+
+// Fields come in block column order (kColumnIds); position is always first.
 std::vector<Field> FieldsOf(ColumnSet columns) {
   std::vector<Field> fields = {{"x", "double"}, {"y", "double"}, {"z", "double"}};
-  if (Has(columns, ColumnId::kWeight)) fields.push_back({"weight", "double"});
-  if (Has(columns, ColumnId::kSmoothing)) fields.push_back({"smoothing", "double"});
-  if (Has(columns, ColumnId::kVelocity)) {
-    for (const char* n : {"vx", "vy", "vz"}) fields.push_back({n, "float"});
-  }
-  if (Has(columns, ColumnId::kId)) fields.push_back({"id", "uint64"});  // see docs/QUERIES.md: a PLY extension
-  if (Has(columns, ColumnId::kType)) fields.push_back({"type", "uchar"});
-  if (Has(columns, ColumnId::kDisplacement)) {
-    for (const char* n : {"dx", "dy", "dz"}) fields.push_back({n, "float"});
+  for (const ColumnId id : kColumnIds) {
+    if (id == ColumnId::kPosition || !Has(columns, id)) continue;
+    if (const auto* names = VectorFieldNames(id)) {
+      for (const char* n : *names) fields.push_back({n, "float"});
+    } else if (id == ColumnId::kWeight || id == ColumnId::kSmoothing) {
+      fields.push_back({ColumnName(id), "double"});
+    } else if (id == ColumnId::kId) {
+      fields.push_back({"id", "uint64"});  // see docs/QUERIES.md: a PLY extension
+    } else if (id == ColumnId::kType) {
+      fields.push_back({"type", "uchar"});
+    }
   }
   return fields;
+}
+
+// Calls put(value) for each field of point i after its position, in the
+// order of FieldsOf; a column the batch lacks gives zeros.
+template <typename Put>
+void ForEachExtraField(const NodePoints& p, std::size_t i, ColumnSet columns, const Put& put) {
+  for (const ColumnId id : kColumnIds) {
+    if (id == ColumnId::kPosition || !Has(columns, id)) continue;
+    if (const std::vector<float>* vector = VectorColumnOf(p, id)) {
+      for (int a = 0; a < 3; ++a) put(At(*vector, 3 * i + a));
+    } else if (id == ColumnId::kWeight) {
+      put(At(p.weight, i));
+    } else if (id == ColumnId::kSmoothing) {
+      put(At(p.smoothing, i));
+    } else if (id == ColumnId::kId) {
+      put(At(p.id, i));
+    } else if (id == ColumnId::kType) {
+      put(At(p.type, i));
+    }
+  }
 }
 
 template <typename T>
@@ -52,16 +92,7 @@ void PutLittleEndian(std::string& out, T value) {
 void AppendBinary(const QueryBatch& batch, std::size_t i, ColumnSet columns, std::string& out) {
   const NodePoints& p = batch.points;
   for (int a = 0; a < 3; ++a) PutLittleEndian(out, p.position[3 * i + a]);
-  if (Has(columns, ColumnId::kWeight)) PutLittleEndian(out, At(p.weight, i));
-  if (Has(columns, ColumnId::kSmoothing)) PutLittleEndian(out, At(p.smoothing, i));
-  if (Has(columns, ColumnId::kVelocity)) {
-    for (int a = 0; a < 3; ++a) PutLittleEndian(out, At(p.velocity, 3 * i + a));
-  }
-  if (Has(columns, ColumnId::kId)) PutLittleEndian(out, At(p.id, i));
-  if (Has(columns, ColumnId::kType)) PutLittleEndian(out, At(p.type, i));
-  if (Has(columns, ColumnId::kDisplacement)) {
-    for (int a = 0; a < 3; ++a) PutLittleEndian(out, At(p.displacement, 3 * i + a));
-  }
+  ForEachExtraField(p, i, columns, [&](auto value) { PutLittleEndian(out, value); });
 }
 
 // Appends a number in the shortest form that reads back to the same value.
@@ -82,16 +113,13 @@ void AppendText(const QueryBatch& batch, std::size_t i, ColumnSet columns, char 
   AppendNumber(p.position[3 * i], out);
   field(p.position[3 * i + 1]);
   field(p.position[3 * i + 2]);
-  if (Has(columns, ColumnId::kWeight)) field(At(p.weight, i));
-  if (Has(columns, ColumnId::kSmoothing)) field(At(p.smoothing, i));
-  if (Has(columns, ColumnId::kVelocity)) {
-    for (int a = 0; a < 3; ++a) field(At(p.velocity, 3 * i + a));
-  }
-  if (Has(columns, ColumnId::kId)) field(At(p.id, i));
-  if (Has(columns, ColumnId::kType)) field(static_cast<unsigned>(At(p.type, i)));
-  if (Has(columns, ColumnId::kDisplacement)) {
-    for (int a = 0; a < 3; ++a) field(At(p.displacement, 3 * i + a));
-  }
+  ForEachExtraField(p, i, columns, [&](auto value) {
+    if constexpr (std::is_same_v<decltype(value), std::uint8_t>) {
+      field(static_cast<unsigned>(value));  // a number, not a character
+    } else {
+      field(value);
+    }
+  });
   out += '\n';
 }
 
@@ -211,29 +239,23 @@ ColumnSet ParseColumnList(const std::string& text) {
       continue;
     }
     bool known = false;
-    for (ColumnId id : {ColumnId::kPosition, ColumnId::kWeight, ColumnId::kSmoothing, ColumnId::kVelocity, ColumnId::kId,
-                        ColumnId::kType, ColumnId::kDisplacement}) {
+    std::string names;
+    for (const ColumnId id : kColumnIds) {
+      names += std::string(ColumnName(id)) + ", ";
       if (item == ColumnName(id)) {
         columns |= ColumnBit(id);
         known = true;
       }
     }
-    if (!known) {
-      throw Error::InvalidArgument("--columns: unknown column '" + item +
-                                   "' (known: position, weight, smoothing, velocity, id, type, displacement, all)");
-    }
+    if (!known) throw Error::InvalidArgument("--columns: unknown column '" + item + "' (known: " + names + "all)");
   }
   return columns;
 }
 
 std::size_t BinaryRecordSize(ColumnSet columns) {
   std::size_t size = 24;
-  if (Has(columns, ColumnId::kWeight)) size += 8;
-  if (Has(columns, ColumnId::kSmoothing)) size += 8;
-  if (Has(columns, ColumnId::kVelocity)) size += 12;
-  if (Has(columns, ColumnId::kId)) size += 8;
-  if (Has(columns, ColumnId::kType)) size += 1;
-  if (Has(columns, ColumnId::kDisplacement)) size += 12;
+  const NodePoints none;
+  ForEachExtraField(none, 0, columns, [&](auto value) { size += sizeof value; });
   return size;
 }
 

@@ -34,8 +34,9 @@ class PointWriter {
 };
 
 // Writes to `out` (which must outlive the writer). Columns: position plus
-// those in `columns`, in the fixed order position, weight, smoothing,
-// velocity, id, type, displacement. A wanted optional column that a block
+// those in `columns`, in the block column order (kColumnIds: position,
+// weight, smoothing, velocity, id, type, displacement, next_velocity,
+// prev_displacement, prev_velocity). A wanted optional column that a block
 // lacks (a store without velocities, say) is written as zeros.
 std::unique_ptr<PointWriter> MakePointWriter(PointFormat format, ColumnSet columns, std::ostream& out);
 

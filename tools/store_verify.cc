@@ -49,6 +49,7 @@ void VerifyEpoch(const Dataset& dataset, std::uint32_t e, const IdIndexReader* i
   std::uint64_t leaf_points = 0;
   std::vector<std::pair<std::uint64_t, NodeKey>> id_samples;
   std::mt19937_64 rng(e);
+  const ColumnSet declared = dataset.columns(e);
   for (std::size_t i = 0; i < entries.size(); ++i) {
     const NodeKey key = NodeKey::FromValue(entries[i].key);
     if (!key.IsValid()) {
@@ -69,6 +70,12 @@ void VerifyEpoch(const Dataset& dataset, std::uint32_t e, const IdIndexReader* i
       const std::size_t n = block.header.point_count;
       if (n != entry.point_count) {
         faults.Add(where + ": index says " + std::to_string(entry.point_count) + " points, block holds " + std::to_string(n));
+      }
+      ColumnSet carried = 0;
+      for (const BlockColumn& column : block.header.columns) carried |= ColumnBit(column.id);
+      if (carried != declared) {
+        faults.Add(where + ": carries the columns " + ColumnNames(carried) + ", the manifest declares " +
+                   ColumnNames(declared));
       }
       const bool leaf = !has_children.count(entry.key);
       if (n > dataset.capacity() && !(leaf && key.level() == dataset.max_level())) {

@@ -9,6 +9,7 @@
 #include <xxhash.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -22,6 +23,10 @@ namespace {
 constexpr ColumnSet kVelocityBit = ColumnBit(ColumnId::kVelocity);
 constexpr ColumnSet kIdBit = ColumnBit(ColumnId::kId);
 constexpr ColumnSet kDisplacementBit = ColumnBit(ColumnId::kDisplacement);
+// The optional columns, in block order.
+constexpr std::array<ColumnId, 6> kOptionalColumns = {ColumnId::kVelocity,     ColumnId::kId,
+                                                      ColumnId::kDisplacement, ColumnId::kNextVelocity,
+                                                      ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity};
 
 // n random points inside node `key`, optional columns as `optional` says.
 NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const Cube& cube, ColumnSet optional) {
@@ -41,12 +46,13 @@ NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const 
     p.weight.push_back(mass(rng));
     p.smoothing.push_back(node.size * std::exp2(-16 * unit(rng)));
     p.type.push_back(static_cast<std::uint8_t>(rng() % 6));
-    if (optional & kVelocityBit) {
-      for (int a = 0; a < 3; ++a) p.velocity.push_back(vel(rng));
-    }
     if (optional & kIdBit) p.id.push_back(rng());
-    if (optional & kDisplacementBit) {
-      for (int a = 0; a < 3; ++a) p.displacement.push_back(static_cast<float>(unit(rng) - 0.5) * 0.01f);
+    for (const ColumnId id : kVectorColumnIds) {
+      if (!(optional & ColumnBit(id))) continue;
+      const bool velocity = id == ColumnId::kVelocity || id == ColumnId::kNextVelocity || id == ColumnId::kPrevVelocity;
+      for (int a = 0; a < 3; ++a) {
+        VectorColumnOf(p, id)->push_back(velocity ? vel(rng) : static_cast<float>(unit(rng) - 0.5) * 0.01f);
+      }
     }
   }
   OrderByOctant(p, key, cube);
@@ -92,9 +98,10 @@ void ExpectMatches(const NodePoints& original, const NodePoints& decoded, NodeKe
   }
   EXPECT_EQ(decoded.type, original.type);
   EXPECT_EQ(decoded.id, original.id);
-  for (const auto* pair : {&original.velocity, &original.displacement}) {
-    const auto& orig = *pair;
-    const auto& got = pair == &original.velocity ? decoded.velocity : decoded.displacement;
+  for (const ColumnId id : kVectorColumnIds) {
+    SCOPED_TRACE(ColumnName(id));
+    const auto& orig = *VectorColumnOf(original, id);
+    const auto& got = *VectorColumnOf(decoded, id);
     ASSERT_EQ(got.size(), orig.size());
     for (int a = 0; a < 3 && !orig.empty(); ++a) {
       float lo = orig[a], hi = orig[a];
@@ -106,8 +113,10 @@ void ExpectMatches(const NodePoints& original, const NodePoints& decoded, NodeKe
 }
 
 bool SamePoints(const NodePoints& a, const NodePoints& b) {
-  return a.position == b.position && a.weight == b.weight && a.smoothing == b.smoothing && a.velocity == b.velocity &&
-         a.id == b.id && a.type == b.type && a.displacement == b.displacement && a.octant_offsets == b.octant_offsets;
+  bool same = a.position == b.position && a.weight == b.weight && a.smoothing == b.smoothing && a.id == b.id &&
+              a.type == b.type && a.octant_offsets == b.octant_offsets;
+  for (const ColumnId id : kVectorColumnIds) same &= *VectorColumnOf(a, id) == *VectorColumnOf(b, id);
+  return same;
 }
 
 const Cube kCube{{-3.25, 12.0, 1000.0}, 77.5, false};
@@ -115,10 +124,11 @@ const Cube kCube{{-3.25, 12.0, 1000.0}, 77.5, false};
 TEST(BlockCodec, RoundTripsEveryColumnCombinationAndSize) {
   std::mt19937_64 rng(1);
   const NodeKey key = NodeKey::FromPath("r30");
-  for (ColumnSet optional = 0; optional < 8; ++optional) {
-    const ColumnSet bits = ((optional & 1) ? kVelocityBit : 0) | ((optional & 2) ? kIdBit : 0) |
-                           ((optional & 4) ? kDisplacementBit : 0);
-    for (std::size_t n : {0, 1, 2, 9, 20000}) {
+  for (ColumnSet optional = 0; optional < (1u << kOptionalColumns.size()); ++optional) {
+    ColumnSet bits = 0;
+    for (std::size_t c = 0; c < kOptionalColumns.size(); ++c) bits |= (optional >> c & 1) ? ColumnBit(kOptionalColumns[c]) : 0;
+    const bool all = optional + 1 == (1u << kOptionalColumns.size());
+    for (const std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{2}, std::size_t{9}, all ? std::size_t{20000} : std::size_t{3000}}) {
       SCOPED_TRACE("optional " + std::to_string(optional) + " n " + std::to_string(n));
       const NodePoints points = RandomPoints(rng, n, key, kCube, bits);
       const Bytes block = EncodeBlock(points, key, kCube);
@@ -196,10 +206,10 @@ TEST(BlockCodec, RangedDecodeEqualsFullDecode) {
   const std::size_t header_size = DecodeBlockHeaderSize(fixed, "ranged");
   const Bytes prefix(block.begin(), block.begin() + static_cast<std::ptrdiff_t>(header_size));
   const BlockHeader header = DecodeBlockHeader(prefix, key, "ranged");
-  EXPECT_EQ(header.columns.size(), 7u);
-  for (ColumnSet wanted = 1; wanted < (1u << 7); wanted += 5) {
+  EXPECT_EQ(header.columns.size(), 10u);
+  for (ColumnSet wanted = 1; wanted < (1u << 10); wanted += 5) {
     NodePoints ranged;
-    for (int raw = 1; raw <= 7; ++raw) {
+    for (int raw = 1; raw <= 10; ++raw) {
       const auto id = static_cast<ColumnId>(raw);
       if (!(wanted & (1u << (raw - 1)))) continue;
       const BlockColumn* c = header.Find(id);
@@ -353,7 +363,7 @@ TEST(BlockCodec, StructuralFuzzBehindValidChecksumsNeverMisbehaves) {
     const int flips = 1 + static_cast<int>(rng() % 3);
     for (int f = 0; f < flips; ++f) {
       // Mostly the header and directory, where the structure lives.
-      const std::size_t at = rng() % 4 ? rng() % std::min<std::size_t>(bad.size(), 480) : rng() % bad.size();
+      const std::size_t at = rng() % 4 ? rng() % std::min<std::size_t>(bad.size(), kBlockMaxHeaderSize) : rng() % bad.size();
       bad[at] = static_cast<std::uint8_t>(rng());
     }
     if (rng() % 8 == 0) bad.resize(rng() % bad.size());
@@ -397,16 +407,75 @@ TEST(BlockCodec, WrongKeyAndVersionAreReported) {
 TEST(BlockCodec, ExtremeVelocityRangesStayFinite) {
   std::mt19937_64 rng(10);
   const NodeKey key = NodeKey::FromPath("r6");
-  NodePoints p = RandomPoints(rng, 64, key, kCube, kVelocityBit | kDisplacementBit);
+  NodePoints p = RandomPoints(rng, 64, key, kCube, kAllColumns);
   const float big = std::numeric_limits<float>::max();
-  for (std::size_t i = 0; i < p.velocity.size(); ++i) p.velocity[i] = (i % 2 ? big : -big) * (static_cast<float>(i % 5) / 4);
+  for (std::size_t i = 0; i < p.velocity.size(); ++i) {
+    p.velocity[i] = (i % 2 ? big : -big) * (static_cast<float>(i % 5) / 4);
+    p.next_velocity[i] = -p.velocity[i];
+    p.prev_velocity[i] = p.velocity[(i + 3) % p.velocity.size()];
+  }
   for (float& d : p.displacement) d = 1e-30f;  // a zero range
+  for (float& d : p.prev_displacement) d = -1e-30f;
   const NodePoints d = DecodeBlock(EncodeBlock(p, key, kCube), kAllColumns, key, kCube, "extreme").points;
   for (std::size_t i = 0; i < p.velocity.size(); ++i) {
-    ASSERT_TRUE(std::isfinite(d.velocity[i]));
-    ASSERT_LE(std::fabs(static_cast<double>(d.velocity[i]) - p.velocity[i]), 2.0 * big / 131070 * 1.001);
+    for (const ColumnId id : {ColumnId::kVelocity, ColumnId::kNextVelocity, ColumnId::kPrevVelocity}) {
+      const float got = (*VectorColumnOf(d, id))[i];
+      ASSERT_TRUE(std::isfinite(got)) << ColumnName(id);
+      ASSERT_LE(std::fabs(static_cast<double>(got) - (*VectorColumnOf(p, id))[i]), 2.0 * big / 131070 * 1.001);
+    }
     ASSERT_EQ(d.displacement[i], 1e-30f);
+    ASSERT_EQ(d.prev_displacement[i], -1e-30f);
   }
+}
+
+// Columns 8-10 (the epoch links) get every check that velocity and
+// displacement get: their own checksum, their length, their range.
+TEST(BlockCodec, EpochLinkColumnsAreCheckedLikeVelocity) {
+  std::mt19937_64 rng(11);
+  const NodeKey key = NodeKey::FromPath("r52");
+  const NodePoints points = RandomPoints(rng, 30, key, kCube, kAllColumns);
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const BlockHeader header = DecodeBlockHeader(block, key, "links");
+  // All ten columns, in id order, the links last.
+  ASSERT_EQ(header.columns.size(), 10u);
+  for (std::size_t c = 0; c < 10; ++c) EXPECT_EQ(static_cast<int>(header.columns[c].id), static_cast<int>(c + 1));
+  auto expect_corrupt = [&](const Bytes& bad, ColumnSet wanted, const std::string& message) {
+    try {
+      DecodeBlock(bad, wanted, key, kCube, "links");
+      ADD_FAILURE() << message;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << e.what();
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  };
+  for (const ColumnId id : {ColumnId::kNextVelocity, ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity}) {
+    SCOPED_TRACE(ColumnName(id));
+    const BlockColumn& column = *header.Find(id);
+    EXPECT_EQ(column.length, 6u * points.size());
+    const std::string name = std::string("column '") + ColumnName(id) + "': ";
+    // A flipped value byte: the column's own checksum, found even when only it is read.
+    Bytes bad = block;
+    bad[column.offset + 7] ^= 0x20;
+    expect_corrupt(bad, ColumnBit(id), name + "checksum mismatch");
+    // A range with min > max behind valid checksums.
+    bad = block;
+    const std::size_t entry = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * (static_cast<std::size_t>(id) - 1);
+    const float min = 1, max = -1;
+    std::memcpy(&bad[entry + 32], &min, 4);
+    std::memcpy(&bad[entry + 32 + 12], &max, 4);
+    FixChecksums(bad);
+    expect_corrupt(bad, ColumnBit(id), name + "range of component 0");
+    // A length that does not fit the point count.
+    bad = block;
+    bad[entry + 16] = static_cast<std::uint8_t>(bad[entry + 16] + 6);
+    FixChecksums(bad);
+    expect_corrupt(bad, kAllColumns, name);
+  }
+  // Id 11 is not a column of version 1.
+  Bytes bad = block;
+  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 9] = 11;
+  FixChecksums(bad);
+  expect_corrupt(bad, kAllColumns, "unknown column id 11");
 }
 
 TEST(BlockCodec, EncodeRejectsPointsThatBreakTheContract) {
@@ -444,6 +513,12 @@ TEST(BlockCodec, EncodeRejectsPointsThatBreakTheContract) {
   p = good;
   p.smoothing.pop_back();
   expect_invalid(p, "short column");
+  p = RandomPoints(rng, 40, key, kCube, kAllColumns);
+  p.prev_velocity[7] = std::nanf("");
+  expect_invalid(p, "nan prev_velocity");
+  p = RandomPoints(rng, 40, key, kCube, kAllColumns);
+  p.next_velocity.pop_back();
+  expect_invalid(p, "short next_velocity");
   p = good;
   p.smoothing[0] = std::nan("");
   expect_invalid(p, "nan smoothing");

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <numeric>
@@ -318,11 +319,20 @@ TEST(SubtreeBuilder, WorksWithoutIdsOrVelocities) {
   EXPECT_EQ(sorted(root), sorted(root2));
 }
 
-TEST(SubtreeBuilder, CarriesDisplacements) {
+// Every vector column (velocity and the epoch links) follows its particle
+// into every node that keeps it.
+TEST(SubtreeBuilder, CarriesEveryVectorColumn) {
   std::mt19937_64 rng(8);
   ParticleChunk input = Clumpy(rng, 5000);
-  for (const std::uint64_t id : input.id) {
-    for (int a = 0; a < 3; ++a) input.displacement.push_back(static_cast<float>(id % 997) * 0.01f + static_cast<float>(a));
+  auto value = [](std::uint64_t id, std::size_t column, int axis) {
+    return static_cast<float>(id % 997) * 0.01f + static_cast<float>(10 * column + static_cast<std::size_t>(axis));
+  };
+  const auto columns = VectorColumns(input);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    columns[v]->clear();
+    for (const std::uint64_t id : input.id) {
+      for (int a = 0; a < 3; ++a) columns[v]->push_back(value(id, v, a));
+    }
   }
   SubtreeOptions options;
   options.capacity = 200;
@@ -330,12 +340,15 @@ TEST(SubtreeBuilder, CarriesDisplacements) {
   BuildSubtree(input, NodeKey::Root(), kCube, options, tree.Sink());
   ASSERT_GT(tree.nodes.size(), 8u);
   for (const auto& [key, points] : tree.nodes) {
-    ASSERT_EQ(points.displacement.size(), 3 * points.size());
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      ASSERT_EQ(points.displacement[3 * i + 2], static_cast<float>(points.id[i] % 997) * 0.01f + 2.0f);
+    const auto node_columns = VectorColumns(points);
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      ASSERT_EQ(node_columns[v]->size(), 3 * points.size());
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        for (int a = 0; a < 3; ++a) ASSERT_EQ((*node_columns[v])[3 * i + a], value(points.id[i], v, a)) << v;
+      }
     }
     const Bytes block = EncodeBlock(points, key, kCube);
-    EXPECT_EQ(DecodeBlock(block, kAllColumns, key, kCube, "d").points.displacement.size(), 3 * points.size());
+    EXPECT_EQ(DecodeBlock(block, kAllColumns, key, kCube, "d").points.prev_velocity.size(), 3 * points.size());
   }
 }
 
@@ -403,6 +416,32 @@ TEST(SubtreeBuilder, RootEstimatesRegionMassesWithoutBias) {
           << " (of " << total << ") sd of mean " << sd_of_mean;
     }
   }
+
+TEST(SubtreeBuilder, ChildrenCarryingDifferentColumnsAreRejected) {
+  std::mt19937_64 rng(9);
+  const ParticleChunk input = Clumpy(rng, 3000, true, true);
+  SubtreeOptions options;
+  options.capacity = 100;
+  // The particles of two sibling regions, one with next velocities and one without.
+  std::array<ParticleChunk, 2> parts;
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    const int octant = kCube.ChildOctant(&input.position[3 * i], 0);
+    if (octant > 1) continue;
+    ParticleChunk& part = parts[static_cast<std::size_t>(octant)];
+    part.position.insert(part.position.end(), &input.position[3 * i], &input.position[3 * i] + 3);
+    part.mass.push_back(input.mass[i]);
+    part.type.push_back(input.type[i]);
+    part.id.push_back(input.id[i]);
+    part.velocity.insert(part.velocity.end(), &input.velocity[3 * i], &input.velocity[3 * i] + 3);
+  }
+  parts[1].next_velocity = parts[1].velocity;
+  TopLevelMerger merger(kCube, options, [](NodeKey, NodePoints&&) {});
+  for (int o = 0; o < 2; ++o) {
+    const NodeKey region = NodeKey::Root().Child(o);
+    ASSERT_GT(parts[static_cast<std::size_t>(o)].size(), 0u);
+    merger.Add(region, BuildSubtree(parts[static_cast<std::size_t>(o)], region, kCube, options, [](NodeKey, NodePoints&&) {}));
+  }
+  EXPECT_THROW(merger.Finish(), Error);
 }
 
 TEST(SubtreeBuilder, TopLevelsMatchOneBuildOverTheWholeCube) {

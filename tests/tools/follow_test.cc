@@ -235,5 +235,48 @@ TEST(QueryOutputTest, CsvBinaryAndPlyHoldTheColumnsAsked) {
   EXPECT_THROW(ParsePointFormat("xml"), Error);
 }
 
+TEST(QueryOutputTest, EpochLinkColumnsHaveTheirOwnFieldsInBlockOrder) {
+  QueryBatch batch = TwoPoints();
+  batch.points.type = {3, 250};
+  batch.points.displacement = {0.5f, 0, 0, 0, 0, -0.5f};
+  batch.points.next_velocity = {7, 8, 9, 10, 11, 12};
+  batch.points.prev_displacement = {-0.5f, 0, 0, 0, 0, 0.5f};
+  // prev_velocity left empty: a store without it gives zeros.
+  const ColumnSet columns = ParseColumnList("prev_velocity,next_velocity,type,prev_displacement,displacement");
+  std::ostringstream csv;
+  auto writer = MakePointWriter(PointFormat::kCsv, columns, csv);
+  writer->Write(batch);
+  writer->Finish();
+  EXPECT_EQ(csv.str(),
+            "x,y,z,type,dx,dy,dz,nvx,nvy,nvz,pdx,pdy,pdz,pvx,pvy,pvz\n"
+            "1.5,2.5,3.5,3,0.5,0,0,7,8,9,-0.5,0,0,0,0,0\n"
+            "-4,5,6.25,250,0,0,-0.5,10,11,12,0,0,0.5,0,0,0\n");
+
+  std::ostringstream bin;
+  writer = MakePointWriter(PointFormat::kBinary, columns, bin);
+  writer->Write(batch);
+  writer->Finish();
+  const std::size_t record = 24 + 1 + 4 * 12;
+  ASSERT_EQ(BinaryRecordSize(columns), record);
+  const std::string bytes = bin.str();
+  ASSERT_EQ(bytes.size(), 16 + 2 * record);
+  std::uint32_t bits;
+  std::memcpy(&bits, bytes.data() + 4, 4);
+  EXPECT_EQ(bits, (1u << 1) | (1u << 6) | (1u << 7) | (1u << 8) | (1u << 9) | (1u << 10));
+  float next_vz, prev_dz;
+  std::memcpy(&next_vz, bytes.data() + 16 + record + 25 + 12 + 8, 4);
+  std::memcpy(&prev_dz, bytes.data() + 16 + record + 25 + 24 + 8, 4);
+  EXPECT_EQ(next_vz, 12);
+  EXPECT_EQ(prev_dz, 0.5f);
+
+  std::ostringstream ply;
+  writer = MakePointWriter(PointFormat::kPly, columns, ply);
+  writer->Write(batch);
+  writer->Finish();
+  for (const char* property : {"property float nvx\n", "property float pdy\n", "property float pvz\n"}) {
+    EXPECT_NE(ply.str().find(property), std::string::npos) << property;
+  }
+}
+
 }  // namespace
 }  // namespace octocosm

@@ -95,10 +95,10 @@ TEST_F(SharedDataIngestTest, Hdf5TimeSeriesDisplacementsMatchTheNextEpoch) {
     if (e < 20) {
       double worst = 0;
       for (const auto& [id, lp] : check.leaf_points) {
-        ASSERT_TRUE(lp.has_displacement);
+        ASSERT_TRUE(lp.Has(VectorColumn::kDisplacement));
         for (int a = 0; a < 3; ++a) {
           const double truth = next_positions.at(id)[a] - positions.at(id)[a];
-          worst = std::max(worst, std::fabs(lp.displacement[a] - truth) / std::max(1.0, std::fabs(truth)));
+          worst = std::max(worst, std::fabs(lp.Vector(VectorColumn::kDisplacement)[a] - truth) / std::max(1.0, std::fabs(truth)));
         }
       }
       // Per-block quantization of the displacement (16 bits over the block's range) and float32.

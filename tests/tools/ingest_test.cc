@@ -199,7 +199,7 @@ TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) 
   std::size_t crossings = 0;
   for (const Particle& p : epoch0) {
     const LeafPoint& lp = first.leaf_points.at(p.id);
-    ASSERT_TRUE(lp.has_displacement);
+    ASSERT_TRUE(lp.Has(VectorColumn::kDisplacement));
     for (int a = 0; a < 3; ++a) {
       double expected = next.at(p.id)->x[a] - p.x[a];
       if (std::fabs(expected) > box / 2) {
@@ -207,13 +207,13 @@ TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) 
         expected -= box * std::nearbyint(expected / box);
       }
       // Quantized per block between min and max (|d| <= 2): error <= 4 / 131070, plus float rounding.
-      ASSERT_NEAR(lp.displacement[a], expected, 4.0 / 131070 + 1e-5) << "ID " << p.id;
+      ASSERT_NEAR(lp.Vector(VectorColumn::kDisplacement)[a], expected, 4.0 / 131070 + 1e-5) << "ID " << p.id;
     }
   }
   EXPECT_GT(crossings, 100u) << "the test must exercise boundary crossings";
   // The last epoch has nothing to move to.
   const TreeCheck last = CheckTree(dataset, 1);
-  EXPECT_FALSE(last.leaf_points.begin()->second.has_displacement);
+  EXPECT_FALSE(last.leaf_points.begin()->second.Has(VectorColumn::kDisplacement));
   // The ID index finds every particle in both epochs.
   IdIndexReader ids(dataset.id_index_directory());
   for (std::size_t i = 0; i < epoch0.size(); i += 97) {

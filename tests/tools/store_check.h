@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <set>
@@ -20,10 +22,29 @@ struct LeafPoint {
   double weight;
   std::uint8_t type;
   NodeKey leaf;
-  float displacement[3];
-  bool has_displacement;
   double node_mass;  // sum of the leaf's weights: one weight unit is node_mass / kWeightTotalUnits
+  // The vector columns (indexed by VectorColumn), whether the leaf has each,
+  // and the codec's error bound of each component in this leaf's block:
+  // half a step of the block's range, (max - min) / 131070, plus float rounding.
+  std::array<std::array<float, 3>, kVectorColumnCount> vectors{};
+  std::array<bool, kVectorColumnCount> present{};
+  std::array<std::array<double, 3>, kVectorColumnCount> bound{};
+
+  bool Has(VectorColumn c) const { return present[static_cast<std::size_t>(c)]; }
+  const std::array<float, 3>& Vector(VectorColumn c) const { return vectors[static_cast<std::size_t>(c)]; }
+  double Bound(VectorColumn c, int axis) const { return bound[static_cast<std::size_t>(c)][static_cast<std::size_t>(axis)]; }
 };
+
+// Per component, the error bound of a quantized vector column in one block.
+inline std::array<double, 3> QuantizationBound(const std::vector<float>& column) {
+  std::array<double, 3> bound{};
+  for (int a = 0; a < 3 && !column.empty(); ++a) {
+    double lo = column[a], hi = column[a];
+    for (std::size_t i = a; i < column.size(); i += 3) lo = std::min<double>(lo, column[i]), hi = std::max<double>(hi, column[i]);
+    bound[a] = (hi - lo) / 131070 * (1 + 1e-6) + 4.0 * std::max(-lo, hi) * 0x1p-23;
+  }
+  return bound;
+}
 
 struct TreeCheck {
   std::unordered_map<std::uint64_t, LeafPoint> leaf_points;  // by ID
@@ -82,11 +103,15 @@ inline TreeCheck CheckTree(const Dataset& dataset, std::uint32_t epoch) {
     }
     if (leaf) {
       EXPECT_FALSE(p.id.empty());
+      const auto columns = VectorColumns(p);
+      std::array<std::array<double, 3>, kVectorColumnCount> bounds;
+      for (std::size_t v = 0; v < kVectorColumnCount; ++v) bounds[v] = QuantizationBound(*columns[v]);
       for (std::size_t i = 0; i < p.size(); ++i) {
-        LeafPoint lp{{p.position[3 * i], p.position[3 * i + 1], p.position[3 * i + 2]},
-                     p.weight[i], p.type[i], key, {0, 0, 0}, !p.displacement.empty(), sum};
-        if (lp.has_displacement) {
-          for (int a = 0; a < 3; ++a) lp.displacement[a] = p.displacement[3 * i + a];
+        LeafPoint lp{{p.position[3 * i], p.position[3 * i + 1], p.position[3 * i + 2]}, p.weight[i], p.type[i], key, sum};
+        lp.bound = bounds;
+        for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+          lp.present[v] = !columns[v]->empty();
+          for (int a = 0; a < 3 && lp.present[v]; ++a) lp.vectors[v][a] = (*columns[v])[3 * i + a];
         }
         EXPECT_TRUE(check.leaf_points.emplace(p.id[i], lp).second) << "ID " << p.id[i] << " in two leaves";
       }

@@ -81,6 +81,7 @@ class VerifyTest : public ::testing::Test {
     const Cube cube{{0, 0, 0}, 1.0, false};
     nlohmann::json dataset = {{"capacity", capacity},
                               {"max_level", 21},
+                              {"has_id", true},
                               {"id_index", ""},
                               {"epochs", {{{"cube", {{"origin", cube.origin}, {"size", cube.size}, {"periodic", false}}},
                                            {"points", leaf_points}}}}};
@@ -148,6 +149,18 @@ TEST_F(VerifyTest, AManifestThatMiscountsTheLeavesIsAFault) {
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "leaves hold 20000 points, the manifest says 20001")) << AllFaults(report);
+}
+
+TEST_F(VerifyTest, BlocksWithoutAColumnTheManifestDeclaresAreAFault) {
+  const std::string store = IngestedStore();  // no velocities
+  const fs::path manifest = fs::path(store) / "manifest.json";
+  nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
+  json["dataset"]["has_velocity"] = true;
+  std::ofstream(manifest) << json.dump();
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,id,type, the manifest declares "
+                                       "position,weight,smoothing,velocity,id,type"))
+      << AllFaults(report);
 }
 
 TEST_F(VerifyTest, ADamagedIdIndexIsAFault) {

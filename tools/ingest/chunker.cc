@@ -23,18 +23,21 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
   grow(to.position, 3 * n);
   grow(to.mass, n);
   grow(to.type, n);
-  if (from.has_velocity()) grow(to.velocity, 3 * n);
   if (from.has_id()) grow(to.id, n);
-  if (!from.displacement.empty()) grow(to.displacement, 3 * n);
+  const auto source = VectorColumns(from);
+  const auto target = VectorColumns(to);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (!source[v]->empty()) grow(*target[v], 3 * n);
+  }
   for (const std::uint32_t i : indices) {
     to.position.insert(to.position.end(), &from.position[3 * i], &from.position[3 * i] + 3);
     to.mass.push_back(from.mass[i]);
     to.type.push_back(from.type[i]);
-    if (from.has_velocity()) to.velocity.insert(to.velocity.end(), &from.velocity[3 * i], &from.velocity[3 * i] + 3);
     if (from.has_id()) to.id.push_back(from.id[i]);
-    if (!from.displacement.empty()) {
-      to.displacement.insert(to.displacement.end(), &from.displacement[3 * i], &from.displacement[3 * i] + 3);
-    }
+  }
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (source[v]->empty()) continue;
+    for (const std::uint32_t i : indices) target[v]->insert(target[v]->end(), &(*source[v])[3 * i], &(*source[v])[3 * i] + 3);
   }
 }
 

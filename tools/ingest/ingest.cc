@@ -394,7 +394,9 @@ IngestReport Ingest(const IngestOptions& options) {
     // temporary files that stay in the OS page cache (docs/BENCHMARKS.md).
     chunker_options.memory_bytes = static_cast<std::size_t>(std::min<std::uint64_t>(budget * 3 / 10, kMaxChunkBufferBytes));
     chunker_options.temp_dir = temp.path();
-    chunker_options.columns = {has_velocity, has_id, join_epochs && next_sorted != nullptr};
+    chunker_options.columns.id = has_id;
+    chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity;
+    chunker_options.columns.vector(VectorColumn::kDisplacement) = join_epochs && next_sorted != nullptr;
     std::vector<Chunk> chunks;
     {
       Progress progress(label + ": read + chunk", expected, "points");

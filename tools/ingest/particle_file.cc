@@ -19,13 +19,20 @@ void ResizeColumn(std::vector<T>& column, std::size_t old_size, std::size_t adde
 
 }  // namespace
 
+std::size_t ParticleColumns::BytesPerPoint() const {
+  std::size_t bytes = 33 + (id ? 8 : 0);
+  for (const bool present : vectors) bytes += present ? 12 : 0;
+  return bytes;
+}
+
 ParticleFileWriter::ParticleFileWriter(std::string path, ParticleColumns columns)
     : path_(std::move(path)), columns_(columns) {
   file_ = std::fopen(path_.c_str(), "wb");
   if (file_ == nullptr) throw IoErrorFromErrno(path_, "creating a temporary particle file", errno);
   std::setvbuf(file_, nullptr, _IOFBF, kStdioBuffer);
   Write(kMagic, sizeof kMagic);
-  const std::uint8_t flags[8] = {columns_.velocity, columns_.id, columns_.displacement, 0, 0, 0, 0, 0};
+  std::uint8_t flags[8] = {columns_.id};
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) flags[1 + v] = columns_.vectors[v];
   Write(flags, sizeof flags);
 }
 
@@ -65,9 +72,11 @@ void ParticleFileWriter::Append(const ParticleChunk& chunk, std::size_t begin, s
   Write(chunk.position.data() + 3 * begin, 3 * n * sizeof(double));
   Write(chunk.mass.data() + begin, n * sizeof(double));
   Write(chunk.type.data() + begin, n);
-  if (columns_.velocity) Write(chunk.velocity.data() + 3 * begin, 3 * n * sizeof(float));
   if (columns_.id) Write(chunk.id.data() + begin, n * sizeof(std::uint64_t));
-  if (columns_.displacement) Write(chunk.displacement.data() + 3 * begin, 3 * n * sizeof(float));
+  const auto vectors = VectorColumns(chunk);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (columns_.vectors[v]) Write(vectors[v]->data() + 3 * begin, 3 * n * sizeof(float));
+  }
   point_count_ += n;
 }
 
@@ -93,7 +102,8 @@ ParticleFileReader::ParticleFileReader(std::string path) : path_(std::move(path)
   if (std::memcmp(magic, kMagic, sizeof magic) != 0) {
     throw Error::Corruption(path_, "not an octocosm temporary particle file (wrong magic)");
   }
-  columns_ = {flags[0] != 0, flags[1] != 0, flags[2] != 0};
+  columns_.id = flags[0] != 0;
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) columns_.vectors[v] = flags[1 + v] != 0;
 }
 
 ParticleFileReader::ParticleFileReader(ParticleFileReader&& other) noexcept
@@ -135,17 +145,15 @@ bool ParticleFileReader::ReadBatch(ParticleChunk& chunk, bool append) {
   Read(chunk.position.data() + 3 * old, 3 * n * sizeof(double), "positions");
   Read(chunk.mass.data() + old, n * sizeof(double), "masses");
   Read(chunk.type.data() + old, n, "types");
-  if (columns_.velocity) {
-    ResizeColumn(chunk.velocity, old, n, 3);
-    Read(chunk.velocity.data() + 3 * old, 3 * n * sizeof(float), "velocities");
-  }
   if (columns_.id) {
     ResizeColumn(chunk.id, old, n, 1);
     Read(chunk.id.data() + old, n * sizeof(std::uint64_t), "IDs");
   }
-  if (columns_.displacement) {
-    ResizeColumn(chunk.displacement, old, n, 3);
-    Read(chunk.displacement.data() + 3 * old, 3 * n * sizeof(float), "displacements");
+  const auto vectors = VectorColumns(chunk);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (!columns_.vectors[v]) continue;
+    ResizeColumn(*vectors[v], old, n, 3);
+    Read(vectors[v]->data() + 3 * old, 3 * n * sizeof(float), "vector columns");
   }
   return true;
 }

@@ -9,6 +9,7 @@
 // misread.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <cstdio>
 #include <string>
@@ -19,12 +20,12 @@ namespace octocosm {
 
 // Which optional columns the batches of a file carry (all batches alike).
 struct ParticleColumns {
-  bool velocity = false;
   bool id = false;
-  bool displacement = false;
+  std::array<bool, kVectorColumnCount> vectors{};  // indexed by VectorColumn
 
+  bool& vector(VectorColumn column) { return vectors[static_cast<std::size_t>(column)]; }
   // Bytes one point takes in a file: position 24, mass 8, type 1 + options.
-  std::size_t BytesPerPoint() const { return 33 + (velocity ? 12 : 0) + (id ? 8 : 0) + (displacement ? 12 : 0); }
+  std::size_t BytesPerPoint() const;
 };
 
 class ParticleFileWriter {
