@@ -81,6 +81,8 @@ void AddIngestCommand(CLI::App& app) {
                   static_cast<unsigned long long>(r.leaves), r.depth, static_cast<unsigned long long>(r.chunks), r.mass);
       if (r.spilled_points) std::printf(", %llu points spilled to disk", static_cast<unsigned long long>(r.spilled_points));
       if (r.missing_in_next) std::printf(", %llu IDs missing in the next epoch", static_cast<unsigned long long>(r.missing_in_next));
+      if (r.missing_in_prev) std::printf(", %llu IDs missing in the previous epoch", static_cast<unsigned long long>(r.missing_in_prev));
+      if (r.to_next) std::printf(", velocity scale to the next epoch %.6g (fit residual %.3g)", r.to_next->velocity_scale, r.to_next->fit_residual);
       if (r.duplicate_ids) std::printf(", %llu duplicate IDs", static_cast<unsigned long long>(r.duplicate_ids));
       std::printf("\n    seconds:");
       for (const auto& [phase, seconds] : r.phase_seconds) std::printf(" %s %.2f", phase.c_str(), seconds);

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 
+#include <algorithm>
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -65,7 +67,7 @@ TEST_F(SharedDataIngestTest, GadgetFilesIngestWithTheirCountsTypesAndIds) {
   EXPECT_TRUE(TempIsEmpty());
 }
 
-TEST_F(SharedDataIngestTest, Hdf5TimeSeriesDisplacementsMatchTheNextEpoch) {
+TEST_F(SharedDataIngestTest, Hdf5TimeSeriesLinksEveryParticleToItsNeighbourEpochs) {
   std::vector<std::string> inputs;
   for (int i = 0; i <= 20; ++i) {
     char name[64];
@@ -78,34 +80,84 @@ TEST_F(SharedDataIngestTest, Hdf5TimeSeriesDisplacementsMatchTheNextEpoch) {
   Ingest(o);
   const Dataset dataset = Dataset::Open(o.output);
   ASSERT_EQ(dataset.epoch_count(), 21u);
-  std::unordered_map<std::uint64_t, std::array<double, 3>> next_positions;
+  struct Truth {
+    std::array<double, 3> x;
+    std::array<float, 3> v;
+  };
+  using V = VectorColumn;
+  std::unordered_map<std::uint64_t, Truth> later;  // epoch e + 1, read straight from its file
+  TreeCheck later_tree;
+  std::vector<double> scale_ratios, least_squares_ratios;
+  double later_time = 0;
   for (int e = 20; e >= 0; --e) {
+    SCOPED_TRACE("epoch " + std::to_string(e));
     const TreeCheck check = CheckTree(dataset, static_cast<std::uint32_t>(e));
     ASSERT_EQ(check.leaf_points.size(), 60000u);
     EXPECT_EQ(TypeCounts(check), (std::map<int, std::uint64_t>{{1, 40000}, {2, 20000}}));
-    // Read the true positions of this epoch straight from the file.
-    std::unordered_map<std::uint64_t, std::array<double, 3>> positions;
+    std::unordered_map<std::uint64_t, Truth> truth;
     auto source = OpenSnapshot(inputs[static_cast<std::size_t>(e)], {});
+    const double time = source->header().time;
     ParticleChunk chunk;
     while (source->Next(chunk)) {
       for (std::size_t i = 0; i < chunk.size(); ++i) {
-        positions[chunk.id[i]] = {chunk.position[3 * i], chunk.position[3 * i + 1], chunk.position[3 * i + 2]};
+        Truth& t = truth[chunk.id[i]];
+        for (int a = 0; a < 3; ++a) {
+          t.x[a] = chunk.position[3 * i + a];
+          t.v[a] = chunk.velocity[3 * i + a];
+        }
+      }
+    }
+    for (const auto& [id, lp] : check.leaf_points) {
+      const Truth& t = truth.at(id);
+      ASSERT_EQ(lp.Has(V::kDisplacement), e < 20);
+      ASSERT_EQ(lp.Has(V::kPrevVelocity), e > 0);
+      for (int a = 0; a < 3; ++a) ASSERT_NEAR(lp.Vector(V::kVelocity)[a], t.v[a], lp.Bound(V::kVelocity, a)) << id;
+      if (e == 20) continue;
+      const Truth& next = later.at(id);
+      const LeafPoint& next_lp = later_tree.leaf_points.at(id);
+      for (int a = 0; a < 3; ++a) {
+        // Each column against the files, within its block's quantization (float32 differences).
+        ASSERT_NEAR(lp.Vector(V::kDisplacement)[a], next.x[a] - t.x[a], lp.Bound(V::kDisplacement, a) + 1e-4) << id;
+        ASSERT_NEAR(lp.Vector(V::kNextVelocity)[a], next.v[a], lp.Bound(V::kNextVelocity, a)) << id;
+        ASSERT_NEAR(next_lp.Vector(V::kPrevVelocity)[a], t.v[a], next_lp.Bound(V::kPrevVelocity, a)) << id;
+        // And each link against the column it mirrors in the other epoch.
+        ASSERT_NEAR(lp.Vector(V::kNextVelocity)[a], next_lp.Vector(V::kVelocity)[a],
+                    lp.Bound(V::kNextVelocity, a) + next_lp.Bound(V::kVelocity, a)) << id;
+        ASSERT_NEAR(next_lp.Vector(V::kPrevVelocity)[a], lp.Vector(V::kVelocity)[a],
+                    next_lp.Bound(V::kPrevVelocity, a) + lp.Bound(V::kVelocity, a)) << id;
+        ASSERT_NEAR(next_lp.Vector(V::kPrevDisplacement)[a], -lp.Vector(V::kDisplacement)[a],
+                    next_lp.Bound(V::kPrevDisplacement, a) + lp.Bound(V::kDisplacement, a)) << id;
       }
     }
     if (e < 20) {
-      double worst = 0;
-      for (const auto& [id, lp] : check.leaf_points) {
-        ASSERT_TRUE(lp.Has(VectorColumn::kDisplacement));
-        for (int a = 0; a < 3; ++a) {
-          const double truth = next_positions.at(id)[a] - positions.at(id)[a];
-          worst = std::max(worst, std::fabs(lp.Vector(VectorColumn::kDisplacement)[a] - truth) / std::max(1.0, std::fabs(truth)));
-        }
-      }
-      // Per-block quantization of the displacement (16 bits over the block's range) and float32.
-      EXPECT_LT(worst, 2e-3) << "epoch " << e;
+      const EpochLink& link = *dataset.link_to_next(static_cast<std::uint32_t>(e));
+      EXPECT_EQ(link.matched, 60000u);
+      scale_ratios.push_back(link.velocity_scale / (later_time - time));
+      least_squares_ratios.push_back(link.least_squares_scale / (later_time - time));
+    } else {
+      EXPECT_FALSE(dataset.link_to_next(20).has_value());
     }
-    next_positions = std::move(positions);
+    later = std::move(truth);
+    later_tree = check;
+    later_time = time;
   }
+  // The velocity scale is the time step (kpc and km/s, time unit kpc/(km/s)).
+  // What limits the agreement: the fit takes the particles whose own scale
+  // lies within about +-25 % of the mode of 1/8-octave bins, and curved
+  // orbits bias a particle's scale upwards ((2/w) tan(w step/2) for angular
+  // frequency w). Measured here: 19 of 20 pairs within 3 % of the step, one
+  // (epoch 2, the first passage) 16 % above it. So every pair within 20 %,
+  // the median within 3 %. The plain least-squares scale, for comparison,
+  // comes out at 0.62-0.85 of the step: the particles that went further than
+  // half an orbit between the snapshots drag it down.
+  ASSERT_EQ(scale_ratios.size(), 20u);
+  for (std::size_t i = 0; i < scale_ratios.size(); ++i) {
+    EXPECT_NEAR(scale_ratios[i], 1.0, 0.2) << "pair " << 19 - i;
+  }
+  std::sort(scale_ratios.begin(), scale_ratios.end());
+  std::sort(least_squares_ratios.begin(), least_squares_ratios.end());
+  EXPECT_NEAR((scale_ratios[9] + scale_ratios[10]) / 2, 1.0, 0.03);
+  EXPECT_LT(least_squares_ratios[10], 0.9);
 }
 
 }  // namespace

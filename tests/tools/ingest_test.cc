@@ -19,6 +19,7 @@
 #include "index/subtree_builder.h"
 #include "storage/error.h"
 #include "tools/snapshot/snapshot_source.h"
+#include "tools/store_verify.h"
 #include "tests/tools/ingest_fixture.h"
 #include "tests/tools/store_check.h"
 
@@ -211,9 +212,25 @@ TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) 
     }
   }
   EXPECT_GT(crossings, 100u) << "the test must exercise boundary crossings";
-  // The last epoch has nothing to move to.
+  // The last epoch has nothing to move to; its way back is the way forward reversed.
   const TreeCheck last = CheckTree(dataset, 1);
   EXPECT_FALSE(last.leaf_points.begin()->second.Has(VectorColumn::kDisplacement));
+  for (const Particle& p : epoch0) {
+    const LeafPoint& back = last.leaf_points.at(p.id);
+    const LeafPoint& forward = first.leaf_points.at(p.id);
+    ASSERT_TRUE(back.Has(VectorColumn::kPrevDisplacement));
+    for (int a = 0; a < 3; ++a) {
+      ASSERT_NEAR(back.Vector(VectorColumn::kPrevDisplacement)[a], -forward.Vector(VectorColumn::kDisplacement)[a],
+                  back.Bound(VectorColumn::kPrevDisplacement, a) + forward.Bound(VectorColumn::kDisplacement, a));
+    }
+  }
+  // Without velocities there is no Hermite scale to fit, and no velocity links.
+  EXPECT_EQ(dataset.columns(0) & (ColumnBit(ColumnId::kNextVelocity) | ColumnBit(ColumnId::kPrevVelocity)), 0u);
+  EXPECT_EQ(dataset.columns(1) & (ColumnBit(ColumnId::kNextVelocity) | ColumnBit(ColumnId::kPrevVelocity)), 0u);
+  ASSERT_TRUE(dataset.link_to_next(0).has_value());
+  EXPECT_EQ(dataset.link_to_next(0)->velocity_scale, 0.0);
+  EXPECT_EQ(dataset.link_to_next(0)->fit_residual, 1.0);
+  EXPECT_EQ(dataset.link_to_next(0)->matched, epoch0.size());
   // The ID index finds every particle in both epochs.
   IdIndexReader ids(dataset.id_index_directory());
   for (std::size_t i = 0; i < epoch0.size(); i += 97) {
@@ -221,6 +238,176 @@ TEST_F(IngestTest, PeriodicSeriesDisplacementsTakeTheShortWayAcrossTheBoundary) 
     EXPECT_EQ(ids.Find(1, epoch0[i].id), last.leaf_points.at(epoch0[i].id).leaf);
   }
   EXPECT_FALSE(ids.Find(0, 7).has_value());
+}
+
+// A particle of a series with velocities, as a raw record
+// "xyz:f64,vel:f32,mass:f64,id:u64".
+struct Moving {
+  double x[3];
+  float v[3];
+  double mass;
+  std::uint64_t id;
+};
+
+std::string WriteMovingRaw(const fs::path& path, const std::vector<Moving>& particles) {
+  std::ofstream out(path, std::ios::binary);
+  for (const Moving& p : particles) {
+    out.write(reinterpret_cast<const char*>(p.x), sizeof p.x);
+    out.write(reinterpret_cast<const char*>(p.v), sizeof p.v);
+    out.write(reinterpret_cast<const char*>(&p.mass), sizeof p.mass);
+    out.write(reinterpret_cast<const char*>(&p.id), sizeof p.id);
+  }
+  return path.string();
+}
+
+double MinimalImage(double d, double box) { return d - box * std::nearbyint(d / box); }
+
+// Three epochs in a periodic box: particles move by exactly
+// step * (v_e + v_e+1) / 2, so the fitted velocity scale must be the step;
+// some particles leave after epoch 0 and others arrive in epoch 1.
+TEST_F(IngestTest, SeriesLinksEveryParticleToBothNeighbours) {
+  const double box = 50.0, step = 0.25;
+  const int kEpochs = 3;
+  std::mt19937_64 rng(21);
+  std::normal_distribution<float> velocity(0, 6), kick(0, 1);
+  std::vector<std::unordered_map<std::uint64_t, Moving>> epochs(kEpochs);
+  for (const Particle& p : Clustered(12000, 22, box)) {
+    Moving m{{p.x[0], p.x[1], p.x[2]}, {velocity(rng), velocity(rng), velocity(rng)}, p.mass, p.id};
+    epochs[0][m.id] = m;
+  }
+  std::uint64_t left = 0, arrived = 0;
+  for (int e = 1; e < kEpochs; ++e) {
+    for (const auto& [id, before] : epochs[e - 1]) {
+      if (e == 1 && id % 50 == 7) {
+        ++left;  // gone after epoch 0
+        continue;
+      }
+      Moving m = before;
+      for (int a = 0; a < 3; ++a) {
+        m.v[a] = before.v[a] + kick(rng);
+        const double moved = before.x[a] + step * 0.5 * (static_cast<double>(before.v[a]) + m.v[a]);
+        m.x[a] = moved - box * std::floor(moved / box);
+      }
+      epochs[e][id] = m;
+    }
+    if (e == 1) {
+      std::uniform_real_distribution<double> anywhere(0, box);
+      for (std::uint64_t k = 0; k < 300; ++k, ++arrived) {
+        Moving m{{anywhere(rng), anywhere(rng), anywhere(rng)}, {velocity(rng), velocity(rng), velocity(rng)}, 1.0,
+                 900000 + k};
+        epochs[1][m.id] = m;
+      }
+    }
+  }
+  std::vector<std::string> inputs;
+  for (int e = 0; e < kEpochs; ++e) {
+    std::vector<Moving> file;
+    for (const auto& [id, m] : epochs[e]) file.push_back(m);
+    std::shuffle(file.begin(), file.end(), rng);  // file order is not ID order
+    inputs.push_back(WriteMovingRaw(dir_ / ("e" + std::to_string(e) + ".raw"), file));
+  }
+  IngestOptions o = Options(inputs, "series");
+  o.read.format = "raw";
+  o.read.raw = RawLayout::Parse("xyz:f64,vel:f32,mass:f64,id:u64");
+  o.read.box_size_override = box;
+  o.tree.capacity = 400;
+  const IngestReport report = Ingest(o);
+  EXPECT_TRUE(TempIsEmpty());
+  ASSERT_EQ(report.epochs.size(), 3u);
+  EXPECT_EQ(report.epochs[0].missing_in_next, left);
+  EXPECT_EQ(report.epochs[0].missing_in_prev, 0u);
+  EXPECT_EQ(report.epochs[1].missing_in_prev, arrived);
+  EXPECT_EQ(report.epochs[1].missing_in_next, 0u);
+  EXPECT_EQ(report.epochs[2].missing_in_prev, 0u);
+
+  const Dataset dataset = Dataset::Open(o.output);
+  const VerifyReport verified = VerifyStore(o.output);
+  EXPECT_TRUE(verified.faults.empty()) << verified.faults.front();
+  std::vector<TreeCheck> trees;
+  for (std::uint32_t e = 0; e < kEpochs; ++e) trees.push_back(CheckTree(dataset, e));
+
+  using V = VectorColumn;
+  std::size_t forward_crossings = 0, backward_crossings = 0;
+  for (int e = 0; e < kEpochs; ++e) {
+    SCOPED_TRACE("epoch " + std::to_string(e));
+    const bool has_next = e + 1 < kEpochs, has_prev = e > 0;
+    // Which columns each epoch carries: the links only where a neighbour exists.
+    const ColumnSet columns = dataset.columns(static_cast<std::uint32_t>(e));
+    EXPECT_EQ((columns & ColumnBit(ColumnId::kNextVelocity)) != 0, has_next);
+    EXPECT_EQ((columns & ColumnBit(ColumnId::kPrevVelocity)) != 0, has_prev);
+    EXPECT_EQ(dataset.link_to_next(static_cast<std::uint32_t>(e)).has_value(), has_next);
+    ASSERT_EQ(trees[e].leaf_points.size(), epochs[e].size());
+    for (const auto& [id, lp] : trees[e].leaf_points) {
+      const Moving& truth = epochs[e].at(id);
+      ASSERT_EQ(lp.Has(V::kDisplacement), has_next);
+      ASSERT_EQ(lp.Has(V::kNextVelocity), has_next);
+      ASSERT_EQ(lp.Has(V::kPrevDisplacement), has_prev);
+      ASSERT_EQ(lp.Has(V::kPrevVelocity), has_prev);
+      for (int a = 0; a < 3; ++a) ASSERT_NEAR(lp.Vector(V::kVelocity)[a], truth.v[a], lp.Bound(V::kVelocity, a)) << id;
+      if (has_next) {
+        const auto next = epochs[e + 1].find(id);
+        for (int a = 0; a < 3; ++a) {
+          if (next == epochs[e + 1].end()) {  // gone: zeros, to within the block's quantization
+            ASSERT_NEAR(lp.Vector(V::kDisplacement)[a], 0.0f, lp.Bound(V::kDisplacement, a)) << id;
+            ASSERT_NEAR(lp.Vector(V::kNextVelocity)[a], 0.0f, lp.Bound(V::kNextVelocity, a)) << id;
+            continue;
+          }
+          const double moved = next->second.x[a] - truth.x[a];
+          forward_crossings += std::fabs(moved) > box / 2;
+          ASSERT_NEAR(lp.Vector(V::kDisplacement)[a], MinimalImage(moved, box), lp.Bound(V::kDisplacement, a)) << id;
+          // The next epoch's own velocity column, as that epoch stores it.
+          const LeafPoint& later = trees[e + 1].leaf_points.at(id);
+          ASSERT_NEAR(lp.Vector(V::kNextVelocity)[a], later.Vector(V::kVelocity)[a],
+                      lp.Bound(V::kNextVelocity, a) + later.Bound(V::kVelocity, a)) << id;
+          ASSERT_NEAR(lp.Vector(V::kNextVelocity)[a], next->second.v[a], lp.Bound(V::kNextVelocity, a)) << id;
+        }
+      }
+      if (has_prev) {
+        const auto prev = epochs[e - 1].find(id);
+        for (int a = 0; a < 3; ++a) {
+          if (prev == epochs[e - 1].end()) {  // arrived: zeros, to within the block's quantization
+            ASSERT_NEAR(lp.Vector(V::kPrevDisplacement)[a], 0.0f, lp.Bound(V::kPrevDisplacement, a)) << id;
+            ASSERT_NEAR(lp.Vector(V::kPrevVelocity)[a], 0.0f, lp.Bound(V::kPrevVelocity, a)) << id;
+            continue;
+          }
+          const double moved_back = prev->second.x[a] - truth.x[a];
+          backward_crossings += std::fabs(moved_back) > box / 2;
+          ASSERT_NEAR(lp.Vector(V::kPrevDisplacement)[a], MinimalImage(moved_back, box), lp.Bound(V::kPrevDisplacement, a)) << id;
+          // Exactly the way forward reversed, to within the two blocks' quantization.
+          const LeafPoint& earlier = trees[e - 1].leaf_points.at(id);
+          ASSERT_NEAR(lp.Vector(V::kPrevDisplacement)[a], -earlier.Vector(V::kDisplacement)[a],
+                      lp.Bound(V::kPrevDisplacement, a) + earlier.Bound(V::kDisplacement, a)) << id;
+          ASSERT_NEAR(lp.Vector(V::kPrevVelocity)[a], earlier.Vector(V::kVelocity)[a],
+                      lp.Bound(V::kPrevVelocity, a) + earlier.Bound(V::kVelocity, a)) << id;
+          ASSERT_NEAR(lp.Vector(V::kPrevVelocity)[a], prev->second.v[a], lp.Bound(V::kPrevVelocity, a)) << id;
+        }
+      }
+    }
+  }
+  EXPECT_GT(forward_crossings, 50u) << "the test must exercise boundary crossings";
+  EXPECT_EQ(forward_crossings, backward_crossings);
+
+  // Every displacement is exactly step * vbar, so every particle agrees on the scale.
+  for (std::uint32_t e = 0; e + 1 < kEpochs; ++e) {
+    const EpochLink& link = *dataset.link_to_next(e);
+    EXPECT_NEAR(link.velocity_scale, step, 1e-9 * step) << e;
+    EXPECT_NEAR(link.least_squares_scale, step, 1e-9 * step) << e;
+    EXPECT_LT(link.fit_residual, 1e-6) << e;
+    EXPECT_NEAR(link.inlier_fraction, 1.0, 1e-12) << e;
+    EXPECT_EQ(link.matched, e == 0 ? epochs[0].size() - left : epochs[1].size());
+  }
+
+  // Out-of-core sort runs, small chunks and two threads give the same blocks.
+  IngestOptions small = o;
+  small.output = (dir_ / "small").string();
+  small.memory_budget = 32 << 20;
+  small.sort_run_points = 1500;
+  small.max_chunk_points = 2500;
+  small.threads = 2;
+  Ingest(small);
+  EXPECT_TRUE(TempIsEmpty());
+  const Dataset other = Dataset::Open(small.output);
+  for (std::uint32_t e = 0; e < kEpochs; ++e) EXPECT_EQ(FirstDifference(trees[e], CheckTree(other, e)), "") << e;
 }
 
 TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
@@ -105,7 +106,7 @@ nlohmann::json HeaderJson(const SnapshotHeader& h) {
           {"extra", h.extra}};
 }
 
-nlohmann::json AttributeSchema(bool velocity, bool id, bool displacement) {
+nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links) {
   nlohmann::json columns = nlohmann::json::array();
   auto add = [&](ColumnId column, const char* encoding, const char* meaning) {
     columns.push_back({{"id", static_cast<int>(column)}, {"name", ColumnName(column)}, {"encoding", encoding},
@@ -117,8 +118,19 @@ nlohmann::json AttributeSchema(bool velocity, bool id, bool displacement) {
   add(ColumnId::kType, "u8", "particle type");
   if (velocity) add(ColumnId::kVelocity, "u16x3 between per-block min and max", "velocity (input units)");
   if (id) add(ColumnId::kId, "u64", "particle ID");
-  if (displacement) add(ColumnId::kDisplacement, "u16x3 between per-block min and max", "offset to the next epoch (minimal image)");
+  if (epoch_links) {
+    const char* ranged = "u16x3 between per-block min and max";
+    add(ColumnId::kDisplacement, ranged, "offset to the next epoch (minimal image); every epoch but the last");
+    if (velocity) add(ColumnId::kNextVelocity, ranged, "velocity at the next epoch; every epoch but the last");
+    add(ColumnId::kPrevDisplacement, ranged, "offset to the previous epoch (minimal image); every epoch but the first");
+    if (velocity) add(ColumnId::kPrevVelocity, ranged, "velocity at the previous epoch; every epoch but the first");
+  }
   return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
+}
+
+// The link file that the join of epoch e - 1 writes for epoch e (tools/ingest/epoch_join.h).
+std::string LinkFilePath(const std::string& temp_dir, std::size_t epoch) {
+  return temp_dir + "/links-" + std::to_string(epoch);
 }
 
 bool InsideBox(const ParticleChunk& chunk, const Cube& cube) {
@@ -293,6 +305,9 @@ IngestReport Ingest(const IngestOptions& options) {
                             {"has_velocity", has_velocity},
                             {"has_id", has_id},
                             {"has_displacement", join_epochs},
+                            {"has_next_velocity", join_epochs && has_velocity},
+                            {"has_prev_displacement", join_epochs},
+                            {"has_prev_velocity", join_epochs && has_velocity},
                             {"id_index", has_id ? "ids" : ""},
                             {"epochs", nlohmann::json::array()}};
   StoreWriterOptions store_options;
@@ -306,6 +321,7 @@ IngestReport Ingest(const IngestOptions& options) {
   }
 
   std::unique_ptr<SortedEpoch> sorted_current, sorted_next;
+  std::uint64_t missing_in_prev = 0;  // of the epoch to come, counted by the join before it
   auto sort_epoch = [&](ParticleSource& s, std::size_t e) {
     Progress progress("epoch " + std::to_string(e) + ": sort by ID", s.header().total_count, "points");
     auto sorted = std::make_unique<SortedEpoch>(s, temp.path() + "/sorted-" + std::to_string(e), sort_run_records,
@@ -359,6 +375,8 @@ IngestReport Ingest(const IngestOptions& options) {
     // The epoch's points as a repeatable pass, wrapped into a periodic box.
     const SortedEpoch* next_sorted = sorted_next.get();
     const double box = cube.periodic ? cube.size : 0.0;
+    const std::string links_from_previous = join_epochs && e > 0 ? LinkFilePath(temp.path(), e) : "";
+    const std::string links_to_next = next_sorted != nullptr ? LinkFilePath(temp.path(), e + 1) : "";
     JoinStats join_stats;
     PointPass pass = [&](const std::function<void(const ParticleChunk&)>& consume) {
       auto forward = [&](const ParticleChunk& chunk) {
@@ -368,7 +386,8 @@ IngestReport Ingest(const IngestOptions& options) {
         consume(wrapped);
       };
       if (join_epochs) {
-        join_stats = JoinedPass(*sorted_current, next_sorted, box, options.read.chunk_particles, forward);
+        join_stats = JoinedPass(*sorted_current, next_sorted, links_from_previous, links_to_next, box,
+                                options.read.chunk_particles, forward);
       } else {
         source->Rewind();
         ParticleChunk chunk;
@@ -396,7 +415,10 @@ IngestReport Ingest(const IngestOptions& options) {
     chunker_options.temp_dir = temp.path();
     chunker_options.columns.id = has_id;
     chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity;
-    chunker_options.columns.vector(VectorColumn::kDisplacement) = join_epochs && next_sorted != nullptr;
+    chunker_options.columns.vector(VectorColumn::kDisplacement) = next_sorted != nullptr;
+    chunker_options.columns.vector(VectorColumn::kNextVelocity) = next_sorted != nullptr && has_velocity;
+    chunker_options.columns.vector(VectorColumn::kPrevDisplacement) = !links_from_previous.empty();
+    chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !links_from_previous.empty() && has_velocity;
     std::vector<Chunk> chunks;
     {
       Progress progress(label + ": read + chunk", expected, "points");
@@ -413,7 +435,15 @@ IngestReport Ingest(const IngestOptions& options) {
     clock.Lap("read+chunk");
     for (const Chunk& c : chunks) epoch_report.points += c.point_count;
     epoch_report.chunks = chunks.size();
+    if (!links_from_previous.empty()) std::remove(links_from_previous.c_str());
     epoch_report.missing_in_next = join_stats.missing_in_next;
+    epoch_report.missing_in_prev = missing_in_prev;
+    missing_in_prev = join_stats.new_in_next;
+    if (next_sorted != nullptr) {
+      const VelocityScaleFit& fit = join_stats.fit;
+      epoch_report.to_next = EpochLink{fit.velocity_scale(), fit.fit_residual(), fit.least_squares_scale(),
+                                       fit.inlier_fraction(), join_stats.matched};
+    }
 
     // 3. build, 4. top levels.
     store.BeginEpoch(header.time, header.redshift);
@@ -449,7 +479,7 @@ IngestReport Ingest(const IngestOptions& options) {
       clock.Lap("ids");
     }
 
-    dataset["epochs"].push_back({{"epoch", e},
+    nlohmann::json epoch_json = {{"epoch", e},
                                  {"input", HeaderJson(header)},
                                  {"cube", CubeJson(cube)},
                                  {"points", epoch_report.points},
@@ -458,7 +488,17 @@ IngestReport Ingest(const IngestOptions& options) {
                                  {"leaves", epoch_report.leaves},
                                  {"depth", epoch_report.depth},
                                  {"missing_in_next", epoch_report.missing_in_next},
-                                 {"duplicate_ids", epoch_report.duplicate_ids}});
+                                 {"missing_in_prev", epoch_report.missing_in_prev},
+                                 {"duplicate_ids", epoch_report.duplicate_ids}};
+    if (epoch_report.to_next) {
+      const EpochLink& link = *epoch_report.to_next;
+      epoch_json["to_next"] = {{"velocity_scale", link.velocity_scale},
+                               {"fit_residual", link.fit_residual},
+                               {"least_squares_scale", link.least_squares_scale},
+                               {"inlier_fraction", link.inlier_fraction},
+                               {"matched", link.matched}};
+    }
+    dataset["epochs"].push_back(std::move(epoch_json));
     report.input_points += epoch_report.points;
     report.epochs.push_back(epoch_report);
 

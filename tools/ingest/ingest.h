@@ -4,7 +4,8 @@
 //
 //   1. sort    (series with IDs) read the snapshot once, sorted by ID into
 //              temporary runs; the merge join with the next epoch's runs gives
-//              each particle its displacement to the next epoch
+//              each particle its links to the neighbouring epochs
+//              (displacements and velocities, tools/ingest/epoch_join.h)
 //      bounds  (otherwise) one pass for the bounding box, unless the box is
 //              periodic or the cube is given
 //   2. chunk   count on a coarse grid, merge cells into chunks that fit in
@@ -27,6 +28,7 @@
 #include <vector>
 
 #include "index/cube.h"
+#include "index/dataset.h"
 #include "index/subtree_builder.h"
 #include "tools/snapshot/snapshot_source.h"
 
@@ -56,8 +58,10 @@ struct EpochReport {
   std::vector<std::pair<std::string, double>> phase_seconds;  // wall time of each phase, in order
   int depth = 0;
   double mass = 0;
-  std::uint64_t missing_in_next = 0;
+  std::uint64_t missing_in_next = 0;  // particles whose ID the next epoch lacks
+  std::uint64_t missing_in_prev = 0;  // particles whose ID the previous epoch lacks
   std::uint64_t duplicate_ids = 0;
+  std::optional<EpochLink> to_next;   // every epoch but the last of a series with IDs
 };
 
 struct IngestReport {
