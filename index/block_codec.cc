@@ -10,36 +10,15 @@
 #include <numeric>
 #include <string>
 
+#include "storage/coding.h"
 #include "storage/error.h"
 
 namespace octocosm {
 namespace {
 
-// Little-endian field access through bytes, so the format does not depend on
-// the host's byte order.
-void PutU16(std::uint8_t* out, std::uint16_t v) {
-  out[0] = static_cast<std::uint8_t>(v);
-  out[1] = static_cast<std::uint8_t>(v >> 8);
-}
-void PutU32(std::uint8_t* out, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) out[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
-void PutU64(std::uint8_t* out, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) out[i] = static_cast<std::uint8_t>(v >> (8 * i));
-}
+// Floating-point fields as the little-endian bit patterns of storage/coding.h.
 void PutF32(std::uint8_t* out, float v) { PutU32(out, std::bit_cast<std::uint32_t>(v)); }
 void PutF64(std::uint8_t* out, double v) { PutU64(out, std::bit_cast<std::uint64_t>(v)); }
-std::uint16_t GetU16(const std::uint8_t* in) { return static_cast<std::uint16_t>(in[0] | (in[1] << 8)); }
-std::uint32_t GetU32(const std::uint8_t* in) {
-  std::uint32_t v = 0;
-  for (int i = 3; i >= 0; --i) v = (v << 8) | in[i];
-  return v;
-}
-std::uint64_t GetU64(const std::uint8_t* in) {
-  std::uint64_t v = 0;
-  for (int i = 7; i >= 0; --i) v = (v << 8) | in[i];
-  return v;
-}
 float GetF32(const std::uint8_t* in) { return std::bit_cast<float>(GetU32(in)); }
 double GetF64(const std::uint8_t* in) { return std::bit_cast<double>(GetU64(in)); }
 
@@ -91,7 +70,12 @@ void EncodePositions(const NodePoints& points, NodeKey key, const Cube& cube, st
   for (std::size_t i = 0; i < points.size(); ++i) {
     while (i >= points.octant_offsets[octant + 1]) ++octant;
     const double* p = &points.position[3 * i];
-    const auto g = cube.GridCoords(p, level + 16);
+    std::array<std::uint64_t, 3> g;
+    if (points.grid.empty()) {
+      g = cube.GridCoords(p, level + 16);
+    } else {
+      for (int a = 0; a < 3; ++a) g[a] = GridAxisAt(points.grid[i], a, level + 16);
+    }
     int point_octant = 0;
     for (int a = 0; a < 3; ++a) {
       if ((g[a] >> 16) != (base[a] >> 16)) {
@@ -169,6 +153,18 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
   return static_cast<double>(total / k);
 }
 
+// std::round (half away from zero), without the libm call it is on baseline
+// x86-64 (no SSE4.1): truncation, then the fraction (exact for |x| < 2^52)
+// decides; std::round elsewhere, NaN and infinities included.
+double Round(double x) {
+  if (!(std::fabs(x) < 0x1p52)) return std::round(x);
+  const double whole = static_cast<double>(static_cast<std::int64_t>(x));
+  const double fraction = x - whole;
+  if (fraction >= 0.5) return whole + 1;
+  if (fraction <= -0.5) return whole - 1;
+  return whole;
+}
+
 void EncodeSmoothing(const std::vector<double>& smoothing, double node_size, std::uint8_t* out) {
   for (std::size_t i = 0; i < smoothing.size(); ++i) {
     const double h = smoothing[i];
@@ -176,7 +172,7 @@ void EncodeSmoothing(const std::vector<double>& smoothing, double node_size, std
       throw Error::InvalidArgument("EncodeBlock: smoothing length " + std::to_string(i) + " is " + std::to_string(h) +
                                    ", must be finite and >= 0");
     }
-    const double code = std::round((std::log2(h / node_size) - kSmoothingLog2Min) * kSmoothingPerOctave);
+    const double code = Round((std::log2(h / node_size) - kSmoothingLog2Min) * kSmoothingPerOctave);
     std::uint16_t q = 0;
     if (code >= 65535) {
       q = 65535;
@@ -209,7 +205,7 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
       const double range = static_cast<double>(hi[a]) - lo[a];
       std::uint16_t q = 0;
       if (range > 0) {
-        const double code = std::round((values[3 * i + a] - static_cast<double>(lo[a])) / range * 65535.0);
+        const double code = Round((values[3 * i + a] - static_cast<double>(lo[a])) / range * 65535.0);
         q = static_cast<std::uint16_t>(std::clamp(code, 0.0, 65535.0));
       }
       PutU16(out + 6 * i + 2 * a, q);
@@ -285,6 +281,7 @@ Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
   CheckLength("smoothing", points.smoothing.size(), n);
   CheckLength("type", points.type.size(), n);
   if (!points.id.empty()) CheckLength("id", points.id.size(), n);
+  if (!points.grid.empty()) CheckLength("grid", points.grid.size(), n);
   for (const ColumnId id : kVectorColumnIds) {
     const std::vector<float>& column = *VectorColumnOf(points, id);
     if (!column.empty()) CheckLength(ColumnName(id), column.size(), 3 * n);

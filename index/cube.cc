@@ -57,6 +57,19 @@ NodeCube Cube::NodeCubeOf(NodeKey key) const {
   return NodeCube{{origin[0] + cell.x * s, origin[1] + cell.y * s, origin[2] + cell.z * s}, s};
 }
 
+namespace {
+
+// floor(x), without the libm call that std::floor is on baseline x86-64 (no
+// SSE4.1 rounding instruction): truncation, corrected below zero, where it
+// is exact (|x| < 2^52); std::floor elsewhere, NaN included.
+double Floor(double x) {
+  if (!(std::fabs(x) < 0x1p52)) return std::floor(x);
+  const double truncated = static_cast<double>(static_cast<std::int64_t>(x));
+  return truncated > x ? truncated - 1 : truncated;
+}
+
+}  // namespace
+
 std::array<std::uint64_t, 3> Cube::GridCoords(const double* point, int bits) const {
   const std::uint64_t last = (std::uint64_t{1} << bits) - 1;
   const double cells = static_cast<double>(last + 1);  // exact: bits <= kMaxGridBits < 53
@@ -69,16 +82,18 @@ std::array<std::uint64_t, 3> Cube::GridCoords(const double* point, int bits) con
     // cells of cube.h and against every other octree (PCL's keys are
     // divisions too). It costs under 2 ns a call.
     double t = (point[a] - origin[a]) / size;
-    if (periodic) t -= std::floor(t);
-    const double g = std::floor(t * cells);
+    if (periodic) t -= Floor(t);
+    const double scaled = t * cells;
+    // floor(scaled) > 0 exactly when scaled >= 1, floor(scaled) >= cells
+    // exactly when scaled >= cells, and in between truncation is floor.
     // Written so that NaN fails the first test: no float-to-int conversion
     // of an out-of-range value, which would be undefined behaviour.
-    if (!(g > 0)) {
+    if (!(scaled >= 1)) {
       grid[a] = 0;
-    } else if (g >= cells) {
+    } else if (scaled >= cells) {
       grid[a] = last;
     } else {
-      grid[a] = static_cast<std::uint64_t>(g);
+      grid[a] = static_cast<std::uint64_t>(scaled);
     }
   }
   return grid;

@@ -34,11 +34,42 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 
 #include "index/morton.h"
 
 namespace octocosm {
+
+// The finest grid anything is placed on: kMaxLevel levels of cells plus the
+// 16 bits of a quantized position inside a block. Because a point's
+// coordinates at fewer bits are its coordinates here shifted right (see
+// above), its GridPoint, computed once, gives its cell at every level, its
+// child octant, its quantized position inside any node and its fine density
+// cell, each by a shift: the octree builder computes it once per particle
+// instead of placing the particle again at every level.
+inline constexpr int kFinestGridBits = kMaxLevel + 16;
+using GridPoint = std::array<std::uint64_t, 3>;
+
+// The point's coordinates on the 2^bits grid (bits <= kFinestGridBits):
+// exactly Cube::GridCoords(point, bits).
+inline std::uint64_t GridAxisAt(const GridPoint& grid, int axis, int bits) {
+  return grid[static_cast<std::size_t>(axis)] >> (kFinestGridBits - bits);
+}
+
+// Which child of the node at `level` holds the point: Cube::ChildOctant.
+inline int OctantAt(const GridPoint& grid, int level) {
+  const int shift = kFinestGridBits - 1 - level;
+  return static_cast<int>(((grid[0] >> shift) & 1) | (((grid[1] >> shift) & 1) << 1) | (((grid[2] >> shift) & 1) << 2));
+}
+
+// Whether the point lies in node `key`: Cube::Holds.
+inline bool GridHolds(const GridPoint& grid, NodeKey key) {
+  const int level = key.level();
+  const CellCoord cell = key.cell();
+  return GridAxisAt(grid, 0, level) == cell.x && GridAxisAt(grid, 1, level) == cell.y &&
+         GridAxisAt(grid, 2, level) == cell.z;
+}
 
 // The cube of one node, in absolute coordinates.
 struct NodeCube {
@@ -72,6 +103,7 @@ struct Cube {
   // The point's coordinates on a 2^bits grid over the cube, as described
   // above. Precondition: 0 <= bits <= kMaxGridBits. Never out of range.
   std::array<std::uint64_t, 3> GridCoords(const double* point, int bits) const;
+  GridPoint FinestGridCoords(const double* point) const { return GridCoords(point, kFinestGridBits); }
   // The point's cell at `level` (0..kMaxLevel).
   CellCoord CellOf(const double* point, int level) const;
   // The key of the node at `level` that holds the point.

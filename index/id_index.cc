@@ -38,12 +38,11 @@ void IdIndexEpochWriter::Add(std::uint64_t id, NodeKey leaf) {
 
 void IdIndexEpochWriter::FlushBucket() {
   if (pairs_.empty()) return;
-  Bytes block;
-  block.reserve(16 + 8 * pairs_.size());
-  Append<std::uint32_t>(block, kBucketMagic);
-  Append<std::uint32_t>(block, kVersion);
-  Append<std::uint64_t>(block, pairs_.size() / 2);
-  for (std::uint64_t v : pairs_) Append<std::uint64_t>(block, v);
+  Bytes block(16 + 8 * pairs_.size());
+  PutU32(block.data(), kBucketMagic);
+  PutU32(block.data() + 4, kVersion);
+  PutU64(block.data() + 8, pairs_.size() / 2);
+  for (std::size_t i = 0; i < pairs_.size(); ++i) PutU64(block.data() + 16 + 8 * i, pairs_[i]);
   store_.AddBlock(first_ids_.size() - 1, block, pairs_.size() / 2);
   pairs_.clear();
 }

@@ -43,6 +43,7 @@ void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube) {
   points.id = Gather(points.id, order, 1);
   points.type = Gather(points.type, order, 1);
   for (std::vector<float>* column : VectorColumns(points)) *column = Gather(*column, order, 3);
+  points.grid = Gather(points.grid, order, 1);
 }
 
 }  // namespace octocosm

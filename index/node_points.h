@@ -32,6 +32,12 @@ struct NodePoints {
   std::vector<float> prev_displacement;
   std::vector<float> prev_velocity;
   std::array<std::uint32_t, 9> octant_offsets{};
+  // Empty, or each point's Cube::FinestGridCoords, kept beside the positions
+  // by the octree builder so that sampling and encoding place each point
+  // with shifts (index/cube.h). EncodeBlock uses it when present; whoever
+  // fills it keeps it equal to the positions' (a decoded block leaves it
+  // empty).
+  std::vector<GridPoint> grid;
 
   std::size_t size() const { return weight.size(); }
 };

@@ -1,6 +1,7 @@
 #include "index/sampler.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <numeric>
@@ -22,47 +23,72 @@ std::uint64_t Mix(std::uint64_t x) {
   return x;
 }
 
-// The population's weight in each point's fine density cell, and the total.
+// The population's weight in each occupied fine density cell, which cell
+// each point lies in, and the total.
 struct Density {
-  std::vector<double> cell_weight;  // per point
+  std::vector<std::uint32_t> cell_of;  // per point: index into cell_weight
+  std::vector<double> cell_weight;     // per occupied fine cell, in cell order
   double total = 0;
   double cell_edge = 0;
+
+  double WeightAround(std::size_t point) const { return cell_weight[cell_of[point]]; }
 };
 
-Density EstimateDensity(std::span<const double> position, std::span<const double> weight,
+// The indices 0..keys.size()-1 ordered by key, stably: a least-significant-
+// digit radix sort, one pass per byte of the `key_bits` used.
+std::vector<std::uint32_t> StableOrderByKey(const std::vector<std::uint32_t>& keys, int key_bits) {
+  const std::size_t m = keys.size();
+  std::vector<std::uint32_t> order(m), scratch(m);
+  for (std::size_t i = 0; i < m; ++i) order[i] = static_cast<std::uint32_t>(i);
+  for (int shift = 0; shift < key_bits; shift += 8) {
+    std::array<std::uint32_t, 257> start{};
+    for (std::size_t i = 0; i < m; ++i) ++start[((keys[i] >> shift) & 0xFF) + 1];
+    for (int d = 0; d < 256; ++d) start[d + 1] += start[d];
+    for (const std::uint32_t i : order) scratch[start[(keys[i] >> shift) & 0xFF]++] = i;
+    order.swap(scratch);
+  }
+  return order;
+}
+
+Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double> weight,
                         std::span<const std::uint64_t> tie_break, NodeKey key, const Cube& cube, int bits) {
   const std::size_t m = weight.size();
   const int level = key.level();
+  const CellCoord cell = key.cell();
+  const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
   std::vector<std::uint32_t> fine(m);
-  for (std::size_t i = 0; i < m; ++i) fine[i] = DensityCellIndex(&position[3 * i], key, cube, bits);
+  for (std::size_t i = 0; i < m; ++i) {
+    // Coordinates relative to the node; the mask keeps the index in range
+    // even for a point that lies outside the node (a caller's error).
+    const std::uint64_t x = (GridAxisAt(grid[i], 0, level + bits) - (std::uint64_t{cell.x} << bits)) & mask;
+    const std::uint64_t y = (GridAxisAt(grid[i], 1, level + bits) - (std::uint64_t{cell.y} << bits)) & mask;
+    const std::uint64_t z = (GridAxisAt(grid[i], 2, level + bits) - (std::uint64_t{cell.z} << bits)) & mask;
+    fine[i] = static_cast<std::uint32_t>(x | (y << bits) | (z << (2 * bits)));
+  }
   // Summing in an order fixed by the points' values (not their positions in
   // the input) makes the sums, and so the sample, independent of input order.
-  // A counting sort groups the points by fine cell in O(m); only the few
-  // points sharing a cell need a comparison sort.
-  const std::size_t cells = std::size_t{1} << (3 * bits);
-  std::vector<std::uint32_t> start(cells + 1, 0);
-  for (std::size_t i = 0; i < m; ++i) ++start[fine[i] + 1];
-  for (std::size_t c = 0; c < cells; ++c) start[c + 1] += start[c];
-  std::vector<std::uint32_t> order(m);
-  {
-    std::vector<std::uint32_t> next(start.begin(), start.end() - 1);
-    for (std::size_t i = 0; i < m; ++i) order[next[fine[i]]++] = static_cast<std::uint32_t>(i);
-  }
-  for (std::size_t c = 0; c < cells; ++c) {
-    if (start[c + 1] - start[c] < 2) continue;
-    std::sort(order.begin() + start[c], order.begin() + start[c + 1], [&](std::uint32_t a, std::uint32_t b) {
-      if (tie_break[a] != tie_break[b]) return tie_break[a] < tie_break[b];
-      return weight[a] < weight[b];
-    });
-  }
+  // A radix sort groups the points by fine cell in O(m), keeping input order
+  // within a cell; only the few points sharing a cell need a comparison sort.
+  std::vector<std::uint32_t> order = StableOrderByKey(fine, 3 * bits);
   Density d;
-  d.cell_weight.resize(m);
+  d.cell_of.resize(m);
   d.cell_edge = cube.NodeSize(level + bits);
   for (std::size_t begin = 0; begin < m;) {
-    std::size_t end = begin;
+    std::size_t end = begin + 1;
+    while (end < m && fine[order[end]] == fine[order[begin]]) ++end;
+    if (end - begin > 1) {
+      std::sort(order.begin() + static_cast<std::ptrdiff_t>(begin), order.begin() + static_cast<std::ptrdiff_t>(end),
+                [&](std::uint32_t a, std::uint32_t b) {
+                  if (tie_break[a] != tie_break[b]) return tie_break[a] < tie_break[b];
+                  return weight[a] < weight[b];
+                });
+    }
     double sum = 0;
-    while (end < m && fine[order[end]] == fine[order[begin]]) sum += weight[order[end++]];
-    for (std::size_t j = begin; j < end; ++j) d.cell_weight[order[j]] = sum;
+    for (std::size_t j = begin; j < end; ++j) {
+      sum += weight[order[j]];
+      d.cell_of[order[j]] = static_cast<std::uint32_t>(d.cell_weight.size());
+    }
+    d.cell_weight.push_back(sum);
     d.total += sum;
     begin = end;
   }
@@ -70,12 +96,10 @@ Density EstimateDensity(std::span<const double> position, std::span<const double
 }
 
 
-void CheckInputs(std::span<const double> position, std::span<const double> weight, std::size_t ids,
-                 const SamplerOptions& options) {
-  if (position.size() != 3 * weight.size() || ids != weight.size()) {
-    throw Error::InvalidArgument("sampler: " + std::to_string(position.size()) + " coordinates, " +
-                                 std::to_string(weight.size()) + " weights and " + std::to_string(ids) +
-                                 " IDs do not describe the same points");
+void CheckInputs(std::size_t points, std::span<const double> weight, std::size_t ids, const SamplerOptions& options) {
+  if (points != weight.size() || ids != weight.size()) {
+    throw Error::InvalidArgument("sampler: " + std::to_string(points) + " points, " + std::to_string(weight.size()) +
+                                 " weights and " + std::to_string(ids) + " IDs do not describe the same points");
   }
   if (!(options.alpha >= 0) || !std::isfinite(options.alpha)) {
     throw Error::InvalidArgument("sampler: density exponent alpha " + std::to_string(options.alpha) +
@@ -91,6 +115,16 @@ void CheckInputs(std::span<const double> position, std::span<const double> weigh
                                    std::to_string(weight[i]) + ", must be finite and > 0");
     }
   }
+}
+
+// The points' GridPoints, for the callers that give positions.
+std::vector<GridPoint> GridOf(std::span<const double> position, const Cube& cube) {
+  if (position.size() % 3 != 0) {
+    throw Error::InvalidArgument("sampler: " + std::to_string(position.size()) + " coordinates are not x,y,z triples");
+  }
+  std::vector<GridPoint> grid(position.size() / 3);
+  for (std::size_t i = 0; i < grid.size(); ++i) grid[i] = cube.FinestGridCoords(&position[3 * i]);
+  return grid;
 }
 
 }  // namespace
@@ -128,25 +162,36 @@ double PriorityUniform(std::uint64_t sampling_id, std::uint64_t seed) {
   return static_cast<double>((h >> 11) + 1) * 0x1.0p-53;
 }
 
-std::vector<double> LeafSmoothingLengths(std::span<const double> position, std::span<const double> weight,
-                                         NodeKey key, const Cube& cube, const SamplerOptions& options) {
-  CheckInputs(position, weight, weight.size(), options);
+std::vector<double> LeafSmoothingLengths(std::span<const GridPoint> grid, std::span<const double> weight, NodeKey key,
+                                         const Cube& cube, const SamplerOptions& options) {
+  CheckInputs(grid.size(), weight, weight.size(), options);
   // Any fixed order works for the sums here; the weights alone break ties.
   const std::vector<std::uint64_t> no_ids(weight.size(), 0);
-  const Density d = EstimateDensity(position, weight, no_ids, key, cube, options.density_grid_bits);
+  const Density d = EstimateDensity(grid, weight, no_ids, key, cube, options.density_grid_bits);
   const double node_size = cube.NodeSize(key.level());
   std::vector<double> h(weight.size());
-  for (std::size_t i = 0; i < h.size(); ++i) h[i] = SmoothingLengthFor(weight[i], d.cell_weight[i], d.cell_edge, node_size);
+  for (std::size_t i = 0; i < h.size(); ++i) h[i] = SmoothingLengthFor(weight[i], d.WeightAround(i), d.cell_edge, node_size);
   return h;
+}
+
+std::vector<double> LeafSmoothingLengths(std::span<const double> position, std::span<const double> weight,
+                                         NodeKey key, const Cube& cube, const SamplerOptions& options) {
+  return LeafSmoothingLengths(GridOf(position, cube), weight, key, cube, options);
 }
 
 Sample SampleNode(std::span<const double> position, std::span<const double> weight,
                   std::span<const std::uint64_t> sampling_id, NodeKey key, const Cube& cube, std::size_t capacity,
                   const SamplerOptions& options) {
-  CheckInputs(position, weight, sampling_id.size(), options);
+  return SampleNode(GridOf(position, cube), weight, sampling_id, key, cube, capacity, options);
+}
+
+Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weight,
+                  std::span<const std::uint64_t> sampling_id, NodeKey key, const Cube& cube, std::size_t capacity,
+                  const SamplerOptions& options) {
+  CheckInputs(grid.size(), weight, sampling_id.size(), options);
   if (capacity == 0) throw Error::InvalidArgument("sampler: capacity must be at least 1");
   const std::size_t m = weight.size();
-  const Density d = EstimateDensity(position, weight, sampling_id, key, cube, options.density_grid_bits);
+  const Density d = EstimateDensity(grid, weight, sampling_id, key, cube, options.density_grid_bits);
   const double node_size = cube.NodeSize(key.level());
   Sample sample;
 
@@ -157,15 +202,19 @@ Sample SampleNode(std::span<const double> position, std::span<const double> weig
     sample.estimate = sample.weight;
     sample.smoothing.resize(m);
     for (std::size_t i = 0; i < m; ++i) {
-      sample.smoothing[i] = SmoothingLengthFor(weight[i], d.cell_weight[i], d.cell_edge, node_size);
+      sample.smoothing[i] = SmoothingLengthFor(weight[i], d.WeightAround(i), d.cell_edge, node_size);
     }
     return sample;
   }
 
   // Importance relative to the node's total weight keeps the numbers near 1.
+  // The density factor is the same for every point of a fine cell: one pow
+  // per occupied cell.
+  std::vector<double> cell_factor(d.cell_weight.size());
+  for (std::size_t c = 0; c < cell_factor.size(); ++c) cell_factor[c] = std::pow(d.cell_weight[c] / d.total, -options.alpha);
   std::vector<double> importance(m), priority(m);
   for (std::size_t i = 0; i < m; ++i) {
-    importance[i] = weight[i] * std::pow(d.cell_weight[i] / d.total, -options.alpha);
+    importance[i] = weight[i] * cell_factor[d.cell_of[i]];
     priority[i] = importance[i] / PriorityUniform(sampling_id[i], LevelSeed(options.seed, key.level()));
   }
   // Highest priority first; equal priorities (duplicate IDs) fall back to
@@ -197,7 +246,7 @@ Sample SampleNode(std::span<const double> position, std::span<const double> weig
   for (std::size_t j = 0; j < capacity; ++j) {
     const std::uint32_t i = sample.kept[j];
     sample.weight[j] *= scale;
-    sample.smoothing[j] = SmoothingLengthFor(sample.weight[j], d.cell_weight[i], d.cell_edge, node_size);
+    sample.smoothing[j] = SmoothingLengthFor(sample.weight[j], d.WeightAround(i), d.cell_edge, node_size);
   }
   return sample;
 }

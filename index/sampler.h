@@ -100,10 +100,18 @@ Sample SampleNode(std::span<const double> position, std::span<const double> weig
                   std::span<const std::uint64_t> sampling_id, NodeKey key, const Cube& cube, std::size_t capacity,
                   const SamplerOptions& options);
 
+// The same, for points given by their Cube::FinestGridCoords instead of
+// their positions (the octree builder's form: no point is placed twice).
+Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weight,
+                  std::span<const std::uint64_t> sampling_id, NodeKey key, const Cube& cube, std::size_t capacity,
+                  const SamplerOptions& options);
+
 // Smoothing lengths for points that are all kept (a leaf): step 5 above with
-// W_i = w_i.
+// W_i = w_i. By position or by grid point.
 std::vector<double> LeafSmoothingLengths(std::span<const double> position, std::span<const double> weight,
                                          NodeKey key, const Cube& cube, const SamplerOptions& options);
+std::vector<double> LeafSmoothingLengths(std::span<const GridPoint> grid, std::span<const double> weight, NodeKey key,
+                                         const Cube& cube, const SamplerOptions& options);
 
 // Step 5 for one point: the smoothing length of a point of weight W whose
 // fine density cell (edge cell_edge) holds population weight cell_weight, in

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <string>
 #include <utility>
@@ -24,7 +25,17 @@ void CheckOptions(const SubtreeOptions& options, NodeKey region) {
   }
 }
 
-void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube) {
+// Where a particle goes in the build: its grid point (index/cube.h),
+// computed once, and its index in the input. Levels are split by reordering
+// these 32-byte records, never the particles' columns, and every placement
+// below (octants, quantized positions, density cells) is a shift of `grid`.
+struct Placed {
+  GridPoint grid;
+  std::uint32_t index;
+};
+
+// Checks the particles and places them.
+std::vector<Placed> PlaceParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube) {
   const std::size_t n = particles.size();
   bool lengths_agree = particles.position.size() == 3 * n && particles.type.size() == n &&
                        (!particles.has_id() || particles.id.size() == n);
@@ -35,13 +46,19 @@ void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& 
     throw Error::InvalidArgument("subtree builder: particle columns of region " + region.Path() +
                                  " have inconsistent lengths for " + std::to_string(n) + " particles");
   }
+  if (n > std::numeric_limits<std::uint32_t>::max()) {
+    throw Error::InvalidArgument("subtree builder: region " + region.Path() + " has " + std::to_string(n) +
+                                 " particles, more than one build takes (2^32 - 1)");
+  }
+  std::vector<Placed> placed(n);
   for (std::size_t i = 0; i < n; ++i) {
     const double* p = &particles.position[3 * i];
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
       throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " of region " + region.Path() +
                                    " has a non-finite position");
     }
-    if (!cube.Holds(region, p)) {
+    placed[i] = {cube.FinestGridCoords(p), static_cast<std::uint32_t>(i)};
+    if (!GridHolds(placed[i].grid, region)) {
       throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " at (" + std::to_string(p[0]) +
                                    ", " + std::to_string(p[1]) + ", " + std::to_string(p[2]) +
                                    ") lies outside region " + region.Path());
@@ -51,6 +68,7 @@ void CheckParticles(const ParticleChunk& particles, NodeKey region, const Cube& 
                                    " has mass " + std::to_string(particles.mass[i]) + ", must be finite and > 0");
     }
   }
+  return placed;
 }
 
 // The vector columns a set of points carries, one bit per VectorColumn.
@@ -83,87 +101,52 @@ void AppendVectors(const From& from, std::size_t i, To& to) {
   }
 }
 
-void SwapParticles(ParticleChunk& c, std::size_t i, std::size_t j) {
-  for (int a = 0; a < 3; ++a) std::swap(c.position[3 * i + a], c.position[3 * j + a]);
-  std::swap(c.mass[i], c.mass[j]);
-  std::swap(c.type[i], c.type[j]);
-  if (c.has_id()) std::swap(c.id[i], c.id[j]);
-  for (std::vector<float>* column : VectorColumns(c)) {
-    if (column->empty()) continue;
-    for (int a = 0; a < 3; ++a) std::swap((*column)[3 * i + a], (*column)[3 * j + a]);
-  }
-}
-
-// Groups particles [begin, end) by their child octant at `level`, in place
-// (American flag sort: each particle is swapped straight into its octant's
-// next free slot). Returns the absolute boundaries of the eight groups.
-std::array<std::size_t, 9> PartitionByOctant(ParticleChunk& c, std::size_t begin, std::size_t end, int level,
-                                             const Cube& cube) {
-  std::vector<std::uint8_t> octant(end - begin);
+// Groups [begin, end) by the child octant at `level` that holds each point,
+// in place (American flag sort: each record is swapped straight into its
+// octant's next free slot). Returns the offsets of the eight groups from
+// `begin`.
+std::array<std::size_t, 9> PartitionByOctant(Placed* begin, Placed* end, int level) {
+  const std::size_t n = static_cast<std::size_t>(end - begin);
+  std::vector<std::uint8_t> octant(n);
   std::array<std::size_t, 9> bounds{};
-  for (std::size_t i = begin; i < end; ++i) {
-    octant[i - begin] = static_cast<std::uint8_t>(cube.ChildOctant(&c.position[3 * i], level));
-    ++bounds[octant[i - begin] + 1];
+  for (std::size_t i = 0; i < n; ++i) {
+    octant[i] = static_cast<std::uint8_t>(OctantAt(begin[i].grid, level));
+    ++bounds[octant[i] + 1];
   }
-  bounds[0] = begin;
   for (int o = 0; o < 8; ++o) bounds[o + 1] += bounds[o];
   std::array<std::size_t, 9> next = bounds;
   for (int o = 0; o < 8; ++o) {
     while (next[o] < bounds[o + 1]) {
       const std::size_t i = next[o];
-      const int target = octant[i - begin];
+      const int target = octant[i];
       if (target == o) {
         ++next[o];
         continue;
       }
       const std::size_t j = next[target]++;
-      SwapParticles(c, i, j);
-      std::swap(octant[i - begin], octant[j - begin]);
+      std::swap(begin[i], begin[j]);
+      std::swap(octant[i], octant[j]);
     }
   }
   return bounds;
 }
 
-NodePoints MakeLeaf(ParticleChunk& c, std::size_t begin, std::size_t end, NodeKey key, const Cube& cube,
-                    const SubtreeOptions& options) {
-  const auto bounds = PartitionByOctant(c, begin, end, key.level(), cube);
-  // The in-place partition is not stable, so the order it leaves depends on
-  // what else shared the array (a whole input or one chunk of it). Ordering
-  // each octant's points by sampling ID (then by position, for inputs with
-  // coincident points and no IDs) makes every node, and every floating-point
-  // sum over a node, the same however the input was chunked.
-  std::vector<std::size_t> order(end - begin);
-  std::vector<std::uint64_t> sampling_id(end - begin);
-  for (std::size_t i = begin; i < end; ++i) {
-    order[i - begin] = i;
-    sampling_id[i - begin] = c.has_id() ? c.id[i] : SamplingId(&c.position[3 * i]);
-  }
-  for (int o = 0; o < 8; ++o) {
-    std::sort(order.begin() + static_cast<std::ptrdiff_t>(bounds[o] - begin),
-              order.begin() + static_cast<std::ptrdiff_t>(bounds[o + 1] - begin), [&](std::size_t a, std::size_t b) {
-                if (sampling_id[a - begin] != sampling_id[b - begin]) return sampling_id[a - begin] < sampling_id[b - begin];
-                return std::lexicographical_compare(&c.position[3 * a], &c.position[3 * a + 3], &c.position[3 * b],
-                                                    &c.position[3 * b + 3]);
-              });
-  }
-  const std::size_t n = end - begin;
-  NodePoints leaf;
-  leaf.position.resize(3 * n);
-  leaf.weight.resize(n);
-  leaf.type.resize(n);
-  if (c.has_id()) leaf.id.resize(n);
-  ReserveVectors(c, n, leaf);
-  for (std::size_t k = 0; k < n; ++k) {
-    const std::size_t i = order[k];
-    for (int a = 0; a < 3; ++a) leaf.position[3 * k + a] = c.position[3 * i + a];
-    leaf.weight[k] = c.mass[i];
-    leaf.type[k] = c.type[i];
-    if (c.has_id()) leaf.id[k] = c.id[i];
-    AppendVectors(c, i, leaf);
-  }
-  for (int o = 0; o < 9; ++o) leaf.octant_offsets[o] = static_cast<std::uint32_t>(bounds[o] - begin);
-  leaf.smoothing = LeafSmoothingLengths(leaf.position, leaf.weight, key, cube, options.sampler);
-  return leaf;
+// The sampling IDs of a node's points: particle IDs, or for inputs without
+// them a hash of the position.
+std::vector<std::uint64_t> SamplingIds(const NodePoints& node) {
+  if (!node.id.empty()) return node.id;
+  std::vector<std::uint64_t> ids(node.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = SamplingId(&node.position[3 * i]);
+  return ids;
+}
+
+// The node's grid points: its own, or for points that came without them
+// (a caller's NodePoints), computed.
+std::vector<GridPoint> GridPointsOf(const NodePoints& node, const Cube& cube) {
+  if (node.grid.size() == node.size()) return node.grid;
+  std::vector<GridPoint> grid(node.size());
+  for (std::size_t i = 0; i < grid.size(); ++i) grid[i] = cube.FinestGridCoords(&node.position[3 * i]);
+  return grid;
 }
 
 // The node `key` sampled from its children's points (children[o] is the
@@ -185,32 +168,33 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   }
   const bool has_id = first >= 0 && !children[first].id.empty();
 
-  // The sampler needs only positions, weights and sampling IDs; the other
+  // The sampler needs only grid points, weights and sampling IDs; the other
   // columns are copied straight from the children for the kept points.
-  std::vector<double> position, weight;
+  std::vector<GridPoint> grid;
+  std::vector<double> weight;
   std::vector<std::uint64_t> sampling_id;
-  position.reserve(3 * total);
+  grid.reserve(total);
   weight.reserve(total);
   sampling_id.reserve(total);
   std::array<std::size_t, 9> child_begin{};
   for (int o = 0; o < 8; ++o) {
     const NodePoints& child = children[o];
     child_begin[o] = weight.size();
-    position.insert(position.end(), child.position.begin(), child.position.end());
+    if (child.size() == 0) continue;
+    const std::vector<GridPoint> child_grid = GridPointsOf(child, cube);
+    grid.insert(grid.end(), child_grid.begin(), child_grid.end());
     weight.insert(weight.end(), child.weight.begin(), child.weight.end());
-    if (has_id) {
-      sampling_id.insert(sampling_id.end(), child.id.begin(), child.id.end());
-    } else {
-      for (std::size_t i = 0; i < child.size(); ++i) sampling_id.push_back(SamplingId(&child.position[3 * i]));
-    }
+    const std::vector<std::uint64_t> ids = SamplingIds(child);
+    sampling_id.insert(sampling_id.end(), ids.begin(), ids.end());
   }
   child_begin[8] = weight.size();
 
-  const Sample sample = SampleNode(position, weight, sampling_id, key, cube, options.capacity, options.sampler);
+  const Sample sample = SampleNode(grid, weight, sampling_id, key, cube, options.capacity, options.sampler);
   NodePoints node;
   const std::size_t kept = sample.kept.size();
   node.position.reserve(3 * kept);
   node.type.reserve(kept);
+  node.grid.reserve(kept);
   if (first >= 0) ReserveVectors(children[first], kept, node);
   node.weight = sample.weight;
   node.smoothing = sample.smoothing;
@@ -224,6 +208,7 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
     const std::size_t k = i - child_begin[octant];
     for (int a = 0; a < 3; ++a) node.position.push_back(child.position[3 * k + a]);
     node.type.push_back(child.type[k]);
+    node.grid.push_back(grid[i]);
     if (has_id) node.id.push_back(child.id[k]);
     AppendVectors(child, k, node);
   }
@@ -231,34 +216,97 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   return node;
 }
 
-NodePoints BuildNode(ParticleChunk& c, std::size_t begin, std::size_t end, NodeKey key, const Cube& cube,
-                     const SubtreeOptions& options, const NodeSink& sink) {
-  NodePoints node;
-  if (end - begin <= options.capacity || key.level() >= options.max_level) {
-    node = MakeLeaf(c, begin, end, key, cube, options);
-  } else {
-    const auto bounds = PartitionByOctant(c, begin, end, key.level(), cube);
-    std::array<NodePoints, 8> children;
-    for (int o = 0; o < 8; ++o) {
-      if (bounds[o] < bounds[o + 1]) {
-        children[o] = BuildNode(c, bounds[o], bounds[o + 1], key.Child(o), cube, options, sink);
+// One BuildSubtree call: the particles, placed, and where nodes go.
+class SubtreeBuild {
+ public:
+  SubtreeBuild(const ParticleChunk& particles, const Cube& cube, const SubtreeOptions& options, const NodeSink& sink)
+      : particles_(particles), cube_(cube), options_(options), sink_(sink) {}
+
+  // Builds the node `key` from the particles `placed` [begin, end), its
+  // subtree first, and hands each node to the sink.
+  NodePoints Build(Placed* begin, Placed* end, NodeKey key) {
+    NodePoints node;
+    if (static_cast<std::size_t>(end - begin) <= options_.capacity || key.level() >= options_.max_level) {
+      node = MakeLeaf(begin, end, key);
+    } else {
+      const auto bounds = PartitionByOctant(begin, end, key.level());
+      std::array<NodePoints, 8> children;
+      for (int o = 0; o < 8; ++o) {
+        if (bounds[o] < bounds[o + 1]) children[o] = Build(begin + bounds[o], begin + bounds[o + 1], key.Child(o));
       }
+      node = SampleParent(key, children, cube_, options_);
     }
-    node = SampleParent(key, children, cube, options);
+    sink_(key, node);
+    return node;
   }
-  sink(key, NodePoints(node));
-  return node;
-}
+
+ private:
+  NodePoints MakeLeaf(Placed* begin, Placed* end, NodeKey key) {
+    const ParticleChunk& c = particles_;
+    const auto bounds = PartitionByOctant(begin, end, key.level());
+    // The in-place partition is not stable, so the order it leaves depends on
+    // what else shared the array (a whole input or one chunk of it). Ordering
+    // each octant's points by sampling ID (then by position, for inputs with
+    // coincident points and no IDs) makes every node, and every floating-point
+    // sum over a node, the same however the input was chunked.
+    const std::size_t n = static_cast<std::size_t>(end - begin);
+    struct Keyed {
+      std::uint64_t sampling_id;
+      std::uint32_t index;  // into the particles
+      std::uint32_t at;     // into [begin, end)
+    };
+    std::vector<Keyed> order(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::uint32_t i = begin[k].index;
+      order[k] = {c.has_id() ? c.id[i] : SamplingId(&c.position[3 * std::size_t{i}]), i, static_cast<std::uint32_t>(k)};
+    }
+    const auto before = [&c](const Keyed& a, const Keyed& b) {
+      if (a.sampling_id != b.sampling_id) return a.sampling_id < b.sampling_id;
+      const double* pa = &c.position[3 * std::size_t{a.index}];
+      const double* pb = &c.position[3 * std::size_t{b.index}];
+      return std::lexicographical_compare(pa, pa + 3, pb, pb + 3);
+    };
+    for (int o = 0; o < 8; ++o) {
+      std::sort(order.begin() + static_cast<std::ptrdiff_t>(bounds[o]),
+                order.begin() + static_cast<std::ptrdiff_t>(bounds[o + 1]), before);
+    }
+    NodePoints leaf;
+    leaf.position.resize(3 * n);
+    leaf.weight.resize(n);
+    leaf.type.resize(n);
+    leaf.grid.resize(n);
+    if (c.has_id()) leaf.id.resize(n);
+    ReserveVectors(c, n, leaf);
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::size_t i = order[k].index;
+      for (int a = 0; a < 3; ++a) leaf.position[3 * k + a] = c.position[3 * i + a];
+      leaf.weight[k] = c.mass[i];
+      leaf.type[k] = c.type[i];
+      leaf.grid[k] = begin[order[k].at].grid;
+      if (c.has_id()) leaf.id[k] = c.id[i];
+      AppendVectors(c, i, leaf);
+    }
+    for (int o = 0; o < 9; ++o) leaf.octant_offsets[o] = static_cast<std::uint32_t>(bounds[o]);
+    leaf.smoothing = LeafSmoothingLengths(leaf.grid, leaf.weight, key, cube_, options_.sampler);
+    return leaf;
+  }
+
+  const ParticleChunk& particles_;
+  const Cube& cube_;
+  const SubtreeOptions& options_;
+  const NodeSink& sink_;
+};
 
 }  // namespace
 
-NodePoints BuildSubtree(ParticleChunk& particles, NodeKey region, const Cube& cube, const SubtreeOptions& options,
-                        const NodeSink& sink) {
+NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
+                        const SubtreeOptions& options, const NodeSink& sink) {
   cube.Validate();
   CheckOptions(options, region);
-  CheckParticles(particles, region, cube);
-  if (particles.size() == 0) return {};
-  return BuildNode(particles, 0, particles.size(), region, cube, options, sink);
+  std::vector<Placed> placed = PlaceParticles(particles, region, cube);
+  if (placed.empty()) return {};
+  SubtreeBuild build(particles, cube, options, sink);
+  return build.Build(placed.data(), placed.data() + placed.size(), region);
 }
 
 TopLevelMerger::TopLevelMerger(const Cube& cube, const SubtreeOptions& options, NodeSink sink)
@@ -270,7 +318,7 @@ void TopLevelMerger::CloseDeepest() {
   Open closing = std::move(open_.back());
   open_.pop_back();
   NodePoints node = SampleParent(closing.key, closing.children, cube_, options_);
-  sink_(closing.key, NodePoints(node));
+  sink_(closing.key, node);
   if (open_.empty()) {
     root_ = std::move(node);
   } else {

@@ -20,11 +20,16 @@
 // calling thread only, so it needs no locking of its own; distinct calls of
 // BuildSubtree share nothing and may run on different threads.
 //
-// Memory: the particles are partitioned in place, octant by octant
-// (an American-flag sort one level per recursion step), so the extra memory
-// is one byte per particle of the node being split, the finished children of
-// each node on the current path (at most 8 * capacity points per level), and
-// about 9 * capacity points more while one node is being sampled.
+// Each particle is placed once on the finest grid (index/cube.h,
+// GridPoint); every later placement is a shift of it. Levels are split by
+// partitioning 32-byte records of (grid point, index) in place, octant by
+// octant (an American-flag sort one level per recursion step); the
+// particles' columns are read once, when a leaf gathers them.
+//
+// Memory: 32 bytes per particle for the records, one byte per particle of
+// the node being split, the finished children of each node on the current
+// path (at most 8 * capacity points per level), and about 9 * capacity
+// points more while one node is being sampled.
 #pragma once
 
 #include <array>
@@ -46,19 +51,21 @@ struct SubtreeOptions {
   SamplerOptions sampler;
 };
 
-using NodeSink = std::function<void(NodeKey, NodePoints&&)>;
+// Receives each finished node; the points are valid during the call only
+// (copy what must outlive it).
+using NodeSink = std::function<void(NodeKey, const NodePoints&)>;
 
 // Builds the subtree of `region` from `particles`, which must all lie in the
 // region (Cube::Holds) with finite positions and finite masses > 0; the
 // optional columns present in `particles` (id and the vector columns) are
 // carried into every node: a kept point keeps its particle's values. The
-// particles are reordered in place. Returns the region's own node (the same
+// particles are left as they are. Returns the region's own node (the same
 // points the sink received for it), for BuildTopLevels; an empty input
 // returns an empty node and calls no sink. Throws Error::InvalidArgument on
 // input that breaks these rules (naming the first offending particle) or on
 // bad options.
-NodePoints BuildSubtree(ParticleChunk& particles, NodeKey region, const Cube& cube, const SubtreeOptions& options,
-                        const NodeSink& sink);
+NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
+                        const SubtreeOptions& options, const NodeSink& sink);
 
 struct RegionRoot {
   NodeKey key;

@@ -51,10 +51,10 @@ struct Tree {
   std::map<NodeKey, NodePoints> nodes;
   std::vector<NodeKey> order;  // sink call order
   NodeSink Sink() {
-    return [this](NodeKey key, NodePoints&& points) {
+    return [this](NodeKey key, const NodePoints& points) {
       EXPECT_FALSE(nodes.count(key)) << "node " << key.Path() << " emitted twice";
       order.push_back(key);
-      nodes[key] = std::move(points);
+      nodes[key] = points;
     };
   }
   bool IsLeaf(NodeKey key) const {
@@ -435,11 +435,11 @@ TEST(SubtreeBuilder, ChildrenCarryingDifferentColumnsAreRejected) {
     part.velocity.insert(part.velocity.end(), &input.velocity[3 * i], &input.velocity[3 * i] + 3);
   }
   parts[1].next_velocity = parts[1].velocity;
-  TopLevelMerger merger(kCube, options, [](NodeKey, NodePoints&&) {});
+  TopLevelMerger merger(kCube, options, [](NodeKey, const NodePoints&) {});
   for (int o = 0; o < 2; ++o) {
     const NodeKey region = NodeKey::Root().Child(o);
     ASSERT_GT(parts[static_cast<std::size_t>(o)].size(), 0u);
-    merger.Add(region, BuildSubtree(parts[static_cast<std::size_t>(o)], region, kCube, options, [](NodeKey, NodePoints&&) {}));
+    merger.Add(region, BuildSubtree(parts[static_cast<std::size_t>(o)], region, kCube, options, [](NodeKey, const NodePoints&) {}));
   }
   EXPECT_THROW(merger.Finish(), Error);
 }

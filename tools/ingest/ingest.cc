@@ -181,23 +181,24 @@ struct EpochBuild {
   // whether its IDs go to the ID index.
   void Emit(NodeKey key, const NodePoints& points, bool is_leaf) {
     Bytes block = EncodeBlock(points, key, *cube);
+    std::vector<IdLeafRecord> pairs;
+    if (is_leaf && id_pairs != nullptr) {
+      pairs.reserve(points.id.size());
+      for (std::uint64_t id : points.id) pairs.push_back({id, key.value()});
+    }
     std::lock_guard lock(mutex);
     store->AddBlock(key.value(), block, points.size());
     ++report->nodes;
     report->depth = std::max(report->depth, key.level());
-    if (is_leaf) {
-      ++report->leaves;
-      if (id_pairs != nullptr) {
-        for (std::uint64_t id : points.id) id_pairs->Add({id, key.value()});
-      }
-    }
+    if (is_leaf) ++report->leaves;
+    if (!pairs.empty()) id_pairs->Add(pairs);
   }
 };
 
 // A sink that tells leaves from inner nodes: nodes arrive children first, so
 // a node none of whose children has arrived is a leaf.
 NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has_children) {
-  return [&build, &has_children](NodeKey key, NodePoints&& points) {
+  return [&build, &has_children](NodeKey key, const NodePoints& points) {
     const bool is_leaf = has_children.erase(key.value()) == 0;
     if (key.level() > 0) has_children.insert(key.Parent().value());
     build.Emit(key, points, is_leaf);
@@ -210,7 +211,7 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
 // waits for its predecessors), so memory holds a few chunk roots plus the
 // merger's open ancestors, never every chunk's sample. Returns the root.
 NodePoints BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads) {
-  TopLevelMerger merger(*build.cube, *build.tree, [&build](NodeKey key, NodePoints&& points) {
+  TopLevelMerger merger(*build.cube, *build.tree, [&build](NodeKey key, const NodePoints& points) {
     build.Emit(key, points, /*is_leaf=*/false);
   });
   std::mutex merge_mutex;  // guards merger, ready, next_to_merge
