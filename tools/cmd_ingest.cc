@@ -84,8 +84,10 @@ void AddIngestCommand(CLI::App& app) {
       if (r.missing_in_prev) std::printf(", %llu IDs missing in the previous epoch", static_cast<unsigned long long>(r.missing_in_prev));
       if (r.to_next) std::printf(", velocity scale to the next epoch %.6g (fit residual %.3g)", r.to_next->velocity_scale, r.to_next->fit_residual);
       if (r.duplicate_ids) std::printf(", %llu duplicate IDs", static_cast<unsigned long long>(r.duplicate_ids));
-      std::printf("\n    seconds:");
-      for (const auto& [phase, seconds] : r.phase_seconds) std::printf(" %s %.2f", phase.c_str(), seconds);
+      std::printf("\n    seconds (CPU):");
+      for (const EpochReport::Phase& phase : r.phases) {
+        std::printf(" %s %.2f (%.2f)", phase.name.c_str(), phase.seconds, phase.cpu_seconds);
+      }
       std::printf("\n");
     }
   });

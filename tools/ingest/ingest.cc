@@ -1,5 +1,6 @@
 #include "tools/ingest/ingest.h"
 
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -158,13 +159,22 @@ class PhaseClock {
   explicit PhaseClock(EpochReport& report) : report_(report) {}
   void Lap(const char* phase) {
     const auto now = std::chrono::steady_clock::now();
-    report_.phase_seconds.emplace_back(phase, std::chrono::duration<double>(now - last_).count());
+    const double cpu = ProcessCpuSeconds();
+    report_.phases.push_back({phase, std::chrono::duration<double>(now - last_).count(), cpu - last_cpu_});
     last_ = now;
+    last_cpu_ = cpu;
   }
 
  private:
+  static double ProcessCpuSeconds() {
+    timespec t{};
+    ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_nsec) * 1e-9;
+  }
+
   EpochReport& report_;
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+  double last_cpu_ = ProcessCpuSeconds();
 };
 
 // Everything one epoch's build shares between the worker threads.

@@ -55,7 +55,12 @@ struct EpochReport {
   std::uint64_t leaves = 0;
   std::uint64_t chunks = 0;
   std::uint64_t spilled_points = 0;  // points that went through temporary chunk files
-  std::vector<std::pair<std::string, double>> phase_seconds;  // wall time of each phase, in order
+  struct Phase {
+    std::string name;
+    double seconds = 0;      // wall time
+    double cpu_seconds = 0;  // CPU time of the whole process (all threads, user and system)
+  };
+  std::vector<Phase> phases;  // in order
   int depth = 0;
   double mass = 0;
   std::uint64_t missing_in_next = 0;  // particles whose ID the next epoch lacks
