@@ -95,7 +95,7 @@ LevelSamples BuildLevelSamples(const ParticleChunk& points, const Cube& cube, co
   LevelSamples levels(points.id);
   ParticleChunk work = points;  // BuildSubtree reorders its input
   BuildSubtree(work, NodeKey::Root(), cube, options,
-               [&](NodeKey key, NodePoints&& node) { levels.AddNode(key, node); });
+               [&](NodeKey key, const NodePoints& node) { levels.AddNode(key, node); });
   return levels;
 }
 

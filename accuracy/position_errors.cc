@@ -58,11 +58,11 @@ PositionErrors LeafPositionErrors(const ParticleChunk& points, const Cube& cube,
   std::unordered_set<std::uint64_t> emitted;
   std::unordered_map<std::uint64_t, NodePoints> nodes;  // the leaves
   ParticleChunk work = points;
-  BuildSubtree(work, NodeKey::Root(), cube, options, [&](NodeKey key, NodePoints&& node) {
+  BuildSubtree(work, NodeKey::Root(), cube, options, [&](NodeKey key, const NodePoints& node) {
     bool leaf = true;
     for (int o = 0; o < 8 && key.level() < kMaxLevel; ++o) leaf &= !emitted.count(key.Child(o).value());
     emitted.insert(key.value());
-    if (leaf) nodes[key.value()] = std::move(node);
+    if (leaf) nodes[key.value()] = node;
   });
   PositionErrors errors;
   for (const auto& [value, node] : nodes) {

@@ -291,13 +291,13 @@ TEST(StabilityDepthLimit, MillionCoincidentPointsEndInOneLeafAtLevel21) {
   std::vector<std::pair<NodeKey, std::size_t>> nodes;
   NodePoints leaf;
   NodeKey leaf_key;
-  BuildSubtree(input, NodeKey::Root(), cube, options, [&](NodeKey key, NodePoints&& points) {
+  BuildSubtree(input, NodeKey::Root(), cube, options, [&](NodeKey key, const NodePoints& points) {
     long double sum = 0;
     for (const double w : points.weight) sum += w;
     EXPECT_NEAR(static_cast<double>(sum / mass), 1.0, 1e-12) << key.Path();
     nodes.emplace_back(key, points.size());
     if (key.level() == kMaxLevel) {
-      leaf = std::move(points);
+      leaf = points;
       leaf_key = key;
     }
   });
@@ -515,17 +515,18 @@ TEST_F(Stability, PeriodicCrossingsStoreTheMinimalImage) {
     const double bound = 2 * half / 131070 * (1 + 1e-6) + 4 * half * 0x1p-23;
     for (const auto& [a, b] : moves) {
       const LeafPoint& leaf = check.leaf_points.at(a.id);
-      ASSERT_TRUE(leaf.has_displacement);
+      ASSERT_TRUE(leaf.Has(VectorColumn::kDisplacement));
       double expected = b.x[0] - a.x[0];
       expected -= box * std::nearbyint(expected / box);
-      const double stored = leaf.displacement[0];
+      const std::array<float, 3>& displacement = leaf.Vector(VectorColumn::kDisplacement);
+      const double stored = displacement[0];
       if (std::fabs(std::fabs(expected) - half) < 1e-9 * box) {
         ASSERT_NEAR(std::fabs(stored), half, bound) << "ID " << a.id << ": half a box either way";
       } else {
         ASSERT_NEAR(stored, expected, bound) << "ID " << a.id << " from " << a.x[0] << " to " << b.x[0];
       }
       ASSERT_LE(std::fabs(stored), half + bound) << "ID " << a.id;
-      ASSERT_LE(std::fabs(leaf.displacement[1]) + std::fabs(leaf.displacement[2]), 2 * bound) << "ID " << a.id;
+      ASSERT_LE(std::fabs(displacement[1]) + std::fabs(displacement[2]), 2 * bound) << "ID " << a.id;
     }
     fs::remove_all(o.output);
   }

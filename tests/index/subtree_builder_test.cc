@@ -396,7 +396,7 @@ TEST(SubtreeBuilder, RootEstimatesRegionMassesWithoutBias) {
       // which at the default 32^3 made this test slow under ASan.
       options.sampler.density_grid_bits = 3;
       ParticleChunk work = input;
-      const NodePoints root = BuildSubtree(work, NodeKey::Root(), kCube, options, [&](NodeKey key, NodePoints&&) {
+      const NodePoints root = BuildSubtree(work, NodeKey::Root(), kCube, options, [&](NodeKey key, const NodePoints&) {
         depth = std::max(depth, key.level());
       });
       double estimate[2] = {0, 0};
@@ -416,6 +416,7 @@ TEST(SubtreeBuilder, RootEstimatesRegionMassesWithoutBias) {
           << " (of " << total << ") sd of mean " << sd_of_mean;
     }
   }
+}
 
 TEST(SubtreeBuilder, ChildrenCarryingDifferentColumnsAreRejected) {
   std::mt19937_64 rng(9);

@@ -148,7 +148,7 @@ TEST_F(IngestTest, StoreIsOneWholeBuildWhereverTheChunksAreCut) {
   }
   std::map<std::uint64_t, Bytes> reference;
   BuildSubtree(all, NodeKey::Root(), cube, o.tree,
-               [&](NodeKey key, NodePoints&& node) { reference[key.value()] = EncodeBlock(node, key, cube); });
+               [&](NodeKey key, const NodePoints& node) { reference[key.value()] = EncodeBlock(node, key, cube); });
   std::size_t sparse_top = 0;  // leaves at levels 1-2: the nodes chunks used to cut below
   for (const auto& [key, bytes] : reference) {
     const NodeKey k = NodeKey::FromValue(key);
