@@ -36,7 +36,7 @@ Dataset Dataset::Open(const std::string& directory) {
         const auto& to_next = epoch.at("to_next");
         link = EpochLink{to_next.at("velocity_scale").get<double>(), to_next.at("fit_residual").get<double>(),
                          to_next.at("least_squares_scale").get<double>(), to_next.at("inlier_fraction").get<double>(),
-                         to_next.at("matched").get<std::uint64_t>(), to_next.value("max_displacement", 0.0)};
+                         to_next.at("matched").get<std::uint64_t>(), to_next.value("max_excursion", 0.0)};
       }
       dataset.links_.push_back(link);
     }

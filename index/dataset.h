@@ -26,7 +26,9 @@ struct EpochLink {
   double least_squares_scale = 0;  // the plain least-squares s over all particles
   double inlier_fraction = 0;      // share of the velocity weight that agrees with s
   std::uint64_t matched = 0;       // particles found in both epochs
-  double max_displacement = 0;     // the largest |d| of any matched particle; 0 when not recorded
+  // How far any matched particle's path between the two epochs (linear or
+  // Hermite) strays from its position at either end; 0 when not recorded.
+  double max_excursion = 0;
 };
 
 class Dataset {

@@ -147,6 +147,11 @@ struct BackLink {
 
 constexpr const char* kLinkFile = "an epoch link file";
 
+double Norm(const float* v) {
+  const double x = v[0], y = v[1], z = v[2];
+  return std::sqrt(x * x + y * y + z * z);
+}
+
 void Append3(std::vector<float>& column, const float* values) { column.insert(column.end(), values, values + 3); }
 
 }  // namespace
@@ -196,7 +201,11 @@ JoinStats JoinedPass(const SortedEpoch& current, const SortedEpoch* next, const 
         back.velocity[a] = c.velocity[a];
         next_velocity[a] = n.velocity[a];
       }
-      if (velocity) stats.fit.Add(d, c.velocity, n.velocity);
+      if (velocity) {
+        stats.fit.Add(d, c.velocity, n.velocity);
+        stats.max_speed_sum = std::max(stats.max_speed_sum, Norm(c.velocity) + Norm(n.velocity));
+      }
+      stats.max_displacement = std::max(stats.max_displacement, std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]));
       links_out->Add(back);
       ++stats.matched;
       have_next = nxt->Next(n);  // duplicates pair up in order

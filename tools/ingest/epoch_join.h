@@ -126,6 +126,8 @@ struct JoinStats {
   std::uint64_t missing_in_next = 0;  // particles of the current epoch whose ID the next one lacks (zeros)
   std::uint64_t new_in_next = 0;      // particles of the next epoch whose ID the current one lacks
   VelocityScaleFit fit;               // over the matched particles, when the epochs carry velocities
+  double max_displacement = 0;        // the largest |d| of a matched particle
+  double max_speed_sum = 0;           // the largest |v_e| + |v_e+1| of a matched particle
 };
 
 // Calls `consume` with batches of at most `batch_points` particles of

@@ -452,8 +452,12 @@ IngestReport Ingest(const IngestOptions& options) {
     missing_in_prev = join_stats.new_in_next;
     if (next_sorted != nullptr) {
       const VelocityScaleFit& fit = join_stats.fit;
+      // A Hermite curve strays from its chord by at most 4/27 of each
+      // tangent (the peak of the basis functions h10 and h11).
+      const double excursion = join_stats.max_displacement +
+                               4.0 / 27.0 * std::fabs(fit.velocity_scale()) * join_stats.max_speed_sum;
       epoch_report.to_next = EpochLink{fit.velocity_scale(), fit.fit_residual(), fit.least_squares_scale(),
-                                       fit.inlier_fraction(), join_stats.matched};
+                                       fit.inlier_fraction(), join_stats.matched, excursion};
     }
 
     // 3. build, 4. top levels.
@@ -507,7 +511,8 @@ IngestReport Ingest(const IngestOptions& options) {
                                {"fit_residual", link.fit_residual},
                                {"least_squares_scale", link.least_squares_scale},
                                {"inlier_fraction", link.inlier_fraction},
-                               {"matched", link.matched}};
+                               {"matched", link.matched},
+                               {"max_excursion", link.max_excursion}};
     }
     dataset["epochs"].push_back(std::move(epoch_json));
     report.input_points += epoch_report.points;
