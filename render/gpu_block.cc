@@ -14,11 +14,6 @@
 namespace octocosm {
 namespace {
 
-// Columns that link an epoch to its neighbours (docs/FORMAT.md section 4).
-constexpr auto kNextVelocityColumn = static_cast<ColumnId>(8);
-constexpr auto kPrevDisplacementColumn = static_cast<ColumnId>(9);
-constexpr auto kPrevVelocityColumn = static_cast<ColumnId>(10);
-
 // Attribute locations of shaders/splat_vert.glsl.
 enum Attribute : GLuint {
   kPositionAttribute = 0,
@@ -51,11 +46,10 @@ std::optional<AttributeFormat> FormatOf(ColumnId id) {
     case ColumnId::kVelocity: return AttributeFormat{kVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
     case ColumnId::kId: return AttributeFormat{kIdAttribute, 2, GL_UNSIGNED_INT, true, 8};
     case ColumnId::kDisplacement: return AttributeFormat{kDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
-    default: break;
+    case ColumnId::kNextVelocity: return AttributeFormat{kNextVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+    case ColumnId::kPrevDisplacement: return AttributeFormat{kPrevDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+    case ColumnId::kPrevVelocity: return AttributeFormat{kPrevVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
   }
-  if (id == kNextVelocityColumn) return AttributeFormat{kNextVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
-  if (id == kPrevDisplacementColumn) return AttributeFormat{kPrevDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
-  if (id == kPrevVelocityColumn) return AttributeFormat{kPrevVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
   return std::nullopt;
 }
 
@@ -131,18 +125,19 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
         u.columns[1][2] = kPresent;
         SetRange(c, u.ranges[1]);
         break;
-      default:
-        if (c.id == kNextVelocityColumn) {
-          u.columns[1][3] = kPresent;
-          SetRange(c, u.ranges[2]);
-        } else if (c.id == kPrevDisplacementColumn) {
-          u.columns[2][0] = kPresent;
-          SetRange(c, u.ranges[3]);
-        } else if (c.id == kPrevVelocityColumn) {
-          u.columns[2][1] = kPresent;
-          SetRange(c, u.ranges[4]);
-        }
+      case ColumnId::kNextVelocity:
+        u.columns[1][3] = kPresent;
+        SetRange(c, u.ranges[2]);
         break;
+      case ColumnId::kPrevDisplacement:
+        u.columns[2][0] = kPresent;
+        SetRange(c, u.ranges[3]);
+        break;
+      case ColumnId::kPrevVelocity:
+        u.columns[2][1] = kPresent;
+        SetRange(c, u.ranges[4]);
+        break;
+      default: break;  // columns the shader does not read
     }
     at += (c.length + 15) / 16 * 16;
   }

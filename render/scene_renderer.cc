@@ -9,11 +9,6 @@
 namespace octocosm {
 namespace {
 
-// Columns that link an epoch to its neighbours (docs/FORMAT.md section 4).
-constexpr auto kNextVelocityColumn = static_cast<ColumnId>(8);
-constexpr auto kPrevDisplacementColumn = static_cast<ColumnId>(9);
-constexpr auto kPrevVelocityColumn = static_cast<ColumnId>(10);
-
 // Hermite tangents come from the ingest's least-squares velocity scale; when
 // velocities explain less than half of the displacements (relative residual
 // above this), the curve would wander and linear paths are used instead.
@@ -55,10 +50,10 @@ const NodeHierarchy& SceneRenderer::hierarchy(std::uint32_t epoch) {
 Interpolation SceneRenderer::InterpolationAvailable(std::uint32_t epoch) const {
   if (epoch + 1 >= dataset_.epoch_count()) return Interpolation::kNone;
   const ColumnSet have = dataset_.columns();
-  const ColumnSet linear = ColumnBit(ColumnId::kDisplacement) | ColumnBit(kPrevDisplacementColumn);
+  const ColumnSet linear = ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kPrevDisplacement);
   if ((have & linear) != linear) return Interpolation::kNone;
   const ColumnSet hermite =
-      ColumnBit(ColumnId::kVelocity) | ColumnBit(kNextVelocityColumn) | ColumnBit(kPrevVelocityColumn);
+      ColumnBit(ColumnId::kVelocity) | ColumnBit(ColumnId::kNextVelocity) | ColumnBit(ColumnId::kPrevVelocity);
   const std::optional<EpochLink>& link = dataset_.link_to_next(epoch);
   if ((have & hermite) == hermite && link && link->velocity_scale > 0 && link->fit_residual < kHermiteMaxResidual) {
     return Interpolation::kHermite;
@@ -70,9 +65,9 @@ ColumnSet SceneRenderer::ColumnsFor(Interpolation interpolation) const {
   ColumnSet c = kCoreColumns;
   if (ColorModeNeedsVelocity(options_.color)) c |= ColumnBit(ColumnId::kVelocity);
   if (selection_ && selection_->size() > 0) c |= ColumnBit(ColumnId::kId);
-  if (interpolation != Interpolation::kNone) c |= ColumnBit(ColumnId::kDisplacement) | ColumnBit(kPrevDisplacementColumn);
+  if (interpolation != Interpolation::kNone) c |= ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kPrevDisplacement);
   if (interpolation == Interpolation::kHermite) {
-    c |= ColumnBit(ColumnId::kVelocity) | ColumnBit(kNextVelocityColumn) | ColumnBit(kPrevVelocityColumn);
+    c |= ColumnBit(ColumnId::kVelocity) | ColumnBit(ColumnId::kNextVelocity) | ColumnBit(ColumnId::kPrevVelocity);
   }
   return c & (dataset_.columns() | kCoreColumns);
 }
@@ -173,7 +168,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     if (stats.interpolation != Interpolation::kNone) {
       const std::uint32_t from = copy.direction > 0 ? copy.epoch : copy.epoch - 1;
       const std::optional<EpochLink>& link = dataset_.link_to_next(from);
-      lod.cull_margin = link ? link->max_displacement : 0;
+      lod.cull_margin = link ? link->max_excursion : 0;
     }
     copy.frontier = SelectLodFrontier(hierarchy(copy.epoch), dataset_.cube(copy.epoch), error_view, lod);
     stats.nodes_selected += copy.frontier.selected.size();
