@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on an embedded default: simulate a small universe, ingest its
 # epochs into a level-of-detail store, describe the store, verify it, query a
-# box and follow a few particles through time.
+# box, follow a few particles through time, and render pictures headless
+# (OSMesa): an epoch, a moment between two epochs, and the ground truth.
 #   tools/demo.sh BUILD_DIR [WORK_DIR]
 set -euo pipefail
 build="${1:?usage: tools/demo.sh BUILD_DIR [WORK_DIR]}"
@@ -24,4 +25,9 @@ echo "== 5. query: a 20 Mpc/h box at level 2 of the last epoch, as PLY"
 echo "== 6. follow: particles 1, 1000 and 100000 through every epoch"
 printf '1\n1000\n100000\n' > "$work/ids.txt"
 "$octocosm" follow "$work/store" --ids "$work/ids.txt"
-echo "demo finished: the store is in $work/store"
+echo "== 7. render: z = 0 from outside the box (blobs 2 px apart at most), halfway between the last"
+echo "   two epochs coloured by speed, and the ground truth (every particle of snap_004, on the CPU)"
+"$octocosm" render "$work/store" --time 4 --error 2 -o "$work/z0.png"
+"$octocosm" render "$work/store" --time 3.5 --error 2 --color speed -o "$work/t3.5-speed.png"
+"$octocosm" render "$work/store" --time 4 --reference "$work/snapshots/snap_004" -o "$work/z0-reference.png"
+echo "demo finished: the store is in $work/store, the pictures are $work/*.png"
