@@ -14,6 +14,10 @@
 // gnuplot (Debian's gnuplot-nox) as render_bench.png. Optionally: the frame
 // time with 10^6 selected IDs against none.
 //
+// --playback STORE measures playback instead: the viewer's frame loop
+// (streamed frames that never wait for the disk, the next epochs requested
+// ahead) through every epoch of a multi-epoch store, interpolating.
+//
 // Generated data, the store and the reference images stay in --dir and are
 // reused by later runs (delete them to start afresh).
 #include <chrono>
@@ -51,6 +55,9 @@ struct Flags {
   std::string backend = "osmesa";
   bool full = true, selection = false, prepare_only = false;
   unsigned threads = 0;
+  std::string playback;  // a multi-epoch store: measure playback instead
+  double playback_threshold = 1;
+  int frames_per_epoch = 30;
 };
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -198,7 +205,61 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
   }
 }
 
+// Playback as the viewer plays: one streamed frame after another (never
+// waiting for blocks; parents stand in for children on their way), the
+// playhead advancing 1/frames_per_epoch of an epoch a frame, each frame
+// measured and tone mapped on the GPU. Reports frames per second and how
+// many frames drew stand-ins because blocks had not arrived.
+void Playback(const Flags& f) {
+  const Dataset dataset = Dataset::Open(f.playback);
+  if (dataset.epoch_count() < 2) {
+    throw Error::InvalidArgument("--playback: " + f.playback + " holds one epoch; playback needs a series");
+  }
+  if (f.frames_per_epoch < 1) throw Error::InvalidArgument("--frames-per-epoch must be at least 1");
+  const Cube& cube = dataset.cube(0);
+  Camera camera;
+  camera.position = OverviewPosition(cube, camera.fov_y_degrees);
+  camera.look_at = {cube.origin[0] + cube.size / 2, cube.origin[1] + cube.size / 2, cube.origin[2] + cube.size / 2};
+  camera.near = cube.size * 1e-4;
+  camera.far = 4 * cube.size;
+  const RenderView view(camera, f.width, f.height);
+  SceneOptions options;
+  options.lod.pixel_threshold = f.playback_threshold;
+  OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
+  std::printf("playback: %s, %u epochs, %dx%d, threshold %g px, %d frames per epoch, %s\n", f.playback.c_str(),
+              dataset.epoch_count(), f.width, f.height, f.playback_threshold, f.frames_per_epoch,
+              renderer.description().c_str());
+  const int frames = static_cast<int>(dataset.epoch_count() - 1) * f.frames_per_epoch + 1;
+  ExposureSmoother smoother;
+  double total = 0, worst = 0;
+  std::uint64_t points = 0;
+  int with_stand_ins = 0;
+  for (int frame = 0; frame < frames; ++frame) {
+    const double time = static_cast<double>(frame) / f.frames_per_epoch;
+    const auto start = std::chrono::steady_clock::now();
+    const FrameStats stats = renderer.scene().Stream(view, time, true);
+    const ImageStatistics measured = renderer.splat().Measure();
+    const double elapsed = frame == 0 ? 0 : 1.0 / 30;  // as if played at 30 frames a second
+    const ToneMapSettings settings;
+    const double exposure = smoother.Update(AutomaticExposure(settings, measured), elapsed);
+    renderer.splat().ToneMapToImage(ResolveToneMap(settings, measured, exposure));
+    renderer.splat().Finish();
+    const double seconds = Seconds(start);
+    total += seconds;
+    worst = std::max(worst, seconds);
+    points += stats.points_drawn;
+    with_stand_ins += stats.stand_ins > 0 || stats.blocks_missing > 0;
+  }
+  std::printf("playback: %d frames in %.2f s: %.1f frames/s (slowest frame %.3f s), %.0f points a frame, "
+              "%d frames drew stand-ins for blocks on their way\n",
+              frames, total, frames / total, worst, static_cast<double>(points) / frames, with_stand_ins);
+}
+
 void Run(const Flags& f) {
+  if (!f.playback.empty()) {
+    Playback(f);
+    return;
+  }
   const fs::path dir = f.dir;
   fs::create_directories(dir);
   const HeadlessBackend backend = ParseHeadlessBackend(f.backend);
@@ -337,6 +398,9 @@ int main(int argc, char** argv) {
   app.add_option("--threads", f.threads, "threads of the reference renderer (default: all)");
   app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");
   app.add_flag("--selection", f.selection, "also time a frame with 10^6 selected IDs");
+  app.add_option("--playback", f.playback, "measure playback through the epochs of this store instead (frames per second)");
+  app.add_option("--playback-threshold", f.playback_threshold, "pixel threshold of --playback")->default_val(1);
+  app.add_option("--frames-per-epoch", f.frames_per_epoch, "frames between two epochs in --playback")->default_val(30);
   app.add_flag("--prepare-only", f.prepare_only, "generate, ingest and render the references, then stop (no timings)");
   CLI11_PARSE(app, argc, argv);
   try {

@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <ostream>
 #include <string>
 
 #include "accuracy/level_comparison.h"
@@ -32,6 +33,9 @@ struct Snapshot {
   // are no sparse regions for density weighting to favour.
   double coverage_floor;
 };
+
+// What ctest and gtest print for a case (instead of its bytes).
+void PrintTo(const Snapshot& snapshot, std::ostream* out) { *out << snapshot.path; }
 
 const Snapshot kSnapshots[] = {
     {"GalaxyIc", "gadget2_ics/galaxy_littleendian.dat", Cube{{-256, -256, -256}, 512, false}, 1.0},
