@@ -3,6 +3,7 @@
 #include <xxhash.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -165,21 +166,35 @@ double Round(double x) {
   return whole;
 }
 
+std::uint16_t SmoothingCode(double h, double node_size) {
+  const double code = Round((std::log2(h / node_size) - kSmoothingLog2Min) * kSmoothingPerOctave);
+  if (code >= 65535) return 65535;
+  if (code > 0) return static_cast<std::uint16_t>(code);  // also false for -inf (h == 0)
+  return 0;
+}
+
 void EncodeSmoothing(const std::vector<double>& smoothing, double node_size, std::uint8_t* out) {
+  // A node's lengths repeat (one per density cell and weight,
+  // index/sampler.h), so a small direct-mapped cache of (length, code) saves
+  // most log2 calls. A slot is valid once its length is set: lengths are >= 0,
+  // never the initial -1.
+  constexpr std::size_t kSlots = 1024;
+  std::array<double, kSlots> cached_length;
+  std::array<std::uint16_t, kSlots> cached_code;
+  cached_length.fill(-1.0);
   for (std::size_t i = 0; i < smoothing.size(); ++i) {
     const double h = smoothing[i];
     if (!std::isfinite(h) || h < 0) {
       throw Error::InvalidArgument("EncodeBlock: smoothing length " + std::to_string(i) + " is " + std::to_string(h) +
                                    ", must be finite and >= 0");
     }
-    const double code = Round((std::log2(h / node_size) - kSmoothingLog2Min) * kSmoothingPerOctave);
-    std::uint16_t q = 0;
-    if (code >= 65535) {
-      q = 65535;
-    } else if (code > 0) {  // also false for -inf (h == 0)
-      q = static_cast<std::uint16_t>(code);
+    const std::uint64_t bits = std::bit_cast<std::uint64_t>(h);
+    const std::size_t slot = static_cast<std::size_t>((bits ^ (bits >> 29) ^ (bits >> 41)) % kSlots);
+    if (std::bit_cast<std::uint64_t>(cached_length[slot]) != bits) {
+      cached_length[slot] = h;
+      cached_code[slot] = SmoothingCode(h, node_size);
     }
-    PutU16(out + 2 * i, q);
+    PutU16(out + 2 * i, cached_code[slot]);
   }
 }
 
@@ -187,28 +202,34 @@ void EncodeSmoothing(const std::vector<double>& smoothing, double node_size, std
 void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint8_t* out, std::uint8_t* params) {
   const std::size_t n = values.size() / 3;
   std::array<float, 3> lo{0, 0, 0}, hi{0, 0, 0};
-  for (std::size_t i = 0; i < values.size(); ++i) {
-    if (!std::isfinite(values[i])) {
-      throw Error::InvalidArgument(std::string("EncodeBlock: ") + name + " of point " + std::to_string(i / 3) +
+  if (n > 0) {
+    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = values[a];
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const float* v = &values[3 * i];
+    if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2])) {
+      throw Error::InvalidArgument(std::string("EncodeBlock: ") + name + " of point " + std::to_string(i) +
                                    " is not finite");
     }
-    const std::size_t a = i % 3;
-    if (i < 3 || values[i] < lo[a]) lo[a] = values[i];
-    if (i < 3 || values[i] > hi[a]) hi[a] = values[i];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], v[a]);
+      hi[a] = std::max(hi[a], v[a]);
+    }
   }
   for (int a = 0; a < 3; ++a) {
     PutF32(params + 4 * a, lo[a]);
     PutF32(params + 12 + 4 * a, hi[a]);
   }
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      const double range = static_cast<double>(hi[a]) - lo[a];
-      std::uint16_t q = 0;
-      if (range > 0) {
-        const double code = Round((values[3 * i + a] - static_cast<double>(lo[a])) / range * 65535.0);
-        q = static_cast<std::uint16_t>(std::clamp(code, 0.0, 65535.0));
+  std::array<double, 3> range;
+  for (int a = 0; a < 3; ++a) range[a] = static_cast<double>(hi[a]) - lo[a];
+  for (int a = 0; a < 3; ++a) {
+    if (range[a] > 0) {
+      for (std::size_t i = 0; i < n; ++i) {
+        const double code = Round((values[3 * i + a] - static_cast<double>(lo[a])) / range[a] * 65535.0);
+        PutU16(out + 6 * i + 2 * a, static_cast<std::uint16_t>(std::clamp(code, 0.0, 65535.0)));
       }
-      PutU16(out + 6 * i + 2 * a, q);
+    } else {
+      for (std::size_t i = 0; i < n; ++i) PutU16(out + 6 * i + 2 * a, 0);
     }
   }
 }
@@ -272,6 +293,12 @@ const BlockColumn* BlockHeader::Find(ColumnId id) const {
 }
 
 Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
+  Bytes block;
+  EncodeBlock(points, key, cube, block);
+  return block;
+}
+
+void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes& block) {
   const std::size_t n = points.size();
   if (n > std::numeric_limits<std::uint32_t>::max()) {
     throw Error::InvalidArgument("EncodeBlock: node " + key.Path() + " has " + std::to_string(n) +
@@ -302,8 +329,11 @@ Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
   const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * ids.size() + 8;
   std::size_t block_size = header_size;
   for (const ColumnId id : ids) block_size += BytesPerPoint(id) * n;
-  Bytes block(block_size, 0);
+  // Every column byte is written below; the header (with its unused
+  // parameter bytes) is zeroed first.
+  block.resize(block_size);
   std::uint8_t* b = block.data();
+  std::memset(b, 0, header_size);
 
   PutU32(b + 0, kBlockMagic);
   PutU16(b + 4, kBlockVersion);
@@ -353,7 +383,6 @@ Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube) {
     offset += length;
   }
   PutU64(b + header_size - 8, Checksum(b, header_size - 8));
-  return block;
 }
 
 std::size_t DecodeBlockHeaderSize(std::span<const std::uint8_t> prefix, const std::string& where) {

@@ -171,6 +171,9 @@ struct BlockHeader {
 // points present), a non-finite value in a vector column, or more than
 // 2^32 - 1 points.
 Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube);
+// The same into `block`, whose memory is reused (an encoder that keeps one
+// buffer neither zeroes nor first-touches a fresh block per node).
+void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes& block);
 
 // Reads the size of the header from the first kBlockFixedHeaderSize bytes of
 // a block (or more), so that a ranged reader knows how much to fetch. Throws

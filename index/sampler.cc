@@ -23,6 +23,13 @@ std::uint64_t Mix(std::uint64_t x) {
   return x;
 }
 
+// PriorityUniform in two steps, so that a node mixes its seed once, not once per point.
+std::uint64_t MixedPrioritySeed(std::uint64_t seed) { return Mix(seed + 0x9e3779b97f4a7c15ull); }
+double PriorityUniformMixed(std::uint64_t sampling_id, std::uint64_t mixed_seed) {
+  const std::uint64_t h = Mix(sampling_id ^ mixed_seed);
+  return static_cast<double>((h >> 11) + 1) * 0x1.0p-53;
+}
+
 // The population's weight in each occupied fine density cell, which cell
 // each point lies in, and the total.
 struct Density {
@@ -30,8 +37,6 @@ struct Density {
   std::vector<double> cell_weight;     // per occupied fine cell, in cell order
   double total = 0;
   double cell_edge = 0;
-
-  double WeightAround(std::size_t point) const { return cell_weight[cell_of[point]]; }
 };
 
 // The indices 0..keys.size()-1 ordered by key, stably: a least-significant-
@@ -76,7 +81,12 @@ Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double>
   for (std::size_t begin = 0; begin < m;) {
     std::size_t end = begin + 1;
     while (end < m && fine[order[end]] == fine[order[begin]]) ++end;
-    if (end - begin > 1) {
+    // Only the order of the additions depends on the sort, and when every
+    // weight in the cell is the same (equal-mass particles) the sum is the
+    // same in any order: the sort is skipped.
+    bool equal_weights = true;
+    for (std::size_t j = begin + 1; j < end && equal_weights; ++j) equal_weights = weight[order[j]] == weight[order[begin]];
+    if (!equal_weights) {
       std::sort(order.begin() + static_cast<std::ptrdiff_t>(begin), order.begin() + static_cast<std::ptrdiff_t>(end),
                 [&](std::uint32_t a, std::uint32_t b) {
                   if (tie_break[a] != tie_break[b]) return tie_break[a] < tie_break[b];
@@ -95,6 +105,33 @@ Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double>
   return d;
 }
 
+
+// Step 5 for the points of one node. A point's length depends only on its
+// weight and its density cell, and equal-mass particles share a cell's
+// weight, so each cell remembers the last weight it was asked for and the
+// length that came out: about one cbrt per occupied cell instead of one per
+// point, with the same results.
+class SmoothingByCell {
+ public:
+  SmoothingByCell(const Density& density, double node_size)
+      : density_(density), node_size_(node_size), last_weight_(density.cell_weight.size(), -1.0),
+        last_length_(density.cell_weight.size()) {}
+
+  double For(std::size_t point, double weight) {
+    const std::uint32_t c = density_.cell_of[point];
+    if (last_weight_[c] != weight) {  // weights are > 0, never the initial -1
+      last_weight_[c] = weight;
+      last_length_[c] = SmoothingLengthFor(weight, density_.cell_weight[c], density_.cell_edge, node_size_);
+    }
+    return last_length_[c];
+  }
+
+ private:
+  const Density& density_;
+  double node_size_;
+  std::vector<double> last_weight_;
+  std::vector<double> last_length_;
+};
 
 void CheckInputs(std::size_t points, std::span<const double> weight, std::size_t ids, const SamplerOptions& options) {
   if (points != weight.size() || ids != weight.size()) {
@@ -158,8 +195,7 @@ std::uint64_t LevelSeed(std::uint64_t seed, int level) {
 }
 
 double PriorityUniform(std::uint64_t sampling_id, std::uint64_t seed) {
-  const std::uint64_t h = Mix(sampling_id ^ Mix(seed + 0x9e3779b97f4a7c15ull));
-  return static_cast<double>((h >> 11) + 1) * 0x1.0p-53;
+  return PriorityUniformMixed(sampling_id, MixedPrioritySeed(seed));
 }
 
 std::vector<double> LeafSmoothingLengths(std::span<const GridPoint> grid, std::span<const double> weight, NodeKey key,
@@ -169,8 +205,9 @@ std::vector<double> LeafSmoothingLengths(std::span<const GridPoint> grid, std::s
   const std::vector<std::uint64_t> no_ids(weight.size(), 0);
   const Density d = EstimateDensity(grid, weight, no_ids, key, cube, options.density_grid_bits);
   const double node_size = cube.NodeSize(key.level());
+  SmoothingByCell smoothing(d, node_size);
   std::vector<double> h(weight.size());
-  for (std::size_t i = 0; i < h.size(); ++i) h[i] = SmoothingLengthFor(weight[i], d.WeightAround(i), d.cell_edge, node_size);
+  for (std::size_t i = 0; i < h.size(); ++i) h[i] = smoothing.For(i, weight[i]);
   return h;
 }
 
@@ -200,10 +237,9 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
     std::iota(sample.kept.begin(), sample.kept.end(), 0u);
     sample.weight.assign(weight.begin(), weight.end());
     sample.estimate = sample.weight;
+    SmoothingByCell smoothing(d, node_size);
     sample.smoothing.resize(m);
-    for (std::size_t i = 0; i < m; ++i) {
-      sample.smoothing[i] = SmoothingLengthFor(weight[i], d.WeightAround(i), d.cell_edge, node_size);
-    }
+    for (std::size_t i = 0; i < m; ++i) sample.smoothing[i] = smoothing.For(i, weight[i]);
     return sample;
   }
 
@@ -213,9 +249,10 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   std::vector<double> cell_factor(d.cell_weight.size());
   for (std::size_t c = 0; c < cell_factor.size(); ++c) cell_factor[c] = std::pow(d.cell_weight[c] / d.total, -options.alpha);
   std::vector<double> importance(m), priority(m);
+  const std::uint64_t mixed_seed = MixedPrioritySeed(LevelSeed(options.seed, key.level()));
   for (std::size_t i = 0; i < m; ++i) {
     importance[i] = weight[i] * cell_factor[d.cell_of[i]];
-    priority[i] = importance[i] / PriorityUniform(sampling_id[i], LevelSeed(options.seed, key.level()));
+    priority[i] = importance[i] / PriorityUniformMixed(sampling_id[i], mixed_seed);
   }
   // Highest priority first; equal priorities (duplicate IDs) fall back to
   // the ID and then the input index, so the order is total.
@@ -228,9 +265,14 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   };
   std::nth_element(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(capacity), order.end(), higher);
   sample.threshold = priority[order[capacity]];
-  order.resize(capacity);
-  std::sort(order.begin(), order.end());
-  sample.kept = std::move(order);
+  // The kept indices in ascending order: marked, then collected in one sweep
+  // (cheaper than sorting them).
+  std::vector<std::uint8_t> is_kept(m, 0);
+  for (std::size_t j = 0; j < capacity; ++j) is_kept[order[j]] = 1;
+  sample.kept.reserve(capacity);
+  for (std::size_t i = 0; i < m; ++i) {
+    if (is_kept[i]) sample.kept.push_back(static_cast<std::uint32_t>(i));
+  }
 
   // Unbiased estimates w_i * max(1, tau / s_i), then rescaled to the exact total.
   sample.weight.resize(capacity);
@@ -242,11 +284,11 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   }
   sample.estimate = sample.weight;
   const double scale = static_cast<double>(static_cast<long double>(d.total) / estimated);
+  SmoothingByCell smoothing(d, node_size);
   sample.smoothing.resize(capacity);
   for (std::size_t j = 0; j < capacity; ++j) {
-    const std::uint32_t i = sample.kept[j];
     sample.weight[j] *= scale;
-    sample.smoothing[j] = SmoothingLengthFor(sample.weight[j], d.WeightAround(i), d.cell_edge, node_size);
+    sample.smoothing[j] = smoothing.For(sample.kept[j], sample.weight[j]);
   }
   return sample;
 }

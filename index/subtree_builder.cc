@@ -97,7 +97,12 @@ void AppendVectors(const From& from, std::size_t i, To& to) {
   const auto source = VectorColumns(from);
   const auto target = VectorColumns(to);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (!source[v]->empty()) target[v]->insert(target[v]->end(), &(*source[v])[3 * i], &(*source[v])[3 * i] + 3);
+    if (source[v]->empty()) continue;
+    // Three push_backs into reserved room: an insert of three was a call per point.
+    const float* p = &(*source[v])[3 * i];
+    target[v]->push_back(p[0]);
+    target[v]->push_back(p[1]);
+    target[v]->push_back(p[2]);
   }
 }
 
@@ -131,22 +136,24 @@ std::array<std::size_t, 9> PartitionByOctant(Placed* begin, Placed* end, int lev
   return bounds;
 }
 
-// The sampling IDs of a node's points: particle IDs, or for inputs without
-// them a hash of the position.
-std::vector<std::uint64_t> SamplingIds(const NodePoints& node) {
-  if (!node.id.empty()) return node.id;
-  std::vector<std::uint64_t> ids(node.size());
-  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = SamplingId(&node.position[3 * i]);
-  return ids;
+// Appends the sampling IDs of a node's points to `ids`: particle IDs, or for
+// inputs without them a hash of the position.
+void AppendSamplingIds(const NodePoints& node, std::vector<std::uint64_t>& ids) {
+  if (!node.id.empty()) {
+    ids.insert(ids.end(), node.id.begin(), node.id.end());
+    return;
+  }
+  for (std::size_t i = 0; i < node.size(); ++i) ids.push_back(SamplingId(&node.position[3 * i]));
 }
 
-// The node's grid points: its own, or for points that came without them
-// (a caller's NodePoints), computed.
-std::vector<GridPoint> GridPointsOf(const NodePoints& node, const Cube& cube) {
-  if (node.grid.size() == node.size()) return node.grid;
-  std::vector<GridPoint> grid(node.size());
-  for (std::size_t i = 0; i < grid.size(); ++i) grid[i] = cube.FinestGridCoords(&node.position[3 * i]);
-  return grid;
+// Appends the node's grid points to `grid`: its own, or for points that came
+// without them (a caller's NodePoints), computed.
+void AppendGridPoints(const NodePoints& node, const Cube& cube, std::vector<GridPoint>& grid) {
+  if (node.grid.size() == node.size()) {
+    grid.insert(grid.end(), node.grid.begin(), node.grid.end());
+    return;
+  }
+  for (std::size_t i = 0; i < node.size(); ++i) grid.push_back(cube.FinestGridCoords(&node.position[3 * i]));
 }
 
 // The node `key` sampled from its children's points (children[o] is the
@@ -181,23 +188,21 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
     const NodePoints& child = children[o];
     child_begin[o] = weight.size();
     if (child.size() == 0) continue;
-    const std::vector<GridPoint> child_grid = GridPointsOf(child, cube);
-    grid.insert(grid.end(), child_grid.begin(), child_grid.end());
+    AppendGridPoints(child, cube, grid);
     weight.insert(weight.end(), child.weight.begin(), child.weight.end());
-    const std::vector<std::uint64_t> ids = SamplingIds(child);
-    sampling_id.insert(sampling_id.end(), ids.begin(), ids.end());
+    AppendSamplingIds(child, sampling_id);
   }
   child_begin[8] = weight.size();
 
-  const Sample sample = SampleNode(grid, weight, sampling_id, key, cube, options.capacity, options.sampler);
+  Sample sample = SampleNode(grid, weight, sampling_id, key, cube, options.capacity, options.sampler);
   NodePoints node;
   const std::size_t kept = sample.kept.size();
   node.position.reserve(3 * kept);
   node.type.reserve(kept);
   node.grid.reserve(kept);
   if (first >= 0) ReserveVectors(children[first], kept, node);
-  node.weight = sample.weight;
-  node.smoothing = sample.smoothing;
+  node.weight = std::move(sample.weight);
+  node.smoothing = std::move(sample.smoothing);
   int octant = 0;
   for (std::size_t j = 0; j < kept; ++j) {
     // Kept indices ascend and the population is grouped by octant, so the

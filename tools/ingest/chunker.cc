@@ -12,32 +12,39 @@
 namespace octocosm {
 namespace {
 
+// Appends the elements `indices` of `from` to `to`, `width` values per point.
+// The target is sized once and written through a pointer: a per-point
+// vector::insert was a call per point and column.
+template <typename T>
+void AppendSelected(const std::vector<T>& from, const std::vector<std::uint32_t>& indices, std::size_t width,
+                    std::vector<T>& to) {
+  const std::size_t old = to.size();
+  to.resize(old + width * indices.size());  // grows geometrically, like push_back
+  T* out = to.data() + old;
+  const T* in = from.data();
+  if (width == 3) {
+    for (const std::uint32_t i : indices) {
+      out[0] = in[3 * std::size_t{i}];
+      out[1] = in[3 * std::size_t{i} + 1];
+      out[2] = in[3 * std::size_t{i} + 2];
+      out += 3;
+    }
+  } else {
+    for (const std::uint32_t i : indices) *out++ = in[i];
+  }
+}
+
 // Copies the points `indices` of `from` to the end of `to` (all columns
-// `from` carries). Appends rather than resizing: resize would zero memory
-// that is overwritten at once.
+// `from` carries).
 void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& indices, ParticleChunk& to) {
-  const std::size_t n = to.size() + indices.size();
-  auto grow = [](auto& column, std::size_t size) {
-    if (column.capacity() < size) column.reserve(std::max(size, 2 * column.capacity()));
-  };
-  grow(to.position, 3 * n);
-  grow(to.mass, n);
-  grow(to.type, n);
-  if (from.has_id()) grow(to.id, n);
+  AppendSelected(from.position, indices, 3, to.position);
+  AppendSelected(from.mass, indices, 1, to.mass);
+  AppendSelected(from.type, indices, 1, to.type);
+  if (from.has_id()) AppendSelected(from.id, indices, 1, to.id);
   const auto source = VectorColumns(from);
   const auto target = VectorColumns(to);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (!source[v]->empty()) grow(*target[v], 3 * n);
-  }
-  for (const std::uint32_t i : indices) {
-    to.position.insert(to.position.end(), &from.position[3 * i], &from.position[3 * i] + 3);
-    to.mass.push_back(from.mass[i]);
-    to.type.push_back(from.type[i]);
-    if (from.has_id()) to.id.push_back(from.id[i]);
-  }
-  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (source[v]->empty()) continue;
-    for (const std::uint32_t i : indices) target[v]->insert(target[v]->end(), &(*source[v])[3 * i], &(*source[v])[3 * i] + 3);
+    if (!source[v]->empty()) AppendSelected(*source[v], indices, 3, *target[v]);
   }
 }
 

@@ -187,10 +187,11 @@ struct EpochBuild {
   EpochReport* report = nullptr;
   Progress* progress = nullptr;
 
-  // Encodes a finished node and adds it to the store. `is_leaf` decides
-  // whether its IDs go to the ID index.
-  void Emit(NodeKey key, const NodePoints& points, bool is_leaf) {
-    Bytes block = EncodeBlock(points, key, *cube);
+  // Encodes a finished node into `block` (the caller's buffer, reused from
+  // node to node) and adds it to the store. `is_leaf` decides whether its
+  // IDs go to the ID index.
+  void Emit(NodeKey key, const NodePoints& points, bool is_leaf, Bytes& block) {
+    EncodeBlock(points, key, *cube, block);
     std::vector<IdLeafRecord> pairs;
     if (is_leaf && id_pairs != nullptr) {
       pairs.reserve(points.id.size());
@@ -207,11 +208,11 @@ struct EpochBuild {
 
 // A sink that tells leaves from inner nodes: nodes arrive children first, so
 // a node none of whose children has arrived is a leaf.
-NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has_children) {
-  return [&build, &has_children](NodeKey key, const NodePoints& points) {
+NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has_children, Bytes& block) {
+  return [&build, &has_children, &block](NodeKey key, const NodePoints& points) {
     const bool is_leaf = has_children.erase(key.value()) == 0;
     if (key.level() > 0) has_children.insert(key.Parent().value());
-    build.Emit(key, points, is_leaf);
+    build.Emit(key, points, is_leaf, block);
   };
 }
 
@@ -221,8 +222,9 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
 // waits for its predecessors), so memory holds a few chunk roots plus the
 // merger's open ancestors, never every chunk's sample. Returns the root.
 NodePoints BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads) {
-  TopLevelMerger merger(*build.cube, *build.tree, [&build](NodeKey key, const NodePoints& points) {
-    build.Emit(key, points, /*is_leaf=*/false);
+  Bytes merger_block;  // the merger runs under merge_mutex: one buffer serves it
+  TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
+    build.Emit(key, points, /*is_leaf=*/false, merger_block);
   });
   std::mutex merge_mutex;  // guards merger, ready, next_to_merge
   std::map<std::size_t, NodePoints> ready;
@@ -233,11 +235,12 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned th
   std::mutex error_mutex;
   auto work = [&] {
     try {
+      Bytes block;  // this worker's encoding buffer
       for (std::size_t c = next++; c < chunks.size() && !failed; c = next++) {
         ParticleChunk points = chunks[c].TakePoints();
         const std::uint64_t count = points.size();
         std::unordered_set<std::uint64_t> has_children;
-        NodePoints root = BuildSubtree(points, chunks[c].key, *build.cube, *build.tree, LeafAwareSink(build, has_children));
+        NodePoints root = BuildSubtree(points, chunks[c].key, *build.cube, *build.tree, LeafAwareSink(build, has_children, block));
         points = ParticleChunk();
         {
           std::lock_guard lock(merge_mutex);
