@@ -6,10 +6,8 @@
 #include <numeric>
 #include <optional>
 #include <unordered_map>
-#include <utility>
 
 #include "storage/error.h"
-#include "tools/ingest/spill_writer.h"
 
 namespace octocosm {
 namespace {
@@ -110,7 +108,6 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
   const std::size_t bytes_per_point = options_.columns.BytesPerPoint();
   const std::size_t max_buffered = std::max<std::size_t>(options_.memory_bytes / bytes_per_point, 1);
   std::size_t buffered_points = 0;
-  SpillWriter spill_writer;  // after `writers`: it is joined before they close
 
   auto spill = [&](std::size_t c) {
     Chunk& chunk = chunks[c];
@@ -119,9 +116,10 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
       chunk.path = NewChunkPath();
       writers[c].emplace(chunk.path, options_.columns);
     }
+    writers[c]->Append(chunk.points);
     spilled_points_ += chunk.points.size();
     buffered_points -= chunk.points.size();
-    spill_writer.Submit(*writers[c], std::exchange(chunk.points, ParticleChunk()));
+    chunk.points = ParticleChunk();  // give the memory back
   };
 
   pass([&](const ParticleChunk& batch) {
@@ -141,7 +139,7 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
       buffered_points += picks[c].size();
       picks[c].clear();
     }
-    if (buffered_points + spill_writer.pending_points() > max_buffered) {
+    if (buffered_points > max_buffered) {
       // Spill the fullest buffers first: the most memory back per write call.
       std::vector<std::size_t> order(cells);
       std::iota(order.begin(), order.end(), 0);
@@ -151,20 +149,16 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
         if (buffered_points <= max_buffered / 2) break;
         spill(c);
       }
-      // Points waiting to be written are memory too: go on only when they
-      // fit beside the buffers.
-      spill_writer.WaitForPendingAtMost(max_buffered - std::min(buffered_points, max_buffered));
     }
   });
 
-  for (std::size_t c = 0; c < cells; ++c) {
-    if (!chunks[c].path.empty()) spill(c);  // a chunk that spilled once goes wholly to its file
-  }
-  spill_writer.Drain();
   std::vector<Chunk> result;
   for (std::size_t c = 0; c < cells; ++c) {
     if (chunks[c].point_count == 0) continue;
-    if (writers[c]) writers[c]->Close();
+    if (!chunks[c].path.empty()) {
+      spill(c);  // a chunk that spilled once goes wholly to its file
+      writers[c]->Close();
+    }
     chunks[c].key = NodeKey::FromValue(first + c);
     result.push_back(std::move(chunks[c]));
   }
