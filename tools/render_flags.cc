@@ -52,9 +52,8 @@ ToneMapSettings ToneSettingsFrom(const SceneFlags& f) {
   tone.asinh_softening = f.softening;
   tone.density_map = ParseColorMap(f.colormap);
   tone.color = ParseColorMode(f.color);
-  tone.attribute_map = !f.attribute_colormap.empty() ? ParseColorMap(f.attribute_colormap)
-                       : tone.color == ColorMode::kLineOfSightVelocity ? ColorMapId::kCoolwarm
-                                                                        : ColorMapId::kViridis;
+  tone.attribute_map =
+      !f.attribute_colormap.empty() ? ParseColorMap(f.attribute_colormap) : DefaultAttributeColorMap(tone.color);
   if (!f.color_range.empty()) {
     const std::vector<double> v = ParseNumberList(f.color_range, "--color-range");
     if (v.size() != 2 || !(v[0] < v[1])) throw Error::InvalidArgument("--color-range: expected two numbers low,high with low < high");
@@ -63,6 +62,10 @@ ToneMapSettings ToneSettingsFrom(const SceneFlags& f) {
   }
   tone.Validate();
   return tone;
+}
+
+ColorMapId DefaultAttributeColorMap(ColorMode mode) {
+  return mode == ColorMode::kLineOfSightVelocity ? ColorMapId::kCoolwarm : ColorMapId::kViridis;
 }
 
 SceneOptions SceneOptionsFrom(const SceneFlags& f) {
