@@ -167,8 +167,9 @@ void RunView(const ViewFlags& f) {
       selection_message = "reading " + *overlay_requests.id_file;
     }
     const bool screenshot_asked = commands.screenshot || overlay_requests.screenshot;
-    if (width == 0 || height == 0) {  // minimised: nothing to draw
+    if (width == 0 || height == 0) {  // minimised: nothing to draw, and no hurry
       window.EndFrame();
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
       continue;
     }
 

@@ -43,7 +43,12 @@ ViewerWindow::ImGuiSession::ImGuiSession(GLFWwindow* window) {
   ImGui::GetIO().IniFilename = nullptr;  // no imgui.ini left in the user's directory
   ImGui::StyleColorsDark();
   ImGui_ImplGlfw_InitForOpenGL(window, true);
-  ImGui_ImplOpenGL3_Init("#version 450 core");
+  // Its OpenGL 3 backend loads its own few GL functions (not through glad).
+  if (!ImGui_ImplOpenGL3_Init("#version 450 core")) {
+    ImGui_ImplGlfw_Shutdown();
+    ImGui::DestroyContext();
+    throw Error::NotSupported("Dear ImGui", "its OpenGL 3 backend could not load the OpenGL functions it needs");
+  }
 }
 
 ViewerWindow::ImGuiSession::~ImGuiSession() {
