@@ -141,7 +141,7 @@ void RunView(const ViewFlags& f) {
 
     // 1. What the user asked for, by key, mouse or the overlay's buttons.
     // The camera and the clock are the script's while it runs.
-    const ViewerCommands commands = input.Read(height);
+    const ViewerCommands commands = input.Read(height, window.keys_pressed());
     if (!script.running()) {
       if (commands.toggle_camera_mode) {
         controller.set_mode(controller.mode() == CameraMode::kOrbit ? CameraMode::kFly : CameraMode::kOrbit);

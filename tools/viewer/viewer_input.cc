@@ -9,15 +9,21 @@
 namespace octocosm {
 namespace {
 
+// How often `glfw_key` went down this frame; with `repeats`, also how often
+// it repeated while held.
+int Presses(const std::vector<KeyPress>& keys_pressed, int glfw_key, bool repeats) {
+  return static_cast<int>(std::ranges::count_if(
+      keys_pressed, [&](const KeyPress& k) { return k.glfw_key == glfw_key && (repeats || !k.repeat); }));
+}
 // The ImGui GLFW backend of Dear ImGui 1.86 indexes io.KeysDown by GLFW key codes.
-bool Pressed(int glfw_key) { return ImGui::IsKeyPressed(glfw_key, false); }
 bool Held(int glfw_key) { return ImGui::IsKeyDown(glfw_key); }
 int Axis(int plus_key, int minus_key) { return (Held(plus_key) ? 1 : 0) - (Held(minus_key) ? 1 : 0); }
 
 }  // namespace
 
-ViewerCommands ViewerInput::Read(int framebuffer_height) {
+ViewerCommands ViewerInput::Read(int framebuffer_height, const std::vector<KeyPress>& keys_pressed) {
   const ImGuiIO& io = ImGui::GetIO();
+  const auto pressed = [&](int glfw_key) { return Presses(keys_pressed, glfw_key, false) > 0; };
   ViewerCommands c;
   c.camera.seconds = io.DeltaTime;
   const double sx = io.DisplayFramebufferScale.x, sy = io.DisplayFramebufferScale.y;
@@ -37,7 +43,7 @@ ViewerCommands ViewerInput::Read(int framebuffer_height) {
       if (!ImGui::IsMouseDown(ImGuiMouseButton_Left)) {
         if (big_enough) c.box_drawn = box;
         box_start_.reset();
-      } else if (!io.WantCaptureKeyboard && Pressed(GLFW_KEY_ESCAPE)) {
+      } else if (!io.WantCaptureKeyboard && pressed(GLFW_KEY_ESCAPE)) {
         box_start_.reset();
         escape_taken = true;
       } else {
@@ -59,14 +65,15 @@ ViewerCommands ViewerInput::Read(int framebuffer_height) {
   if (!io.WantCaptureKeyboard) {
     c.camera.move = {Axis(GLFW_KEY_D, GLFW_KEY_A), Axis(GLFW_KEY_E, GLFW_KEY_Q), Axis(GLFW_KEY_W, GLFW_KEY_S)};
     c.camera.fast = io.KeyShift;
-    c.toggle_camera_mode = Pressed(GLFW_KEY_F);
-    c.toggle_playing = Pressed(GLFW_KEY_SPACE);
-    c.step_epochs = (ImGui::IsKeyPressed(GLFW_KEY_RIGHT) ? 1 : 0) - (ImGui::IsKeyPressed(GLFW_KEY_LEFT) ? 1 : 0);
-    c.reset_view = Pressed(GLFW_KEY_R);
-    c.clear_selection = Pressed(GLFW_KEY_C);
-    c.toggle_overlay = Pressed(GLFW_KEY_H);
-    c.screenshot = Pressed(GLFW_KEY_P);
-    c.cancel = Pressed(GLFW_KEY_ESCAPE) && !escape_taken;
+    c.toggle_camera_mode = pressed(GLFW_KEY_F);
+    c.toggle_playing = pressed(GLFW_KEY_SPACE);
+    // An arrow key held down steps on at the keyboard's repeat rate.
+    c.step_epochs = Presses(keys_pressed, GLFW_KEY_RIGHT, true) - Presses(keys_pressed, GLFW_KEY_LEFT, true);
+    c.reset_view = pressed(GLFW_KEY_R);
+    c.clear_selection = pressed(GLFW_KEY_C);
+    c.toggle_overlay = pressed(GLFW_KEY_H);
+    c.screenshot = pressed(GLFW_KEY_P);
+    c.cancel = pressed(GLFW_KEY_ESCAPE) && !escape_taken;
   }
   return c;
 }

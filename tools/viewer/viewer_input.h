@@ -15,9 +15,11 @@
 #pragma once
 
 #include <optional>
+#include <vector>
 
 #include "tools/viewer/camera_controller.h"
 #include "tools/viewer/screen_region.h"
+#include "tools/viewer/viewer_window.h"
 
 namespace octocosm {
 
@@ -25,7 +27,7 @@ struct ViewerCommands {
   CameraInput camera;
   bool toggle_camera_mode = false;
   bool toggle_playing = false;
-  int step_epochs = 0;  // -1 or +1
+  int step_epochs = 0;  // whole epochs forward (> 0) or back (< 0)
   bool reset_view = false;
   bool clear_selection = false;
   bool toggle_overlay = false;
@@ -40,10 +42,12 @@ class ViewerInput {
   // Rectangles smaller than this on a side are taken as clicks, not boxes.
   static constexpr double kMinBoxPixels = 3;
 
-  // Reads the current ImGui frame's input (call after ImGui::NewFrame).
-  // Positions and drags are in framebuffer pixels; rectangles in the window
-  // coordinates of render/render_view.h (origin at the lower left).
-  ViewerCommands Read(int framebuffer_height);
+  // Reads the current ImGui frame's input (call after ImGui::NewFrame), and
+  // the keys pressed among this frame's events (ViewerWindow::keys_pressed),
+  // which decide the one-off commands (F, space, P, ...). Positions and drags
+  // are in framebuffer pixels; rectangles in the window coordinates of
+  // render/render_view.h (origin at the lower left).
+  ViewerCommands Read(int framebuffer_height, const std::vector<KeyPress>& keys_pressed);
 
  private:
   std::optional<std::array<double, 2>> box_start_;  // framebuffer pixels, y down

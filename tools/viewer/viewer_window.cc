@@ -74,8 +74,16 @@ ViewerWindow::ViewerWindow(int width, int height, const std::string& title, bool
   glfwSwapInterval(vsync ? 1 : 0);
   LoadGlFunctions(glfwGetProcAddress, std::string("GLFW window (") + glfwGetVersionString() + ")");
   description_ = CurrentGlDescription();
+  // Before Dear ImGui's callbacks, which call the ones they replace.
+  glfwSetWindowUserPointer(window_.get(), this);
+  glfwSetKeyCallback(window_.get(), RecordKeyPress);
   imgui_ = std::make_unique<ImGuiSession>(window_.get());
   glfwGetFramebufferSize(window_.get(), &framebuffer_width_, &framebuffer_height_);
+}
+
+void ViewerWindow::RecordKeyPress(GLFWwindow* window, int key, int, int action, int) {
+  if (action == GLFW_RELEASE) return;
+  static_cast<ViewerWindow*>(glfwGetWindowUserPointer(window))->keys_pressed_.push_back({key, action == GLFW_REPEAT});
 }
 
 ViewerWindow::~ViewerWindow() {
@@ -87,6 +95,7 @@ bool ViewerWindow::ShouldClose() const { return glfwWindowShouldClose(window_.ge
 double ViewerWindow::frames_per_second() const { return ImGui::GetIO().Framerate; }
 
 void ViewerWindow::BeginFrame() {
+  keys_pressed_.clear();
   glfwPollEvents();
   glfwGetFramebufferSize(window_.get(), &framebuffer_width_, &framebuffer_height_);
   ImGui_ImplOpenGL3_NewFrame();

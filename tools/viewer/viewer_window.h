@@ -11,12 +11,19 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "render/image.h"
 
 struct GLFWwindow;
 
 namespace octocosm {
+
+// A key going down, or repeating while held (GLFW key codes).
+struct KeyPress {
+  int glfw_key = 0;
+  bool repeat = false;
+};
 
 class ViewerWindow {
  public:
@@ -44,6 +51,11 @@ class ViewerWindow {
   double frames_per_second() const;
   // The context's renderer and version (render/gl_context.h CurrentGlDescription).
   const std::string& description() const { return description_; }
+  // Every key press among this frame's events, in order. Dear ImGui 1.86
+  // keeps only whether a key is down at the frame, so a key pressed and
+  // released between two frames (a quick tap while llvmpipe draws a few
+  // frames a second) would never be seen; these are not lost.
+  const std::vector<KeyPress>& keys_pressed() const { return keys_pressed_; }
 
  private:
   // Each part tears down what it set up, so a constructor that fails half
@@ -59,12 +71,14 @@ class ViewerWindow {
     explicit ImGuiSession(GLFWwindow* window);
     ~ImGuiSession();
   };
+  static void RecordKeyPress(GLFWwindow* window, int key, int scancode, int action, int mods);
 
   GlfwLibrary glfw_;
   std::unique_ptr<GLFWwindow, WindowDeleter> window_;
   std::unique_ptr<ImGuiSession> imgui_;
   int framebuffer_width_ = 0, framebuffer_height_ = 0;
   std::string description_;
+  std::vector<KeyPress> keys_pressed_;
 };
 
 }  // namespace octocosm
