@@ -35,6 +35,7 @@
 #include "tools/viewer/overlay.h"
 #include "tools/viewer/playback.h"
 #include "tools/viewer/screen_region.h"
+#include "tools/viewer/screenshot_request.h"
 #include "tools/viewer/selection_job.h"
 #include "tools/viewer/viewer_input.h"
 #include "tools/viewer/viewer_script.h"
@@ -68,6 +69,14 @@ std::string FreeScreenshotName() {
     std::snprintf(name, sizeof name, "octocosm-view-%03d.png", n);
     if (!std::filesystem::exists(name)) return name;
   }
+}
+
+// The frame's summary for stderr, after a screenshot's name.
+std::string DescribeFrame(int width, int height, const FrameStats& stats, double time, double exposure) {
+  char text[200];
+  std::snprintf(text, sizeof text, "%dx%d: %llu points, epoch %.3g, exposure %.4g", width, height,
+                static_cast<unsigned long long>(stats.points_drawn), time, exposure);
+  return text;
 }
 
 // So that playing into an epoch never waits for its index pages: a few
@@ -126,6 +135,7 @@ void RunView(const ViewFlags& f) {
   SelectionJob selection_job;
   std::string selection_message = initial_selection.empty() ? "" : "from --select / --select-box";
   std::string status;
+  ScreenshotRequest screenshot_request;  // the P key's, or the overlay's button's
   ExposureSmoother smoother;
   const double path_frame_seconds = script_options.path ? 1 / script_options.path->fps() : 0;
 
@@ -166,7 +176,7 @@ void RunView(const ViewFlags& f) {
       selection_job.Start(IdFileSelectionWork(*overlay_requests.id_file));
       selection_message = "reading " + *overlay_requests.id_file;
     }
-    const bool screenshot_asked = commands.screenshot || overlay_requests.screenshot;
+    if (commands.screenshot || overlay_requests.screenshot) screenshot_request.Ask(SecondsSince(started));
     if (width == 0 || height == 0) {  // minimised: nothing to draw, and no hurry
       window.EndFrame();
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -193,6 +203,7 @@ void RunView(const ViewFlags& f) {
     }
     if (std::optional<SelectionResult> result = selection_job.TakeResult()) {
       selection_message = result->message;
+      if (!f.quiet) std::fprintf(stderr, "view: selection: %s (%.2f s)\n", result->message.c_str(), result->seconds);
       if (!result->failed) {
         try {
           scene.SetSelection(result->ids);
@@ -229,20 +240,29 @@ void RunView(const ViewFlags& f) {
     if (after.take_screenshot) {
       WritePng(f.screenshot, window.ReadBackBuffer());
       if (!f.quiet) {
-        std::fprintf(stderr, "view: %s %dx%d: %llu points, epoch %.3g, exposure %.4g, after %.2f s\n",
-                     f.screenshot.c_str(), width, height, static_cast<unsigned long long>(stats.points_drawn), time,
-                     tone.exposure, SecondsSince(started));
+        std::fprintf(stderr, "view: %s %s, after %.2f s\n", f.screenshot.c_str(),
+                     DescribeFrame(width, height, stats, time, tone.exposure).c_str(), SecondsSince(started));
       }
     }
-    if (screenshot_asked) {
+    const ScreenshotRequest::Take take = screenshot_request.FrameDrawn(stats.blocks_missing, SecondsSince(started));
+    if (take != ScreenshotRequest::Take::kNotYet) {
       // A screenshot that cannot be written is a message, not the end of the session.
       try {
         const std::string name = FreeScreenshotName();
         WritePng(name, window.ReadBackBuffer());
-        status = "screenshot " + name + (stats.blocks_missing > 0 ? " (blocks were still loading)" : "");
+        const std::string completeness = take == ScreenshotRequest::Take::kComplete
+                                             ? "view complete"
+                                             : std::to_string(stats.blocks_missing) + " blocks still loading";
+        status = "screenshot " + name + " (" + completeness + ")";
+        if (!f.quiet) {
+          std::fprintf(stderr, "view: %s %s, %s\n", name.c_str(),
+                       DescribeFrame(width, height, stats, time, tone.exposure).c_str(), completeness.c_str());
+        }
       } catch (const Error& e) {
         status = e.what();
       }
+    } else if (screenshot_request.waiting()) {
+      status = "screenshot: waiting for " + std::to_string(stats.blocks_missing) + " blocks to load";
     }
     if (script_was_running && !script.running()) {
       // The user takes over where the script left the camera and the clock.
@@ -314,7 +334,7 @@ void AddViewCommand(CLI::App& app) {
   cmd->add_flag("--exit-after-path", f.exit_after_path, "quit after --path has played (and --screenshot is written)");
   cmd->add_option("--settle-timeout", f.settle_timeout, "seconds the script's last view may take to load")
       ->default_val(60);
-  cmd->add_flag("-q,--quiet", f.quiet, "no summary on stderr");
+  cmd->add_flag("-q,--quiet", f.quiet, "nothing on stderr but errors (no context, selections or screenshots)");
   cmd->callback([flags] { RunView(*flags); });
 }
 

@@ -1,6 +1,6 @@
 // The viewer's parts that need no window (tools/viewer/): the playback
-// clock, the frustum under a screen rectangle, the scripted run, and the
-// background selection job.
+// clock, the frustum under a screen rectangle, the scripted run, the P key's
+// screenshot request, and the background selection job.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -12,6 +12,7 @@
 #include "storage/error.h"
 #include "tools/viewer/playback.h"
 #include "tools/viewer/screen_region.h"
+#include "tools/viewer/screenshot_request.h"
 #include "tools/viewer/selection_job.h"
 #include "tools/viewer/viewer_script.h"
 
@@ -189,6 +190,33 @@ TEST(ViewerScriptTest, ALastViewThatNeverCompletesIsAnIoErrorAfterTheTimeout) {
     EXPECT_NE(std::string(e.what()).find("the-store"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("3 blocks"), std::string::npos) << e.what();
   }
+}
+
+// --- The P key's screenshot ---
+
+TEST(ScreenshotRequestTest, WaitsForTheCompleteViewThenTakesItOnce) {
+  ScreenshotRequest request;
+  EXPECT_EQ(request.FrameDrawn(0, 0), ScreenshotRequest::Take::kNotYet) << "nothing asked";
+  request.Ask(10);
+  EXPECT_TRUE(request.waiting());
+  EXPECT_EQ(request.FrameDrawn(4, 10.1), ScreenshotRequest::Take::kNotYet);
+  request.Ask(11);  // the same request
+  EXPECT_EQ(request.FrameDrawn(1, 12), ScreenshotRequest::Take::kNotYet);
+  EXPECT_EQ(request.FrameDrawn(0, 12.1), ScreenshotRequest::Take::kComplete);
+  EXPECT_FALSE(request.waiting());
+  EXPECT_EQ(request.FrameDrawn(0, 12.2), ScreenshotRequest::Take::kNotYet) << "once";
+
+  request.Ask(20);
+  EXPECT_EQ(request.FrameDrawn(0, 20), ScreenshotRequest::Take::kComplete) << "a complete view at once";
+}
+
+TEST(ScreenshotRequestTest, AViewThatDoesNotCompleteIsTakenAsItIsAfterThePatience) {
+  ScreenshotRequest request;
+  request.Ask(3);
+  request.Ask(6);  // the same request: its patience counts from 3
+  EXPECT_EQ(request.FrameDrawn(2, 3 + ScreenshotRequest::kPatienceSeconds - 0.01), ScreenshotRequest::Take::kNotYet);
+  EXPECT_EQ(request.FrameDrawn(2, 3 + ScreenshotRequest::kPatienceSeconds), ScreenshotRequest::Take::kAsItIs);
+  EXPECT_FALSE(request.waiting());
 }
 
 // --- The background selection job ---
