@@ -1,5 +1,6 @@
 #include "index/particle_lookup.h"
 
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <unordered_map>
@@ -81,21 +82,40 @@ std::vector<std::optional<ParticleState>> ParticleLocator::Trajectory(std::uint6
   return path;
 }
 
-std::vector<std::uint64_t> ParticleIdsInBox(const Dataset& dataset, std::uint32_t epoch, const std::array<double, 3>& lo,
-                                            const std::array<double, 3>& hi) {
+ParticleIdCollection ParticleIdsInRegion(const Dataset& dataset, std::uint32_t epoch, const Region& region,
+                                         std::size_t max_ids, std::stop_token stop) {
   if (!(dataset.columns() & ColumnBit(ColumnId::kId))) {
     throw Error::InvalidArgument("the store holds no particle IDs (its input had none), so nothing can be selected by ID");
   }
-  const std::unique_ptr<Region> box = MakeBoxRegion(lo, hi, dataset.cube(epoch));
   QueryOptions options;
   options.epoch = epoch;
   options.level = kMaxLevel;  // every leaf: each particle once
   options.columns = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kId);
-  std::vector<std::uint64_t> ids;
-  RunQuery(dataset, *box, options, [&](const QueryBatch& batch) {
-    ids.insert(ids.end(), batch.points.id.begin(), batch.points.id.end());
-  });
-  return ids;
+  ParticleIdCollection found;
+  struct StopReading {};  // thrown from the callback: RunQuery stops at a throw
+  try {
+    RunQuery(dataset, region, options, [&](const QueryBatch& batch) {
+      const std::vector<std::uint64_t>& ids = batch.points.id;
+      const std::size_t room = max_ids - found.ids.size();
+      found.ids.insert(found.ids.end(), ids.begin(), ids.begin() + static_cast<std::ptrdiff_t>(std::min(room, ids.size())));
+      if (ids.size() > room) {
+        found.truncated = true;
+        throw StopReading{};
+      }
+      if (stop.stop_requested()) {
+        found.stopped = true;
+        throw StopReading{};
+      }
+    });
+  } catch (const StopReading&) {
+  }
+  return found;
+}
+
+std::vector<std::uint64_t> ParticleIdsInBox(const Dataset& dataset, std::uint32_t epoch, const std::array<double, 3>& lo,
+                                            const std::array<double, 3>& hi) {
+  const std::unique_ptr<Region> box = MakeBoxRegion(lo, hi, dataset.cube(epoch));
+  return ParticleIdsInRegion(dataset, epoch, *box).ids;
 }
 
 }  // namespace octocosm

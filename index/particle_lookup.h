@@ -5,14 +5,17 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "index/column_reader.h"
 #include "index/dataset.h"
 #include "index/id_index.h"
+#include "index/region.h"
 
 namespace octocosm {
 
@@ -48,10 +51,23 @@ class ParticleLocator {
   ReadCounters reads_;
 };
 
-// The IDs of every particle of `epoch` inside the closed box [lo, hi]
-// (periodic boxes as in index/region.h), read from the leaves that meet it:
-// a selection by box. Throws Error::InvalidArgument when the store has no
+// The IDs of the particles of `epoch` in `region`, read from the leaves
+// that meet it (only their id and position columns): a selection by region.
+// Reading stops early once more than `max_ids` particles are found (the
+// first max_ids are kept and `truncated` is set), and, leaving the IDs found
+// so far, when `stop` is requested (a viewer's selection thread that is no
+// longer wanted). Throws Error::InvalidArgument when the store has no
 // particle IDs, as RunQuery otherwise.
+struct ParticleIdCollection {
+  std::vector<std::uint64_t> ids;
+  bool truncated = false;  // the region holds more than max_ids particles
+  bool stopped = false;    // `stop` was requested before the whole region was read
+};
+ParticleIdCollection ParticleIdsInRegion(const Dataset& dataset, std::uint32_t epoch, const Region& region,
+                                         std::size_t max_ids = SIZE_MAX, std::stop_token stop = {});
+
+// The IDs of every particle of `epoch` inside the closed box [lo, hi]
+// (periodic boxes as in index/region.h): ParticleIdsInRegion of the box.
 std::vector<std::uint64_t> ParticleIdsInBox(const Dataset& dataset, std::uint32_t epoch, const std::array<double, 3>& lo,
                                             const std::array<double, 3>& hi);
 

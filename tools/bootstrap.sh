@@ -21,6 +21,8 @@ packages=(
   # viewer's tests, EGL for headless rendering on a real GPU
   libosmesa6-dev libglfw3-dev libglm-dev python3-glad libimgui-dev libpng-dev libegl-dev
   xvfb xauth
+  # the viewer's test plays mouse and keyboard input into Xvfb through XTEST
+  libxtst-dev
   # accuracy cross-checks against the Point Cloud Library
   libpcl-dev
   # benchmarks draw their plots with gnuplot

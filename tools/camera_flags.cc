@@ -22,6 +22,8 @@ std::array<double, 3> Centre(const Cube& cube) {
   return {cube.origin[0] + cube.size / 2, cube.origin[1] + cube.size / 2, cube.origin[2] + cube.size / 2};
 }
 
+double DefaultNear(const Cube& cube) { return cube.size * 1e-6; }
+
 double DefaultFar(const std::array<double, 3>& position, const Cube& cube) {
   const auto c = Centre(cube);
   double d2 = 0;
@@ -32,7 +34,7 @@ double DefaultFar(const std::array<double, 3>& position, const Cube& cube) {
 Camera Build(const CameraFlags& f, const Cube& cube, double aspect,
              const std::optional<std::array<double, 3>>& fallback_position) {
   // Defaults scaled to the data: near a millionth of the cube, far beyond its far side.
-  const double near = f.near > 0 ? f.near : cube.size * 1e-6;
+  const double near = f.near > 0 ? f.near : DefaultNear(cube);
   if (!f.view_matrix.empty()) {
     if (!f.position.empty() || !f.look_at.empty()) {
       throw Error::InvalidArgument("--view-matrix replaces --camera and --look-at; give one or the other");
@@ -53,8 +55,7 @@ Camera Build(const CameraFlags& f, const Cube& cube, double aspect,
   camera.up = Triple(f.up, "--up");
   camera.fov_y_degrees = f.fov;
   camera.aspect = aspect;
-  camera.near = near;
-  camera.far = f.far > 0 ? f.far : DefaultFar(camera.position, cube);
+  ApplyDepthRange(f, cube, camera);
   camera.Validate();
   return camera;
 }
@@ -82,6 +83,11 @@ Camera CameraFromFlags(const CameraFlags& flags, const Cube& cube, double aspect
     if (what.rfind(prefix, 0) == 0) what.erase(0, prefix.size());
     throw Error::InvalidArgument("camera flags (--camera, --look-at, --up, --view-matrix, --fov, --near, --far): " + what);
   }
+}
+
+void ApplyDepthRange(const CameraFlags& flags, const Cube& cube, Camera& camera) {
+  camera.near = flags.near > 0 ? flags.near : DefaultNear(cube);
+  camera.far = flags.far > 0 ? flags.far : DefaultFar(camera.position, cube);
 }
 
 std::array<double, 3> OverviewPosition(const Cube& cube, double fov_y_degrees) {

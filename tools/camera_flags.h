@@ -34,6 +34,13 @@ void AddCameraFlags(CLI::App& command, CameraFlags& flags);
 Camera CameraFromFlags(const CameraFlags& flags, const Cube& cube, double aspect,
                        const std::optional<std::array<double, 3>>& fallback_position = std::nullopt);
 
+// Sets the near and far distances of a camera that moves (camera paths, the
+// viewer) as CameraFromFlags does for a fixed one: --near and --far when
+// given, else a millionth of the cube and the camera's distance to the
+// cube's centre plus its edge, so that nothing in the cube is clipped from
+// wherever the camera is, inside the cube or out.
+void ApplyDepthRange(const CameraFlags& flags, const Cube& cube, Camera& camera);
+
 // A position from which the whole cube is in view: on the +z side of its
 // centre, far enough that the cube's bounding sphere fits the vertical field
 // of view.

@@ -16,5 +16,6 @@ void AddSynthCommand(CLI::App& app);
 void AddQueryCommand(CLI::App& app);
 void AddFollowCommand(CLI::App& app);
 void AddRenderCommand(CLI::App& app);
+void AddViewCommand(CLI::App& app);
 
 }  // namespace octocosm

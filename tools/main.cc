@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
   octocosm::AddQueryCommand(app);
   octocosm::AddFollowCommand(app);
   octocosm::AddRenderCommand(app);
+  octocosm::AddViewCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

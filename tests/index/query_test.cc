@@ -21,6 +21,7 @@
 #include "index/dataset.h"
 #include "index/frustum.h"
 #include "index/node_selection.h"
+#include "index/particle_lookup.h"
 #include "index/region.h"
 #include "storage/error.h"
 #include "tools/ingest/ingest.h"
@@ -220,6 +221,44 @@ TEST_F(QueryTest, BoxesAndSpheresMatchBruteForceAtEveryLevel) {
     EXPECT_GT(nonempty, 40u);
     EXPECT_GT(straddling, 20u);
   }
+}
+
+// Selection by region (index/particle_lookup.h): the IDs of every particle
+// of the leaves in the region, each once; a cap stops reading with the first
+// max_ids of them, and a stop request ends it early.
+TEST_F(QueryTest, ParticleIdsInRegionAreTheLeavesParticlesUpToTheCap) {
+  const Dataset dataset = Dataset::Open(stores->bounded);
+  const Everything all = ReadEverything(dataset);
+  const std::array<double, 3> lo{10, 20, 5}, hi{70, 60, 80};
+  const auto box = MakeBoxRegion(lo, hi, dataset.cube(0));
+  std::vector<std::uint64_t> expected;
+  for (const PointRow& row : BruteForce(all, [&](NodeKey key) { return all.IsLeaf(key.value()); },
+                                        [&](const double* p) { return InBox(p, lo, hi, false); })) {
+    expected.push_back(std::get<3>(row));
+  }
+  std::sort(expected.begin(), expected.end());
+  ASSERT_GT(expected.size(), 1000u);
+
+  ParticleIdCollection found = ParticleIdsInRegion(dataset, 0, *box);
+  EXPECT_FALSE(found.truncated);
+  EXPECT_FALSE(found.stopped);
+  std::sort(found.ids.begin(), found.ids.end());
+  EXPECT_EQ(found.ids, expected);
+  EXPECT_EQ(ParticleIdsInBox(dataset, 0, lo, hi).size(), expected.size());
+
+  const std::size_t cap = expected.size() / 2;
+  ParticleIdCollection capped = ParticleIdsInRegion(dataset, 0, *box, cap);
+  EXPECT_TRUE(capped.truncated);
+  ASSERT_EQ(capped.ids.size(), cap);
+  std::sort(capped.ids.begin(), capped.ids.end());
+  EXPECT_TRUE(std::includes(expected.begin(), expected.end(), capped.ids.begin(), capped.ids.end()));
+  EXPECT_FALSE(ParticleIdsInRegion(dataset, 0, *box, expected.size()).truncated) << "exactly the cap is not more";
+
+  std::stop_source stop;
+  stop.request_stop();
+  const ParticleIdCollection stopped = ParticleIdsInRegion(dataset, 0, *box, SIZE_MAX, stop.get_token());
+  EXPECT_TRUE(stopped.stopped);
+  EXPECT_LT(stopped.ids.size(), expected.size()) << "one block at most";
 }
 
 TEST_F(QueryTest, PeriodicBoxAcrossTheFaceSelectsTheOtherSide) {
