@@ -15,6 +15,7 @@
 #include "index/particle_lookup.h"
 #include "index/query.h"
 #include "storage/error.h"
+#include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
 #include "tools/query_output.h"
@@ -22,73 +23,19 @@
 namespace octocosm {
 namespace {
 
-std::array<double, 3> Triple(const std::string& text, const std::string& flag) {
-  const std::vector<double> v = ParseNumberList(text, flag);
-  if (v.size() != 3) throw Error::InvalidArgument(flag + " '" + text + "': expected 3 numbers x,y,z");
-  return {v[0], v[1], v[2]};
-}
-
 struct QueryFlags {
   std::string store;
   std::uint32_t epoch = 0;
   std::string box, sphere, planes;
   bool frustum = false;
-  std::string camera = "", look_at = "", up = "0,1,0", view_matrix;
-  double fov = 60, aspect = 0, near = 0, far = 0;
+  CameraFlags camera;
+  double aspect = 0;
   std::optional<int> level;
   std::optional<double> error;
   double width = 1920, height = 1080;
   std::string columns, format = "csv", output;
   bool quiet = false;
 };
-
-bool HasCamera(const QueryFlags& f) { return !f.camera.empty() || !f.view_matrix.empty(); }
-
-Camera CameraFrom(const QueryFlags& f, const Cube& cube) {
-  const double aspect = f.aspect > 0 ? f.aspect : f.width / f.height;
-  // Defaults scaled to the data: near a millionth of the cube, far beyond its far side.
-  const double near = f.near > 0 ? f.near : cube.size * 1e-6;
-  if (!f.view_matrix.empty()) {
-    if (!f.camera.empty() || !f.look_at.empty()) {
-      throw Error::InvalidArgument("--view-matrix replaces --camera and --look-at; give one or the other");
-    }
-    const std::vector<double> m = ParseNumberList(f.view_matrix, "--view-matrix");
-    if (m.size() != 16) throw Error::InvalidArgument("--view-matrix: expected 16 numbers (column-major 4x4)");
-    std::array<double, 16> view;
-    std::copy(m.begin(), m.end(), view.begin());
-    Camera probe = Camera::FromViewMatrix(view, f.fov, aspect, near, near * 2);
-    double far = f.far;
-    if (far <= 0) {
-      const double dx = probe.position[0] - (cube.origin[0] + cube.size / 2), dy = probe.position[1] - (cube.origin[1] + cube.size / 2),
-                   dz = probe.position[2] - (cube.origin[2] + cube.size / 2);
-      far = std::sqrt(dx * dx + dy * dy + dz * dz) + cube.size;
-    }
-    return Camera::FromViewMatrix(view, f.fov, aspect, near, far);
-  }
-  if (f.camera.empty()) throw Error::InvalidArgument("--camera x,y,z (or --view-matrix) is required here");
-  Camera camera;
-  camera.position = Triple(f.camera, "--camera");
-  camera.look_at = f.look_at.empty()
-                       ? std::array<double, 3>{cube.origin[0] + cube.size / 2, cube.origin[1] + cube.size / 2,
-                                               cube.origin[2] + cube.size / 2}
-                       : Triple(f.look_at, "--look-at");
-  camera.up = Triple(f.up, "--up");
-  camera.fov_y_degrees = f.fov;
-  camera.aspect = aspect;
-  camera.near = near;
-  if (f.far > 0) {
-    camera.far = f.far;
-  } else {
-    double d2 = 0;
-    for (int a = 0; a < 3; ++a) {
-      const double d = camera.position[a] - (cube.origin[a] + cube.size / 2);
-      d2 += d * d;
-    }
-    camera.far = std::sqrt(d2) + cube.size;
-  }
-  camera.Validate();
-  return camera;
-}
 
 std::unique_ptr<Region> RegionFrom(const QueryFlags& f, const Cube& cube, const std::optional<Camera>& camera) {
   const int given = !f.box.empty() + !f.sphere.empty() + f.frustum + !f.planes.empty();
@@ -127,17 +74,7 @@ void RunQueryCommand(const QueryFlags& f) {
   if (f.level.has_value() == f.error.has_value()) throw Error::InvalidArgument("give exactly one of --level and --error");
   if (!(f.width > 0) || !(f.height > 0)) throw Error::InvalidArgument("--width and --height must be > 0");
   std::optional<Camera> camera;
-  if (HasCamera(f)) {
-    try {
-      camera = CameraFrom(f, cube);
-    } catch (const Error& e) {
-      if (e.kind() != ErrorKind::kInvalidArgument) throw;
-      std::string what = e.what();
-      const std::string prefix = "invalid argument: ";
-      if (what.rfind(prefix, 0) == 0) what.erase(0, prefix.size());
-      throw Error::InvalidArgument("camera flags (--camera, --look-at, --up, --view-matrix, --fov, --aspect, --near, --far): " + what);
-    }
-  }
+  if (f.camera.given()) camera = CameraFromFlags(f.camera, cube, f.aspect > 0 ? f.aspect : f.width / f.height);
   QueryOptions options;
   options.epoch = f.epoch;
   options.columns = ParseColumnList(f.columns);
@@ -266,14 +203,8 @@ void AddQueryCommand(CLI::App& app) {
   cmd->add_option("--sphere", f->sphere, "sphere x,y,z,r (periodic in a periodic store)");
   cmd->add_flag("--frustum", f->frustum, "the camera's view frustum (camera flags below)");
   cmd->add_option("--planes", f->planes, "frustum as 6 planes a,b,c,d (24 numbers; inside when ax+by+cz+d >= 0)");
-  cmd->add_option("--camera", f->camera, "camera position x,y,z");
-  cmd->add_option("--look-at", f->look_at, "point the camera looks at (default: the cube's centre)");
-  cmd->add_option("--up", f->up, "camera up direction")->default_val("0,1,0");
-  cmd->add_option("--view-matrix", f->view_matrix, "OpenGL view matrix, 16 numbers column-major (instead of --camera/--look-at/--up)");
-  cmd->add_option("--fov", f->fov, "vertical field of view, degrees")->default_val(60);
+  AddCameraFlags(*cmd, f->camera);
   cmd->add_option("--aspect", f->aspect, "aspect ratio (default: width / height)");
-  cmd->add_option("--near", f->near, "near distance (default: cube size * 1e-6)");
-  cmd->add_option("--far", f->far, "far distance (default: beyond the far side of the cube)");
   cmd->add_option("--level", f->level, "level of detail: the nodes at this level plus shallower leaves");
   cmd->add_option("--error", f->error, "level of detail: screen-space error threshold in pixels (needs a camera)");
   cmd->add_option("--width", f->width, "viewport width in pixels")->default_val(1920);
