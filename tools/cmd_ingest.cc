@@ -10,16 +10,15 @@
 #include "tools/commands.h"
 #include "tools/ingest/ingest.h"
 #include "tools/progress.h"
+#include "tools/read_flags.h"
 
 namespace octocosm {
 
 void AddIngestCommand(CLI::App& app) {
   struct Flags {
     IngestOptions options;
-    std::string memory, page_size = "64K", cube, format = "auto", raw_layout, types;
-    double box_size = -1;
-    bool no_velocity = false, no_ids = false;
-    std::size_t chunk_particles = std::size_t{1} << 16;
+    ReadFlags read;
+    std::string memory, page_size = "64K", cube;
   };
   auto flags = std::make_shared<Flags>();
   IngestOptions& o = flags->options;
@@ -43,27 +42,16 @@ void AddIngestCommand(CLI::App& app) {
   cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);
   cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M")->default_val("64K");
   cmd->add_option("--cube", flags->cube, "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube)");
-  cmd->add_option("--box-size", flags->box_size, "periodic box size, overriding the header's (0 = not periodic)");
-  cmd->add_option("--types", flags->types, "particle types to read, e.g. '1,2' (default: all)");
-  cmd->add_option("--format", flags->format, "input format")->check(CLI::IsMember({"auto", "gadget", "hdf5", "raw", "csv"}))->default_val("auto");
-  cmd->add_option("--raw-layout", flags->raw_layout, "record layout of raw binary input, e.g. 'xyz:f32,vel:f32x3,id:u64'");
-  cmd->add_option("--chunk-particles", flags->chunk_particles, "particles read per batch (small batches stay in CPU caches)")->default_val(std::size_t{1} << 16);
-  cmd->add_flag("--no-velocity", flags->no_velocity, "do not store velocities");
-  cmd->add_flag("--no-ids", flags->no_ids, "do not store particle IDs (no ID index, no displacements)");
+  AddReadFlags(*cmd, flags->read);
+  // What ingest does with what it does not read.
+  cmd->get_option("--no-velocity")->description("do not store velocities");
+  cmd->get_option("--no-ids")->description("do not store particle IDs (no ID index, no displacements)");
   cmd->add_flag("-q,--quiet", o.quiet, "no progress output");
   cmd->callback([flags] {
     IngestOptions& options = flags->options;
     if (!flags->memory.empty()) options.memory_budget = ParseByteSize(flags->memory, "--memory");
     options.page_size = static_cast<std::uint32_t>(ParseByteSize(flags->page_size, "--page-size"));
-    options.read.format = flags->format;
-    options.read.read_velocity = !flags->no_velocity;
-    options.read.read_id = !flags->no_ids;
-    options.read.chunk_particles = flags->chunk_particles;
-    options.read.box_size_override = flags->box_size;
-    if (!flags->raw_layout.empty()) options.read.raw = RawLayout::Parse(flags->raw_layout);
-    if (!flags->types.empty()) {
-      for (double t : ParseNumberList(flags->types, "--types")) options.read.types.push_back(static_cast<int>(t));
-    }
+    options.read = ReadOptionsFrom(flags->read);
     if (!flags->cube.empty()) {
       const auto v = ParseNumberList(flags->cube, "--cube");
       if (v.size() != 4) throw Error::InvalidArgument("--cube '" + flags->cube + "': expected x,y,z,size");
