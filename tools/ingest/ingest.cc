@@ -143,14 +143,7 @@ bool InsideBox(const ParticleChunk& chunk, const Cube& cube) {
 }
 
 void WrapIntoBox(ParticleChunk& chunk, const Cube& cube) {
-  for (std::size_t i = 0; i < chunk.position.size(); ++i) {
-    const int a = static_cast<int>(i % 3);
-    double t = (chunk.position[i] - cube.origin[a]) / cube.size;
-    t -= std::floor(t);
-    double x = cube.origin[a] + t * cube.size;
-    if (x >= cube.origin[a] + cube.size) x = cube.origin[a];  // t rounded up to 1
-    chunk.position[i] = x;
-  }
+  for (std::size_t i = 0; i + 3 <= chunk.position.size(); i += 3) cube.Wrap(&chunk.position[i]);
 }
 
 // Wall time of consecutive phases.
