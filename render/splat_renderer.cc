@@ -72,6 +72,29 @@ SplatRenderer::SplatRenderer() {
   CheckGlError("setting up the splat renderer");
 }
 
+void SplatRenderer::Allocate(RenderTarget& target, GLenum format, int width, int height, const char* what) {
+  if (target.width == width && target.height == height) return;
+  target = RenderTarget();
+  GLuint texture = 0;
+  glCreateTextures(GL_TEXTURE_2D, 1, &texture);
+  target.texture = GlTexture(texture);
+  glTextureStorage2D(texture, 1, format, width, height);
+  // texelFetch needs a complete texture: no mipmaps, so no mipmap filter.
+  glTextureParameteri(texture, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(texture, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  GLuint fbo = 0;
+  glCreateFramebuffers(1, &fbo);
+  target.framebuffer = GlFramebuffer(fbo);
+  glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, texture, 0);
+  if (glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
+    throw Error::NotSupported("OpenGL", std::string(what) + " of " + std::to_string(width) + "x" +
+                                            std::to_string(height) + " is not supported as a framebuffer");
+  }
+  CheckGlError(std::string("allocating ") + what);
+  target.width = width;
+  target.height = height;
+}
+
 void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& settings) {
   if (view.max_blob_radius() > max_blob_radius_) {
     throw Error::InvalidArgument("a blob radius of " + std::to_string(view.max_blob_radius()) +
@@ -83,28 +106,7 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   if (!(settings.t >= 0 && settings.t <= 1)) throw Error::InvalidArgument("interpolation time must be in [0, 1]");
   margin_ = GuardMargin(view.max_blob_radius());
   const int tw = view.width() + 2 * margin_, th = view.height() + 2 * margin_;
-  if (tw != texture_width_ || th != texture_height_) {
-    accumulation_fbo_.Reset();
-    accumulation_.Reset();
-    GLuint texture = 0;
-    glCreateTextures(GL_TEXTURE_2D, 1, &texture);
-    accumulation_ = GlTexture(texture);
-    glTextureStorage2D(texture, 1, GL_RGBA32F, tw, th);
-    // texelFetch needs a complete texture: no mipmaps, so no mipmap filter.
-    glTextureParameteri(texture, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTextureParameteri(texture, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    GLuint fbo = 0;
-    glCreateFramebuffers(1, &fbo);
-    accumulation_fbo_ = GlFramebuffer(fbo);
-    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, texture, 0);
-    if (glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE) {
-      throw Error::NotSupported("OpenGL", "an RGBA32F framebuffer of " + std::to_string(tw) + "x" + std::to_string(th) +
-                                              " is not supported");
-    }
-    CheckGlError("allocating the accumulation buffer");
-    texture_width_ = tw;
-    texture_height_ = th;
-  }
+  Allocate(accumulation_, GL_RGBA32F, tw, th, "the accumulation buffer");
   in_frame_ = true;
   width_ = view.width();
   height_ = view.height();
@@ -135,10 +137,10 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   SetSelection(nullptr);
   SetCopy(1, 1);
 
-  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_fbo_.get());
-  glViewport(0, 0, texture_width_, texture_height_);
+  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_.framebuffer.get());
+  glViewport(0, 0, accumulation_.width, accumulation_.height);
   const float zero[4] = {0, 0, 0, 0};
-  glClearNamedFramebufferfv(accumulation_fbo_.get(), GL_COLOR, 0, zero);
+  glClearNamedFramebufferfv(accumulation_.framebuffer.get(), GL_COLOR, 0, zero);
 }
 
 void SplatRenderer::UploadFrameUniforms() {
@@ -172,8 +174,8 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
   if (!draw_state_set_) {
     // Once per frame: state changes between draws make drivers (llvmpipe
     // among them) flush the work queued so far.
-    glBindFramebuffer(GL_FRAMEBUFFER, accumulation_fbo_.get());
-    glViewport(0, 0, texture_width_, texture_height_);
+    glBindFramebuffer(GL_FRAMEBUFFER, accumulation_.framebuffer.get());
+    glViewport(0, 0, accumulation_.width, accumulation_.height);
     glEnable(GL_BLEND);
     glBlendEquation(GL_FUNC_ADD);
     glBlendFunc(GL_ONE, GL_ONE);
@@ -200,7 +202,7 @@ ImageStatistics SplatRenderer::Measure() {
   words[1] = 0xFFFFFFFFu;  // the ordered minimum starts at the largest value
   glNamedBufferSubData(statistics_buffer_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
   glUseProgram(statistics_.get());
-  glBindTextureUnit(0, accumulation_.get());
+  glBindTextureUnit(0, accumulation_.texture.get());
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, statistics_buffer_.get());
   glProgramUniform2i(statistics_.get(), Location(statistics_, "u_offset"), margin_, margin_);
   glProgramUniform2i(statistics_.get(), Location(statistics_, "u_size"), width_, height_);
@@ -245,28 +247,14 @@ void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
   glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
   glUseProgram(program);
   glBindVertexArray(empty_vao_.get());
-  glBindTextureUnit(0, accumulation_.get());
+  glBindTextureUnit(0, accumulation_.texture.get());
   glDrawArrays(GL_TRIANGLES, 0, 3);
   CheckGlError("tone mapping");
 }
 
 void SplatRenderer::ToneMapToImage(const ToneMapParameters& parameters) {
-  if (display_width_ != width_ || display_height_ != height_) {
-    display_fbo_.Reset();
-    display_.Reset();
-    GLuint texture = 0;
-    glCreateTextures(GL_TEXTURE_2D, 1, &texture);
-    display_ = GlTexture(texture);
-    glTextureStorage2D(texture, 1, GL_RGBA8, width_, height_);
-    GLuint fbo = 0;
-    glCreateFramebuffers(1, &fbo);
-    display_fbo_ = GlFramebuffer(fbo);
-    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, texture, 0);
-    CheckGlError("allocating the display image");
-    display_width_ = width_;
-    display_height_ = height_;
-  }
-  glBindFramebuffer(GL_FRAMEBUFFER, display_fbo_.get());
+  Allocate(display_, GL_RGBA8, width_, height_, "the display image");
+  glBindFramebuffer(GL_FRAMEBUFFER, display_.framebuffer.get());
   glViewport(0, 0, width_, height_);
   ToneMap(parameters, 0, 0);
 }
@@ -280,7 +268,7 @@ HdrImage SplatRenderer::ReadHdr() {
   HdrImage image{width_, height_, {}};
   std::vector<float> texels(4 * static_cast<std::size_t>(width_) * height_);
   glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_UPDATE_BARRIER_BIT);
-  glGetTextureSubImage(accumulation_.get(), 0, margin_, margin_, 0, width_, height_, 1, GL_RGBA, GL_FLOAT,
+  glGetTextureSubImage(accumulation_.texture.get(), 0, margin_, margin_, 0, width_, height_, 1, GL_RGBA, GL_FLOAT,
                        static_cast<GLsizei>(texels.size() * sizeof(float)), texels.data());
   CheckGlError("reading the accumulation buffer");
   image.rgba.resize(texels.size());
@@ -291,7 +279,7 @@ HdrImage SplatRenderer::ReadHdr() {
 RgbImage SplatRenderer::ReadDisplay() {
   RgbImage image{width_, height_, {}};
   std::vector<std::uint8_t> rgba(4 * static_cast<std::size_t>(width_) * height_);
-  glGetTextureSubImage(display_.get(), 0, 0, 0, 0, width_, height_, 1, GL_RGBA, GL_UNSIGNED_BYTE,
+  glGetTextureSubImage(display_.texture.get(), 0, 0, 0, 0, width_, height_, 1, GL_RGBA, GL_UNSIGNED_BYTE,
                        static_cast<GLsizei>(rgba.size()), rgba.data());
   CheckGlError("reading the display image");
   image.rgb.resize(3 * static_cast<std::size_t>(width_) * height_);

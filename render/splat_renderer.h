@@ -83,12 +83,16 @@ class SplatRenderer {
   GlBuffer frame_uniforms_;
   GlBuffer statistics_buffer_;
   GlBuffer no_selection_;
-  GlTexture accumulation_;
-  GlFramebuffer accumulation_fbo_;
-  GlTexture display_;
-  GlFramebuffer display_fbo_;
-  int texture_width_ = 0, texture_height_ = 0;
-  int display_width_ = 0, display_height_ = 0;
+  // A texture and the framebuffer that draws into it.
+  struct RenderTarget {
+    GlTexture texture;
+    GlFramebuffer framebuffer;
+    int width = 0, height = 0;
+  };
+  // (Re)allocates `target` as `format` at width x height unless it already is.
+  static void Allocate(RenderTarget& target, GLenum format, int width, int height, const char* what);
+  RenderTarget accumulation_;  // RGBA32F: the image and a guard margin around it
+  RenderTarget display_;       // RGBA8: the tone-mapped image
   int margin_ = 0;
   double max_blob_radius_ = 0;
 
