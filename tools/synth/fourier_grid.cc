@@ -7,7 +7,7 @@
 #include <string>
 
 #include "storage/error.h"
-#include "tools/synth/parallel_for.h"
+#include "tools/parallel_for.h"
 
 namespace octocosm::synth {
 namespace {

@@ -4,7 +4,7 @@
 
 #include "storage/error.h"
 #include "tools/synth/cloud_in_cell.h"
-#include "tools/synth/parallel_for.h"
+#include "tools/parallel_for.h"
 
 namespace octocosm::synth {
 

@@ -4,7 +4,7 @@
 #include <string>
 
 #include "storage/error.h"
-#include "tools/synth/parallel_for.h"
+#include "tools/parallel_for.h"
 #include "tools/synth/zeldovich.h"
 
 namespace octocosm::synth {

@@ -13,7 +13,7 @@
 #include "storage/error.h"
 #include "tools/synth/cosmic_web.h"
 #include "tools/synth/gadget_writer.h"
-#include "tools/synth/parallel_for.h"
+#include "tools/parallel_for.h"
 #include "tools/synth/scale_sampler.h"
 
 namespace octocosm::synth {

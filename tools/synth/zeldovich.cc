@@ -5,7 +5,7 @@
 
 #include "storage/error.h"
 #include "tools/synth/fourier_grid.h"
-#include "tools/synth/parallel_for.h"
+#include "tools/parallel_for.h"
 #include "tools/synth/random.h"
 
 namespace octocosm::synth {

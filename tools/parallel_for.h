@@ -8,7 +8,7 @@
 #include <cstddef>
 #include <functional>
 
-namespace octocosm::synth {
+namespace octocosm {
 
 // min_items_per_thread keeps light loops on fewer threads, where starting a
 // thread would cost more than it saves.
@@ -18,4 +18,4 @@ void ParallelFor(std::size_t count, int threads, const std::function<void(std::s
 // The thread count to use for `requested` (0 means all hardware threads).
 int ResolveThreadCount(int requested);
 
-}  // namespace octocosm::synth
+}  // namespace octocosm

@@ -1,11 +1,11 @@
-#include "tools/synth/parallel_for.h"
+#include "tools/parallel_for.h"
 
 #include <algorithm>
 #include <exception>
 #include <thread>
 #include <vector>
 
-namespace octocosm::synth {
+namespace octocosm {
 
 int ResolveThreadCount(int requested) {
   if (requested > 0) return requested;
@@ -41,4 +41,4 @@ void ParallelFor(std::size_t count, int threads, const std::function<void(std::s
   }
 }
 
-}  // namespace octocosm::synth
+}  // namespace octocosm
