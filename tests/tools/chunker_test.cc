@@ -35,11 +35,11 @@ ParticleChunk Points(std::size_t n) {
   return points;
 }
 
-// Feeds `points` in batches of 1000, as a snapshot reader would.
-PointPass PassOver(const ParticleChunk& points) {
-  return [&points](const std::function<void(const ParticleChunk&)>& consume) {
-    for (std::size_t begin = 0; begin < points.size(); begin += 1000) {
-      const std::size_t end = std::min(points.size(), begin + 1000);
+// Feeds `points` in batches, as a snapshot reader would.
+PointPass PassOver(const ParticleChunk& points, std::size_t batch_points) {
+  return [&points, batch_points](const std::function<void(const ParticleChunk&)>& consume) {
+    for (std::size_t begin = 0; begin < points.size(); begin += batch_points) {
+      const std::size_t end = std::min(points.size(), begin + batch_points);
       ParticleChunk batch;
       batch.position.assign(points.position.begin() + 3 * begin, points.position.begin() + 3 * end);
       batch.mass.assign(points.mass.begin() + begin, points.mass.begin() + end);
@@ -51,22 +51,30 @@ PointPass PassOver(const ParticleChunk& points) {
 }
 
 struct Split {
-  std::map<std::uint64_t, std::uint64_t> counts;  // chunk key -> points
+  std::map<std::uint64_t, std::uint64_t> counts;          // chunk key -> points
+  std::map<std::uint64_t, std::vector<std::uint64_t>> ids;  // chunk key -> its points' IDs, in chunk order
   std::uint64_t spilled = 0;
+};
+
+struct SplitSettings {
+  std::size_t memory_bytes = std::size_t{1} << 30;
+  int threads = 1;
+  std::size_t batch_points = 1000;
 };
 
 // Splits `points` with `memory_bytes` of buffers, takes every chunk's points
 // back and checks each one against the input: in its chunk's cell, with its
 // own mass and type, and seen once.
-Split SplitAndCheck(const ParticleChunk& points, std::size_t memory_bytes, const fs::path& temp) {
+Split SplitAndCheck(const ParticleChunk& points, const SplitSettings& settings, const fs::path& temp) {
   ChunkerOptions options;
   options.max_chunk_points = 3000;
   options.split_levels = 2;
-  options.memory_bytes = memory_bytes;
+  options.memory_bytes = settings.memory_bytes;
+  options.threads = settings.threads;
   options.temp_dir = temp.string();
   options.columns.id = true;
   Chunker chunker(kCube, options);
-  std::vector<Chunk> chunks = chunker.Split(NodeKey::Root(), PassOver(points));
+  std::vector<Chunk> chunks = chunker.Split(NodeKey::Root(), PassOver(points, settings.batch_points));
   Split split;
   split.spilled = chunker.spilled_points();
   std::vector<int> seen(points.size(), 0);
@@ -74,9 +82,12 @@ Split SplitAndCheck(const ParticleChunk& points, std::size_t memory_bytes, const
     const bool on_disk = !chunk.path.empty();
     const std::string path = chunk.path;
     const ParticleChunk taken = chunk.TakePoints();
-    if (on_disk) EXPECT_FALSE(fs::exists(path)) << "a taken chunk's file is removed";
+    if (on_disk) {
+      EXPECT_FALSE(fs::exists(path)) << "a taken chunk's file is removed";
+    }
     EXPECT_EQ(taken.size(), chunk.point_count);
     EXPECT_TRUE(split.counts.emplace(chunk.key.value(), chunk.point_count).second) << "one chunk per key";
+    split.ids[chunk.key.value()] = taken.id;
     for (std::size_t i = 0; i < taken.size(); ++i) {
       const std::uint64_t id = taken.id[i];
       EXPECT_TRUE(id >= 1 && id <= points.size());
@@ -104,8 +115,8 @@ TEST(Chunker, SpillingChangesNothingButWhereThePointsWait) {
   const fs::path in_memory = dir.path() / "in-memory", spilling = dir.path() / "spilling";
   fs::create_directories(in_memory);
   fs::create_directories(spilling);
-  const Split held = SplitAndCheck(points, std::size_t{1} << 30, in_memory);
-  const Split spilled = SplitAndCheck(points, 16 << 10, spilling);
+  const Split held = SplitAndCheck(points, {.memory_bytes = std::size_t{1} << 30}, in_memory);
+  const Split spilled = SplitAndCheck(points, {.memory_bytes = 16 << 10}, spilling);
   EXPECT_EQ(held.spilled, 0u);
   EXPECT_GT(spilled.spilled, points.size() / 2) << "a 16 KiB budget must spill most points";
   EXPECT_EQ(held.counts, spilled.counts);
@@ -117,6 +128,29 @@ TEST(Chunker, SpillingChangesNothingButWhereThePointsWait) {
   EXPECT_GT(deepest, 2u) << "the clump's chunk must have been split again";
   EXPECT_TRUE(fs::is_empty(in_memory));
   EXPECT_TRUE(fs::is_empty(spilling)) << "no chunk file left once every chunk was taken";
+}
+
+// Points are placed, gathered and spilled on several threads, each gathering
+// the points of its own cells: the chunks hold the same points in the same
+// order (which the tree builder does not need, but a reader of the chunks
+// might) for any thread count, in memory or spilling. Batches are large
+// enough here for the work to be shared out.
+TEST(Chunker, ThreadsChangeNothing) {
+  testing_support::TempDir dir("chunker-threads-test");
+  const ParticleChunk points = Points(100000);
+  for (const std::size_t memory : {std::size_t{1} << 30, std::size_t{64} << 10}) {
+    SCOPED_TRACE("memory " + std::to_string(memory));
+    const fs::path one = dir.path() / ("one-" + std::to_string(memory));
+    const fs::path three = dir.path() / ("three-" + std::to_string(memory));
+    fs::create_directories(one);
+    fs::create_directories(three);
+    const Split single = SplitAndCheck(points, {.memory_bytes = memory, .threads = 1, .batch_points = 40000}, one);
+    const Split shared = SplitAndCheck(points, {.memory_bytes = memory, .threads = 3, .batch_points = 40000}, three);
+    EXPECT_EQ(single.spilled, shared.spilled);
+    EXPECT_EQ(single.ids, shared.ids);
+    EXPECT_TRUE(fs::is_empty(one));
+    EXPECT_TRUE(fs::is_empty(three));
+  }
 }
 
 }  // namespace

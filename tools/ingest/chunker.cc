@@ -8,9 +8,14 @@
 #include <unordered_map>
 
 #include "storage/error.h"
+#include "tools/parallel_for.h"
 
 namespace octocosm {
 namespace {
+
+// Fewer points per batch than this are placed on one thread: starting another
+// would cost more than it saves.
+constexpr std::size_t kPointsPerThread = 16384;
 
 // Appends the elements `indices` of `from` to `to`, `width` values per point.
 // The target is sized once and written through a pointer: a per-point
@@ -102,63 +107,114 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
   const int level = root.level() + levels;
   const std::uint64_t first = root.DescendantRange(level).first;
   const std::size_t cells = std::size_t{1} << (3 * levels);
+  const int threads = std::max(options_.threads, 1);
   std::vector<Chunk> chunks(cells);
   std::vector<std::optional<ParticleFileWriter>> writers(cells);  // opened on a chunk's first spill
   std::vector<std::vector<std::uint32_t>> picks(cells);
+  std::vector<std::uint32_t> cell_of;  // of each point of the batch
+  std::vector<std::uint64_t> batch_count(cells);
   const std::size_t bytes_per_point = options_.columns.BytesPerPoint();
   const std::size_t max_buffered = std::max<std::size_t>(options_.memory_bytes / bytes_per_point, 1);
   std::size_t buffered_points = 0;
 
-  auto spill = [&](std::size_t c) {
-    Chunk& chunk = chunks[c];
-    if (chunk.points.size() == 0) return;
-    if (chunk.path.empty()) {
-      chunk.path = NewChunkPath();
-      writers[c].emplace(chunk.path, options_.columns);
+  // Appends the buffers of chunks `spilling` to their files, on all threads
+  // (each file is written by one), and gives their memory back.
+  auto spill = [&](const std::vector<std::size_t>& spilling) {
+    for (std::size_t c : spilling) {
+      if (chunks[c].path.empty()) {
+        chunks[c].path = NewChunkPath();
+        writers[c].emplace(chunks[c].path, options_.columns);
+      }
+      spilled_points_ += chunks[c].points.size();
+      buffered_points -= chunks[c].points.size();
     }
-    writers[c]->Append(chunk.points);
-    spilled_points_ += chunk.points.size();
-    buffered_points -= chunk.points.size();
-    chunk.points = ParticleChunk();  // give the memory back
+    // Largest first, dealt round-robin: the threads write about as much.
+    const std::size_t parts = static_cast<std::size_t>(threads);
+    ParallelFor(parts, threads, [&](std::size_t part_begin, std::size_t part_end) {
+      for (std::size_t part = part_begin; part < part_end; ++part) {
+        for (std::size_t k = part; k < spilling.size(); k += parts) {
+          Chunk& chunk = chunks[spilling[k]];
+          writers[spilling[k]]->Append(chunk.points);
+          chunk.points = ParticleChunk();  // give the memory back
+        }
+      }
+    }, 1);
   };
 
   pass([&](const ParticleChunk& batch) {
-    if (batch.size() > UINT32_MAX) throw Error::InvalidArgument("chunker: batch too large");
-    for (std::uint32_t i = 0; i < batch.size(); ++i) {
-      const NodeKey cell = cube_.LeafKey(&batch.position[3 * i], level);
-      const std::uint64_t c = cell.value() - first;
-      if (cell.value() < first || c >= cells) {
-        throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
+    const std::size_t n = batch.size();
+    if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: batch too large");
+    cell_of.resize(n);
+    ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const NodeKey cell = cube_.LeafKey(&batch.position[3 * i], level);
+        const std::uint64_t c = cell.value() - first;
+        if (cell.value() < first || c >= cells) {
+          throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
+        }
+        cell_of[i] = static_cast<std::uint32_t>(c);
       }
-      picks[c].push_back(i);
-    }
+    }, kPointsPerThread);
+    // The cells go to the threads in contiguous groups of about equal point
+    // counts; each thread gathers the points of its own cells, in input order,
+    // so the chunks come out the same for any thread count.
+    std::fill(batch_count.begin(), batch_count.end(), 0);
+    for (std::uint32_t c : cell_of) ++batch_count[c];
+    std::vector<std::size_t> group_begin = {0};
+    std::uint64_t counted = 0;
     for (std::size_t c = 0; c < cells; ++c) {
-      if (picks[c].empty()) continue;
-      AppendPoints(batch, picks[c], chunks[c].points);
-      chunks[c].point_count += picks[c].size();
-      buffered_points += picks[c].size();
-      picks[c].clear();
+      counted += batch_count[c];
+      const std::size_t group = group_begin.size();
+      if (group < static_cast<std::size_t>(threads) && counted * threads >= n * group) group_begin.push_back(c + 1);
     }
+    while (group_begin.size() <= static_cast<std::size_t>(threads)) group_begin.push_back(cells);
+    ParallelFor(static_cast<std::size_t>(threads), n >= kPointsPerThread ? threads : 1,
+                [&](std::size_t group_first, std::size_t group_last) {
+                  const std::size_t cell_begin = group_begin[group_first], cell_end = group_begin[group_last];
+                  if (cell_begin == cell_end) return;
+                  for (std::size_t c = cell_begin; c < cell_end; ++c) picks[c].reserve(batch_count[c]);
+                  for (std::uint32_t i = 0; i < n; ++i) {
+                    const std::uint32_t c = cell_of[i];
+                    if (c >= cell_begin && c < cell_end) picks[c].push_back(i);
+                  }
+                  for (std::size_t c = cell_begin; c < cell_end; ++c) {
+                    if (picks[c].empty()) continue;
+                    AppendPoints(batch, picks[c], chunks[c].points);
+                    chunks[c].point_count += picks[c].size();
+                    picks[c].clear();
+                  }
+                },
+                1);
+    buffered_points += n;
     if (buffered_points > max_buffered) {
       // Spill the fullest buffers first: the most memory back per write call.
       std::vector<std::size_t> order(cells);
       std::iota(order.begin(), order.end(), 0);
       std::sort(order.begin(), order.end(),
                 [&](std::size_t a, std::size_t b) { return chunks[a].points.size() > chunks[b].points.size(); });
+      std::vector<std::size_t> spilling;
+      std::size_t left = buffered_points;
       for (std::size_t c : order) {
-        if (buffered_points <= max_buffered / 2) break;
-        spill(c);
+        if (left <= max_buffered / 2 || chunks[c].points.size() == 0) break;
+        left -= chunks[c].points.size();
+        spilling.push_back(c);
       }
+      spill(spilling);
     }
   });
 
+  // A chunk that spilled once goes wholly to its file.
+  std::vector<std::size_t> spilled;
+  for (std::size_t c = 0; c < cells; ++c) {
+    if (!chunks[c].path.empty() && chunks[c].points.size() > 0) spilled.push_back(c);
+  }
+  std::sort(spilled.begin(), spilled.end(),
+            [&](std::size_t a, std::size_t b) { return chunks[a].points.size() > chunks[b].points.size(); });
+  spill(spilled);
   std::vector<Chunk> result;
   for (std::size_t c = 0; c < cells; ++c) {
     if (chunks[c].point_count == 0) continue;
-    if (!chunks[c].path.empty()) {
-      spill(c);  // a chunk that spilled once goes wholly to its file
-      writers[c]->Close();
-    }
+    if (writers[c]) writers[c]->Close();
     chunks[c].key = NodeKey::FromValue(first + c);
     result.push_back(std::move(chunks[c]));
   }

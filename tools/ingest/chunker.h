@@ -54,6 +54,7 @@ struct ChunkerOptions {
   std::uint64_t leaf_capacity = 0;       // the tree's node capacity; 0 = chunks are never merged
   std::size_t memory_bytes = 256u << 20;  // buffers of all chunks together
   std::string temp_dir;                  // spilled chunk files are created here
+  int threads = 1;                       // threads placing, gathering and spilling points
   ParticleColumns columns;               // the optional columns the points carry
 };
 

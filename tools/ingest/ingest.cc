@@ -420,6 +420,7 @@ IngestReport Ingest(const IngestOptions& options) {
     // temporary files that stay in the OS page cache (docs/BENCHMARKS.md).
     chunker_options.memory_bytes = static_cast<std::size_t>(std::min<std::uint64_t>(budget * 3 / 10, kMaxChunkBufferBytes));
     chunker_options.temp_dir = temp.path();
+    chunker_options.threads = static_cast<int>(threads);
     chunker_options.columns.id = has_id;
     chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity;
     chunker_options.columns.vector(VectorColumn::kDisplacement) = next_sorted != nullptr;
