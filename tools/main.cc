@@ -8,6 +8,7 @@
 
 #include "storage/error.h"
 #include "tools/commands.h"
+#include "tools/huge_pages.h"
 
 namespace {
 
@@ -27,6 +28,7 @@ int ExitStatusFor(octocosm::ErrorKind kind) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  octocosm::ReexecuteIngestWithHugePages(argc, argv);
   CLI::App app{"octocosm: an out-of-core level-of-detail octree store for N-body snapshots"};
   app.footer(
       "Exit status: 0 success, 1 other failure, 2 bad arguments, 3 corrupt store, 4 malformed input,\n"

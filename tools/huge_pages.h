@@ -1,0 +1,30 @@
+// Transparent huge pages for the ingest's heap, through glibc's malloc.
+//
+// Ingest touches gigabytes of fresh memory (chunk buffers, node points,
+// encoded blocks). With 4 KiB pages every first touch is a page fault: about
+// 400,000 of them for 10^7 points, a fifth of the run's wall time on this
+// project's machines (docs/BENCHMARKS.md). glibc's tunable
+// `glibc.malloc.hugetlb=1` makes malloc advise the kernel to back its memory
+// with 2 MiB transparent huge pages (where THP is set to "madvise", the
+// common default), but glibc reads tunables only from the environment at
+// program start. So the `ingest` subcommand re-executes the program once with
+// the tunable added. A GLIBC_TUNABLES that already sets glibc.malloc.hugetlb
+// (to 0, say) is left as it is.
+#pragma once
+
+#include <optional>
+#include <string>
+
+namespace octocosm {
+
+// The GLIBC_TUNABLES value to run with: `current` (null when unset) plus
+// glibc.malloc.hugetlb=1, or nullopt when `current` already sets it.
+std::optional<std::string> TunablesWithHugePages(const char* current);
+
+// For `octocosm ingest ...`: re-executes /proc/self/exe with the tunable set
+// when it is not. Returns (doing nothing) for other subcommands, when the
+// tunable is already set, or when the re-execution fails (the program then
+// runs on with 4 KiB pages; only the speed differs).
+void ReexecuteIngestWithHugePages(int argc, char** argv);
+
+}  // namespace octocosm
