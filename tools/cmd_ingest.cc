@@ -27,7 +27,8 @@ void AddIngestCommand(CLI::App& app) {
       "Build a level-of-detail store from snapshots, out of core. Give one snapshot per epoch, in time order;\n"
       "a multi-file snapshot is named by its base name (snap_005 for snap_005.0, snap_005.1, ...) or any of\n"
       "its files. Formats: GADGET 1 and 2 (either endianness), HDF5 (GADGET-4, AREPO, SWIFT), raw binary\n"
-      "(--format raw --raw-layout), CSV (docs/INPUT_FORMATS.md).");
+      "(--format raw --raw-layout), CSV (docs/INPUT_FORMATS.md). Runs with glibc's huge-page malloc\n"
+      "(GLIBC_TUNABLES=glibc.malloc.hugetlb=1) unless GLIBC_TUNABLES already sets it (docs/INGEST.md).");
   cmd->add_option("inputs", o.inputs, "snapshots, one per epoch")->required();
   cmd->add_option("-o,--output", o.output, "store directory to create (must not hold a store)")->required();
   cmd->add_option("-n,--capacity", o.tree.capacity, "most points per node")->default_val(16000)->check(CLI::Range(1, 100000000));
