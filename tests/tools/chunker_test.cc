@@ -153,5 +153,56 @@ TEST(Chunker, ThreadsChangeNothing) {
   }
 }
 
+// A point set held in memory whole is cut into the same chunks as a stream
+// of batches, each listing (as indices into the set, which comes back
+// reordered chunk by chunk) the same points in the same order, whether the chunks under a leaf-sized node are merged or not and
+// for any thread count; nothing touches the disk.
+TEST(Chunker, ResidentSplitCutsTheSameChunks) {
+  testing_support::TempDir dir("chunker-resident-test");
+  const ParticleChunk points = Points(60000);
+  for (const std::uint64_t leaf_capacity : {std::uint64_t{0}, std::uint64_t{700}}) {
+    for (const int threads : {1, 3}) {
+      SCOPED_TRACE("leaf capacity " + std::to_string(leaf_capacity) + ", threads " + std::to_string(threads));
+      ChunkerOptions options;
+      options.max_chunk_points = 3000;
+      options.split_levels = 2;
+      options.leaf_capacity = leaf_capacity;
+      options.memory_bytes = std::size_t{1} << 30;
+      options.threads = threads;
+      options.temp_dir = dir.path().string();
+      options.columns.id = true;
+      Chunker streaming(kCube, options);
+      std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
+      Chunker in_place(kCube, options);
+      ParticleChunk resident;
+      const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, resident);
+      ASSERT_EQ(resident.size(), points.size()) << "an expected count too small only costs reallocations";
+      ASSERT_EQ(chunks.size(), streamed.size());
+      std::uint32_t next = 0;
+      for (std::size_t c = 0; c < chunks.size(); ++c) {
+        for (std::uint32_t i : chunks[c].resident) EXPECT_EQ(i, next++) << "chunk after chunk, each one contiguous";
+        EXPECT_EQ(chunks[c].key, streamed[c].key);
+        EXPECT_EQ(chunks[c].point_count, streamed[c].point_count);
+        EXPECT_TRUE(chunks[c].path.empty());
+        EXPECT_EQ(chunks[c].points.size(), 0u);
+        ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
+        std::vector<std::uint64_t> ids;
+        for (std::uint32_t i : chunks[c].resident) ids.push_back(resident.id[i]);
+        const ParticleChunk taken = streamed[c].TakePoints();
+        EXPECT_EQ(ids, taken.id) << chunks[c].key.Path();
+        for (std::size_t k = 0; k < ids.size() && k < taken.size(); ++k) {
+          const std::uint32_t i = chunks[c].resident[k];
+          EXPECT_EQ(resident.mass[i], taken.mass[k]);
+          EXPECT_EQ(resident.type[i], taken.type[k]);
+          for (int a = 0; a < 3; ++a) EXPECT_EQ(resident.position[3 * i + a], taken.position[3 * k + a]);
+        }
+      }
+      EXPECT_EQ(next, points.size());
+      EXPECT_EQ(in_place.spilled_points(), 0u);
+      EXPECT_TRUE(fs::is_empty(dir.path()));
+    }
+  }
+}
+
 }  // namespace
 }  // namespace octocosm

@@ -117,12 +117,21 @@ TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
   chunked.output = (dir_ / "chunked").string();
   chunked.max_chunk_points = 2000;
   chunked.threads = 2;
-  Ingest(whole);
+  IngestOptions streamed = chunked;
+  streamed.output = (dir_ / "streamed").string();
+  streamed.stream_chunks = true;
+  EXPECT_TRUE(Ingest(whole).epochs[0].resident);
   const IngestReport report = Ingest(chunked);
   EXPECT_GT(report.epochs[0].chunks, 10u);
+  EXPECT_TRUE(report.epochs[0].resident);
+  const IngestReport streamed_report = Ingest(streamed);
+  EXPECT_FALSE(streamed_report.epochs[0].resident);
+  EXPECT_EQ(streamed_report.epochs[0].chunks, report.epochs[0].chunks);
   const TreeCheck a = CheckTree(Dataset::Open(whole.output), 0);
   const TreeCheck b = CheckTree(Dataset::Open(chunked.output), 0);
+  const TreeCheck c = CheckTree(Dataset::Open(streamed.output), 0);
   EXPECT_EQ(FirstDifference(a, b), "") << "the same data must give the same blocks whatever the memory budget";
+  EXPECT_EQ(FirstDifference(a, c), "") << "chunks held in place or streamed through buffers give the same blocks";
 }
 
 // Chunks are cells of a fixed level; where the data are sparse, a node above

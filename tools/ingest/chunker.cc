@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <numeric>
 #include <optional>
+#include <span>
 #include <unordered_map>
 
 #include "storage/error.h"
@@ -53,10 +55,70 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
   }
 }
 
-void AppendAll(const ParticleChunk& from, ParticleChunk& to) {
-  std::vector<std::uint32_t> everything(from.size());
-  std::iota(everything.begin(), everything.end(), 0u);
-  AppendPoints(from, everything, to);
+// The points of `points` (every one, or when `subset` is not empty the ones
+// it lists) sorted into the `cells` cells of `level` that begin at key value
+// `first`: computes each point's cell on all threads, then calls
+// take(c, picks) for every cell c with points, on the one thread that gathers
+// that cell. `picks` lists the cell's points in input order, as positions in
+// `points`; take may move it away. Cells go to the threads in contiguous
+// groups of about equal point counts, so the result is the same for any
+// thread count.
+template <typename Take>
+void BucketByCell(const Cube& cube, const ParticleChunk& points, std::span<const std::uint32_t> subset, NodeKey root,
+                  int level, int threads, Take&& take) {
+  const std::size_t n = subset.empty() ? points.size() : subset.size();
+  if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: more than 2^32 - 1 points in one pass");
+  const std::uint64_t first = root.DescendantRange(level).first;
+  const std::size_t cells = std::size_t{1} << (3 * (level - root.level()));
+  const auto point = [&](std::size_t i) { return subset.empty() ? static_cast<std::uint32_t>(i) : subset[i]; };
+  std::vector<std::uint32_t> cell_of(n);
+  ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const NodeKey cell = cube.LeafKey(&points.position[3 * std::size_t{point(i)}], level);
+      const std::uint64_t c = cell.value() - first;
+      if (cell.value() < first || c >= cells) {
+        throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
+      }
+      cell_of[i] = static_cast<std::uint32_t>(c);
+    }
+  }, kPointsPerThread);
+  std::vector<std::uint64_t> count(cells, 0);
+  for (std::uint32_t c : cell_of) ++count[c];
+  std::vector<std::size_t> group_begin = {0};
+  std::uint64_t counted = 0;
+  for (std::size_t c = 0; c < cells; ++c) {
+    counted += count[c];
+    const std::size_t group = group_begin.size();
+    if (group < static_cast<std::size_t>(threads) && counted * threads >= n * group) group_begin.push_back(c + 1);
+  }
+  while (group_begin.size() <= static_cast<std::size_t>(threads)) group_begin.push_back(cells);
+  ParallelFor(static_cast<std::size_t>(threads), n >= kPointsPerThread ? threads : 1,
+              [&](std::size_t group_first, std::size_t group_last) {
+                const std::size_t cell_begin = group_begin[group_first], cell_end = group_begin[group_last];
+                if (cell_begin == cell_end) return;
+                std::vector<std::vector<std::uint32_t>> picks(cell_end - cell_begin);
+                for (std::size_t c = cell_begin; c < cell_end; ++c) picks[c - cell_begin].reserve(count[c]);
+                for (std::size_t i = 0; i < n; ++i) {
+                  const std::uint32_t c = cell_of[i];
+                  if (c >= cell_begin && c < cell_end) picks[c - cell_begin].push_back(point(i));
+                }
+                for (std::size_t c = cell_begin; c < cell_end; ++c) {
+                  if (!picks[c - cell_begin].empty()) take(c, picks[c - cell_begin]);
+                }
+              },
+              1);
+}
+
+// Appends every point of `from` to `to` (the columns `from` carries).
+void AppendWhole(const ParticleChunk& from, ParticleChunk& to) {
+  const auto append = [](const auto& source, auto& target) { target.insert(target.end(), source.begin(), source.end()); };
+  append(from.position, to.position);
+  append(from.mass, to.mass);
+  append(from.type, to.type);
+  append(from.id, to.id);
+  const auto source = VectorColumns(from);
+  const auto target = VectorColumns(to);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) append(*source[v], *target[v]);
 }
 
 }  // namespace
@@ -72,7 +134,7 @@ ParticleChunk Chunk::TakePoints() {
   std::remove(path.c_str());
   path.clear();
   if (all.size() == 0) return from_file;
-  AppendAll(all, from_file);
+  AppendWhole(all, from_file);
   return from_file;
 }
 
@@ -110,9 +172,6 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
   const int threads = std::max(options_.threads, 1);
   std::vector<Chunk> chunks(cells);
   std::vector<std::optional<ParticleFileWriter>> writers(cells);  // opened on a chunk's first spill
-  std::vector<std::vector<std::uint32_t>> picks(cells);
-  std::vector<std::uint32_t> cell_of;  // of each point of the batch
-  std::vector<std::uint64_t> batch_count(cells);
   const std::size_t bytes_per_point = options_.columns.BytesPerPoint();
   const std::size_t max_buffered = std::max<std::size_t>(options_.memory_bytes / bytes_per_point, 1);
   std::size_t buffered_points = 0;
@@ -142,50 +201,11 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
   };
 
   pass([&](const ParticleChunk& batch) {
-    const std::size_t n = batch.size();
-    if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: batch too large");
-    cell_of.resize(n);
-    ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t i = begin; i < end; ++i) {
-        const NodeKey cell = cube_.LeafKey(&batch.position[3 * i], level);
-        const std::uint64_t c = cell.value() - first;
-        if (cell.value() < first || c >= cells) {
-          throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
-        }
-        cell_of[i] = static_cast<std::uint32_t>(c);
-      }
-    }, kPointsPerThread);
-    // The cells go to the threads in contiguous groups of about equal point
-    // counts; each thread gathers the points of its own cells, in input order,
-    // so the chunks come out the same for any thread count.
-    std::fill(batch_count.begin(), batch_count.end(), 0);
-    for (std::uint32_t c : cell_of) ++batch_count[c];
-    std::vector<std::size_t> group_begin = {0};
-    std::uint64_t counted = 0;
-    for (std::size_t c = 0; c < cells; ++c) {
-      counted += batch_count[c];
-      const std::size_t group = group_begin.size();
-      if (group < static_cast<std::size_t>(threads) && counted * threads >= n * group) group_begin.push_back(c + 1);
-    }
-    while (group_begin.size() <= static_cast<std::size_t>(threads)) group_begin.push_back(cells);
-    ParallelFor(static_cast<std::size_t>(threads), n >= kPointsPerThread ? threads : 1,
-                [&](std::size_t group_first, std::size_t group_last) {
-                  const std::size_t cell_begin = group_begin[group_first], cell_end = group_begin[group_last];
-                  if (cell_begin == cell_end) return;
-                  for (std::size_t c = cell_begin; c < cell_end; ++c) picks[c].reserve(batch_count[c]);
-                  for (std::uint32_t i = 0; i < n; ++i) {
-                    const std::uint32_t c = cell_of[i];
-                    if (c >= cell_begin && c < cell_end) picks[c].push_back(i);
-                  }
-                  for (std::size_t c = cell_begin; c < cell_end; ++c) {
-                    if (picks[c].empty()) continue;
-                    AppendPoints(batch, picks[c], chunks[c].points);
-                    chunks[c].point_count += picks[c].size();
-                    picks[c].clear();
-                  }
-                },
-                1);
-    buffered_points += n;
+    BucketByCell(cube_, batch, {}, root, level, threads, [&](std::size_t c, std::vector<std::uint32_t>& picks) {
+      AppendPoints(batch, picks, chunks[c].points);
+      chunks[c].point_count += picks.size();
+    });
+    buffered_points += batch.size();
     if (buffered_points > max_buffered) {
       // Spill the fullest buffers first: the most memory back per write call.
       std::vector<std::size_t> order(cells);
@@ -217,6 +237,99 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
     if (writers[c]) writers[c]->Close();
     chunks[c].key = NodeKey::FromValue(first + c);
     result.push_back(std::move(chunks[c]));
+  }
+  return result;
+}
+
+int Chunker::ResplitLevels(std::uint64_t points) const {
+  return std::clamp(SplitLevelsFor(points, options_.max_chunk_points / 2), 1, 3);
+}
+
+bool Chunker::Oversized(const Chunk& chunk) const {
+  return chunk.point_count > options_.max_chunk_points && chunk.key.level() < options_.max_level;
+}
+
+std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
+                                          ParticleChunk& resident) {
+  resident.clear();
+  const auto reserve = [expected_points](auto& column, std::size_t width) { column.reserve(width * expected_points); };
+  reserve(resident.position, 3);
+  reserve(resident.mass, 1);
+  reserve(resident.type, 1);
+  if (options_.columns.id) reserve(resident.id, 1);
+  const auto vectors = VectorColumns(resident);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+    if (options_.columns.vectors[v]) reserve(*vectors[v], 3);
+  }
+  pass([&](const ParticleChunk& batch) { AppendWhole(batch, resident); });
+  if (resident.size() > UINT32_MAX) {
+    throw Error::InvalidArgument("chunker: " + std::to_string(resident.size()) +
+                                 " points are more than one resident split takes (2^32 - 1)");
+  }
+  std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, {});
+  if (options_.leaf_capacity != 0) chunks = MergeLeafSubtrees(root, std::move(chunks));
+  ArrangeByChunk(chunks, resident);
+  return chunks;
+}
+
+void Chunker::ArrangeByChunk(std::vector<Chunk>& chunks, ParticleChunk& resident) const {
+  // Where each point goes: chunk after chunk, each in its own order.
+  const std::size_t n = resident.size();
+  std::vector<std::uint32_t> target(n);
+  std::uint32_t next = 0;
+  for (Chunk& chunk : chunks) {
+    const std::uint32_t first = next;
+    for (const std::uint32_t i : chunk.resident) target[i] = next++;
+    std::iota(chunk.resident.begin(), chunk.resident.end(), first);
+  }
+  const int threads = std::max(options_.threads, 1);
+  // Column by column through one scratch buffer, so that memory holds one
+  // column twice at most and the scratch's pages, once touched, serve every
+  // column (fresh pages cost a fault and zeroing each). Reading in input
+  // order and writing to each chunk's range in turn keeps both sides of the
+  // copy close to sequential.
+  std::unique_ptr<std::byte[]> scratch(new std::byte[3 * sizeof(double) * n]);
+  const auto arrange = [&](auto& column, std::size_t width) {
+    if (column.empty()) return;
+    using Value = typename std::remove_reference_t<decltype(column)>::value_type;
+    Value* arranged = reinterpret_cast<Value*>(scratch.get());
+    ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        for (std::size_t a = 0; a < width; ++a) arranged[width * target[i] + a] = column[width * i + a];
+      }
+    }, kPointsPerThread);
+    std::copy(arranged, arranged + column.size(), column.begin());
+  };
+  arrange(resident.position, 3);
+  arrange(resident.mass, 1);
+  arrange(resident.type, 1);
+  arrange(resident.id, 1);
+  for (std::vector<float>* column : VectorColumns(resident)) arrange(*column, 3);
+}
+
+std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,
+                                            std::span<const std::uint32_t> subset) {
+  levels = std::max(std::min(levels, options_.max_level - root.level()), 0);
+  const int level = root.level() + levels;
+  const std::uint64_t first = root.DescendantRange(level).first;
+  std::vector<Chunk> chunks(std::size_t{1} << (3 * levels));
+  BucketByCell(cube_, resident, subset, root, level, std::max(options_.threads, 1),
+               [&](std::size_t c, std::vector<std::uint32_t>& picks) {
+                 chunks[c].point_count = picks.size();
+                 chunks[c].resident = std::move(picks);
+               });
+  std::vector<Chunk> result;
+  for (std::size_t c = 0; c < chunks.size(); ++c) {
+    Chunk& chunk = chunks[c];
+    if (chunk.point_count == 0) continue;
+    chunk.key = NodeKey::FromValue(first + c);
+    if (!Oversized(chunk)) {
+      result.push_back(std::move(chunk));
+      continue;
+    }
+    for (Chunk& part : SplitResidentAt(chunk.key, ResplitLevels(chunk.point_count), resident, chunk.resident)) {
+      result.push_back(std::move(part));
+    }
   }
   return result;
 }
@@ -257,7 +370,11 @@ std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> c
     for (; i < chunks.size() && leaf.IsAncestorOrSelf(chunks[i].key); ++i) {
       spilled |= !chunks[i].path.empty();
       merged.point_count += chunks[i].point_count;
-      AppendAll(chunks[i].TakePoints(), merged.points);
+      if (!chunks[i].resident.empty()) {
+        merged.resident.insert(merged.resident.end(), chunks[i].resident.begin(), chunks[i].resident.end());
+      } else {
+        AppendWhole(chunks[i].TakePoints(), merged.points);
+      }
     }
     if (spilled) {  // back to a file: memory was short when its parts spilled
       merged.path = NewChunkPath();
@@ -275,7 +392,7 @@ std::vector<Chunk> Chunker::SplitAt(NodeKey root, int levels, const PointPass& p
   levels = std::min(levels, options_.max_level - root.level());
   std::vector<Chunk> result;
   for (Chunk& chunk : Distribute(root, std::max(levels, 0), pass)) {
-    if (chunk.point_count <= options_.max_chunk_points || chunk.key.level() >= options_.max_level) {
+    if (!Oversized(chunk)) {
       result.push_back(std::move(chunk));
       continue;
     }
@@ -286,8 +403,7 @@ std::vector<Chunk> Chunker::SplitAt(NodeKey root, int levels, const PointPass& p
       ParticleChunk batch;
       while (reader.Next(batch)) consume(batch);
     };
-    const int finer = std::clamp(SplitLevelsFor(chunk.point_count, options_.max_chunk_points / 2), 1, 3);
-    std::vector<Chunk> parts = SplitAt(chunk.key, finer, own_pass);
+    std::vector<Chunk> parts = SplitAt(chunk.key, ResplitLevels(chunk.point_count), own_pass);
     if (!chunk.path.empty()) std::remove(chunk.path.c_str());
     for (Chunk& part : parts) result.push_back(std::move(part));
   }

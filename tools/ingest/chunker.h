@@ -20,10 +20,17 @@
 // count and the memory budget). So when the points are distributed, the
 // chunks under each highest node holding at most `leaf_capacity` points are
 // merged into one chunk for that node.
+//
+// A point set that fits in memory as a whole is better not copied at all:
+// SplitResident reads it once into one ParticleChunk and cuts the same chunks
+// as lists of indices into it, which the tree builder reads in place
+// (BuildSubtree's subset form). That saves the gather into chunk buffers, the
+// buffers' growth and any spilling.
 #pragma once
 
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -42,8 +49,12 @@ struct Chunk {
   std::uint64_t point_count = 0;
   std::string path;       // its particle file, when it spilled to disk
   ParticleChunk points;   // its points, when they stayed in memory (path empty)
+  // Its points as indices into the resident point set, in input order, when
+  // it came from Chunker::SplitResident (then path and points are empty).
+  std::vector<std::uint32_t> resident;
 
-  // Moves the chunk's points out (reading and deleting its file if it has one).
+  // Moves the chunk's points out (reading and deleting its file if it has
+  // one); not for resident chunks, whose points stay where they are.
   ParticleChunk TakePoints();
 };
 
@@ -67,9 +78,28 @@ class Chunker {
   // point ends in exactly one chunk; chunks come in depth-first key order.
   std::vector<Chunk> Split(NodeKey root, const PointPass& pass);
 
+  // The same chunks for a point set that fits in memory as a whole: reads the
+  // pass once into `resident` (room reserved for `expected_points`; more or
+  // fewer are fine) and returns chunks that list their points as indices into
+  // it, in the same order as Split would hold them. `resident` comes back
+  // reordered chunk by chunk, so that each chunk's indices are one contiguous
+  // range (a builder then reads memory in order). Nothing goes through chunk
+  // buffers and nothing spills; memory_bytes is not consulted. At most
+  // 2^32 - 1 points.
+  std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
+                                   ParticleChunk& resident);
+
   std::uint64_t spilled_points() const { return spilled_points_; }
 
  private:
+  // Whether a chunk must be split again, and by how many levels.
+  bool Oversized(const Chunk& chunk) const;
+  int ResplitLevels(std::uint64_t points) const;
+  // Reorders the resident points chunk by chunk, each chunk's points
+  // contiguous and in its order, and renumbers the chunks' indices to match.
+  void ArrangeByChunk(std::vector<Chunk>& chunks, ParticleChunk& resident) const;
+  std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,
+                                     std::span<const std::uint32_t> subset);
   std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks);

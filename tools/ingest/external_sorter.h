@@ -36,6 +36,9 @@ class ExternalSorter {
     for (const std::string& path : run_paths_) std::remove(path.c_str());
   }
 
+  // Makes room for `records` (at most one run) at once, instead of growing
+  // the run buffer step by step, copying it and touching new memory each time.
+  void Reserve(std::size_t records) { buffer_.reserve(std::min(records, run_records_)); }
   void Add(const Record& record) { Add(std::span<const Record>(&record, 1)); }
   void Add(std::span<const Record> records) {
     if (finished_) throw Error::InvalidArgument("ExternalSorter: Add after Finish");

@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <future>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -214,7 +215,8 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
 // their roots handed to the merger in that order (a root that completes early
 // waits for its predecessors), so memory holds a few chunk roots plus the
 // merger's open ancestors, never every chunk's sample. Returns the root.
-NodePoints BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned threads) {
+// Resident chunks (Chunker::SplitResident) are read in place from `resident`.
+NodePoints BuildChunks(std::vector<Chunk> chunks, const ParticleChunk& resident, EpochBuild& build, unsigned threads) {
   Bytes merger_block;  // the merger runs under merge_mutex: one buffer serves it
   TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
     build.Emit(key, points, /*is_leaf=*/false, merger_block);
@@ -230,11 +232,16 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, EpochBuild& build, unsigned th
     try {
       Bytes block;  // this worker's encoding buffer
       for (std::size_t c = next++; c < chunks.size() && !failed; c = next++) {
-        ParticleChunk points = chunks[c].TakePoints();
-        const std::uint64_t count = points.size();
+        const std::uint64_t count = chunks[c].point_count;
         std::unordered_set<std::uint64_t> has_children;
-        NodePoints root = BuildSubtree(points, chunks[c].key, *build.cube, *build.tree, LeafAwareSink(build, has_children, block));
-        points = ParticleChunk();
+        const NodeSink sink = LeafAwareSink(build, has_children, block);
+        NodePoints root;
+        if (!chunks[c].resident.empty()) {
+          root = BuildSubtree(resident, chunks[c].resident, chunks[c].key, *build.cube, *build.tree, sink);
+          chunks[c].resident = {};
+        } else {
+          root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink);
+        }
         {
           std::lock_guard lock(merge_mutex);
           ready.emplace(c, std::move(root));
@@ -427,6 +434,13 @@ IngestReport Ingest(const IngestOptions& options) {
     chunker_options.columns.vector(VectorColumn::kNextVelocity) = next_sorted != nullptr && has_velocity;
     chunker_options.columns.vector(VectorColumn::kPrevDisplacement) = !links_from_previous.empty();
     chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !links_from_previous.empty() && has_velocity;
+    // A point set that fits in its share of the budget whole (the chunk
+    // buffers' share, and the sorted epochs' too when there are none) is read
+    // into memory once and chunked in place (Chunker::SplitResident).
+    const std::uint64_t resident_share = budget * (join_epochs ? 3 : 6) / 10;
+    const bool resident = !options.stream_chunks && expected < UINT32_MAX &&
+                          expected * (chunker_options.columns.BytesPerPoint() + sizeof(std::uint32_t)) <= resident_share;
+    ParticleChunk resident_points;
     std::vector<Chunk> chunks;
     {
       Progress progress(label + ": read + chunk", expected, "points");
@@ -437,8 +451,10 @@ IngestReport Ingest(const IngestOptions& options) {
         });
       };
       Chunker chunker(cube, chunker_options);
-      chunks = chunker.Split(NodeKey::Root(), counted);
+      chunks = resident ? chunker.SplitResident(NodeKey::Root(), counted, expected, resident_points)
+                        : chunker.Split(NodeKey::Root(), counted);
       epoch_report.spilled_points = chunker.spilled_points();
+      epoch_report.resident = resident;
     }
     clock.Lap("read+chunk");
     for (const Chunk& c : chunks) epoch_report.points += c.point_count;
@@ -460,7 +476,10 @@ IngestReport Ingest(const IngestOptions& options) {
     // 3. build, 4. top levels.
     store.BeginEpoch(header.time, header.redshift);
     std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
-    if (has_id) id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp.path() + "/ids-" + std::to_string(e), id_run_records);
+    if (has_id) {
+      id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp.path() + "/ids-" + std::to_string(e), id_run_records);
+      id_pairs->Reserve(static_cast<std::size_t>(epoch_report.points));
+    }
     EpochBuild build;
     build.cube = &cube;
     build.tree = &options.tree;
@@ -470,13 +489,15 @@ IngestReport Ingest(const IngestOptions& options) {
     {
       Progress progress(label + ": build", epoch_report.points, "points");
       build.progress = &progress;
-      const NodePoints root = BuildChunks(std::move(chunks), build, threads);
+      const NodePoints root = BuildChunks(std::move(chunks), resident_points, build, threads);
+      resident_points = ParticleChunk();
       for (double w : root.weight) epoch_report.mass += w;
       progress.Finish();
     }
     clock.Lap("build");
-    store.EndEpoch();
-    clock.Lap("write");
+    // Finishing the epoch's page file is mostly waiting for the disk (fsync):
+    // the ID index is built meanwhile. The store and the ID store share no state.
+    std::future<void> epoch_written = std::async(std::launch::async, [&store] { store.EndEpoch(); });
 
     // 5. ID index.
     if (has_id) {
@@ -490,6 +511,8 @@ IngestReport Ingest(const IngestOptions& options) {
       id_store->EndEpoch();
       clock.Lap("ids");
     }
+    epoch_written.get();
+    clock.Lap("write");
 
     nlohmann::json epoch_json = {{"epoch", e},
                                  {"input", HeaderJson(header)},

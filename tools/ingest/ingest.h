@@ -9,7 +9,9 @@
 //      bounds  (otherwise) one pass for the bounding box, unless the box is
 //              periodic or the cube is given
 //   2. chunk   count on a coarse grid, merge cells into chunks that fit in
-//              memory, distribute the points into chunk files (tools/ingest/chunker.h)
+//              memory, distribute the points into chunk files (tools/ingest/chunker.h);
+//              an epoch that fits in its share of the budget whole is read into
+//              memory once instead and chunked in place
 //   3. build   each chunk's subtree in memory (index/subtree_builder.h), chunks
 //              in parallel; blocks are encoded (index/block_codec.h) and added
 //              to the store as they complete
@@ -46,6 +48,7 @@ struct IngestOptions {
   std::uint32_t page_size = 65536;
   std::uint64_t max_chunk_points = 0;  // 0 = derived from the memory budget; tests set it to force chunking
   std::uint64_t sort_run_points = 0;   // 0 = derived from the memory budget; tests set it to force merge sorts
+  bool stream_chunks = false;          // chunk through buffers and files even when the epoch fits in memory whole (tests)
   bool quiet = false;               // no progress output
 };
 
@@ -55,6 +58,7 @@ struct EpochReport {
   std::uint64_t leaves = 0;
   std::uint64_t chunks = 0;
   std::uint64_t spilled_points = 0;  // points that went through temporary chunk files
+  bool resident = false;             // held in memory whole and chunked in place (Chunker::SplitResident)
   struct Phase {
     std::string name;
     double seconds = 0;      // wall time
