@@ -18,6 +18,8 @@ namespace {
 // Appends are gathered into writes of this size: large enough that a page
 // file of small blocks costs few system calls, small enough not to matter.
 constexpr std::size_t kWriteBufferBytes = 1 << 20;
+// Shorter runs of zeros are written: a hole smaller than a file-system block saves nothing.
+constexpr std::size_t kMinHoleBytes = 4096;
 
 // Linux caps one read/write at just under 2 GiB; stay well below.
 constexpr std::size_t kMaxIoBytes = std::size_t{1} << 30;
@@ -98,6 +100,7 @@ void WritableFile::WriteFully(std::uint64_t offset, const std::uint8_t* data, st
     }
     done += static_cast<std::size_t>(wrote);
   }
+  written_end_ = std::max(written_end_, offset + size);
 }
 
 void WritableFile::Flush() {
@@ -120,12 +123,26 @@ void WritableFile::Append(std::span<const std::uint8_t> bytes) {
 }
 
 void WritableFile::AppendZeros(std::uint64_t count) {
-  static const std::vector<std::uint8_t> zeros(64 * 1024, 0);
-  while (count > 0) {
-    std::size_t now = static_cast<std::size_t>(std::min<std::uint64_t>(count, zeros.size()));
-    Append(std::span<const std::uint8_t>(zeros.data(), now));
-    count -= now;
+  if (count < kMinHoleBytes) {
+    static const std::vector<std::uint8_t> zeros(kMinHoleBytes, 0);
+    Append(std::span<const std::uint8_t>(zeros.data(), static_cast<std::size_t>(count)));
+    return;
   }
+  // Skipped, not written: the gap becomes a hole, which reads as zeros but
+  // costs no copy into the page cache and no disk blocks (the padding of
+  // blocks to whole pages is about a fifth of a store). Sync and Close set
+  // the length when the file ends in one.
+  Flush();
+  flushed_ += count;
+  size_ += count;
+}
+
+void WritableFile::ExtendOverTrailingHole() {
+  if (written_end_ >= size_) return;
+  if (::ftruncate(fd_.get(), static_cast<off_t>(size_)) != 0) {
+    throw IoErrorFromErrno(path_, "ftruncate to " + std::to_string(size_) + " bytes", errno);
+  }
+  written_end_ = size_;
 }
 
 void WritableFile::WriteAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) {
@@ -137,11 +154,13 @@ void WritableFile::WriteAt(std::uint64_t offset, std::span<const std::uint8_t> b
 
 void WritableFile::Sync() {
   Flush();
+  ExtendOverTrailingHole();
   if (::fsync(fd_.get()) != 0) throw IoErrorFromErrno(path_, "fsync", errno);
 }
 
 void WritableFile::Close() {
   Flush();
+  ExtendOverTrailingHole();
   int fd = fd_.Release();
   if (fd >= 0 && ::close(fd) != 0) throw IoErrorFromErrno(path_, "close", errno);
 }

@@ -83,6 +83,8 @@ class WritableFile {
   ~WritableFile() = default;
 
   void Append(std::span<const std::uint8_t> bytes);
+  // Appends `count` zero bytes; runs of 4 KiB or more become a hole (a
+  // sparse file where the file system has them), which reads back the same.
   void AppendZeros(std::uint64_t count);
   // Writes at an absolute offset (after flushing what was appended).
   void WriteAt(std::uint64_t offset, std::span<const std::uint8_t> bytes);
@@ -99,12 +101,14 @@ class WritableFile {
   WritableFile(std::string path, UniqueFd fd) : path_(std::move(path)), fd_(std::move(fd)) {}
   void Flush();
   void WriteFully(std::uint64_t offset, const std::uint8_t* data, std::size_t size);
+  void ExtendOverTrailingHole();
 
   std::string path_;
   UniqueFd fd_;
   std::vector<std::uint8_t> buffer_;
   std::uint64_t flushed_ = 0;  // file offset where buffer_ starts
   std::uint64_t size_ = 0;
+  std::uint64_t written_end_ = 0;  // end of the furthest write; below size_ when the file ends in a hole
 };
 
 // rename(2): atomically replaces `to` on the same file system.

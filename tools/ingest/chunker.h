@@ -88,6 +88,10 @@ class Chunker {
   // 2^32 - 1 points.
   std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                    ParticleChunk& resident);
+  // The scratch memory SplitResident takes per point on top of the resident
+  // points while it runs: each point's cell, its index in its chunk's list,
+  // and a buffer for reordering the widest column (three doubles).
+  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 3 * sizeof(double);
 
   std::uint64_t spilled_points() const { return spilled_points_; }
 

@@ -436,10 +436,12 @@ IngestReport Ingest(const IngestOptions& options) {
     chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !links_from_previous.empty() && has_velocity;
     // A point set that fits in its share of the budget whole (the chunk
     // buffers' share, and the sorted epochs' too when there are none) is read
-    // into memory once and chunked in place (Chunker::SplitResident).
+    // into memory once and chunked in place (Chunker::SplitResident). The
+    // split's scratch is gone before the builds and the ID pairs take theirs.
     const std::uint64_t resident_share = budget * (join_epochs ? 3 : 6) / 10;
     const bool resident = !options.stream_chunks && expected < UINT32_MAX &&
-                          expected * (chunker_options.columns.BytesPerPoint() + sizeof(std::uint32_t)) <= resident_share;
+                          expected * chunker_options.columns.BytesPerPoint() <= resident_share &&
+                          expected * Chunker::kResidentScratchBytesPerPoint <= budget * 4 / 10;
     ParticleChunk resident_points;
     std::vector<Chunk> chunks;
     {

@@ -1,0 +1,67 @@
+// WritableFile: what is appended, zeros included, is what the file holds.
+// Long runs of zeros become holes rather than written bytes; they must still
+// read back as zeros, in the middle of the file and at its end, and a
+// positioned write into a hole must land.
+#include "storage/file.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <vector>
+
+#include "tests/support/temp_dir.h"
+
+namespace octocosm {
+namespace {
+
+std::vector<std::uint8_t> Bytes(const std::string& text) { return {text.begin(), text.end()}; }
+
+std::vector<std::uint8_t> ReadAll(const std::string& path) { return testing_support::ReadFileBytes(path); }
+
+TEST(WritableFile, ZerosReadBackAsZerosWhetherWrittenOrLeftAsHoles) {
+  testing_support::TempDir dir("file-test");
+  const std::string path = (dir.path() / "holes").string();
+  std::vector<std::uint8_t> expected;
+  auto append = [&](WritableFile& file, const std::string& text) {
+    file.Append(Bytes(text));
+    expected.insert(expected.end(), text.begin(), text.end());
+  };
+  auto zeros = [&](WritableFile& file, std::size_t count) {
+    file.AppendZeros(count);
+    expected.insert(expected.end(), count, 0);
+  };
+  WritableFile file = WritableFile::Create(path);
+  zeros(file, 70000);  // a hole at the start, like a page file's header page
+  append(file, "first block");
+  zeros(file, 100);  // short: written
+  append(file, "second");
+  zeros(file, 65536 * 3 + 17);  // a hole mid-file
+  append(file, "third");
+  zeros(file, 200000);  // the file ends in a hole
+  EXPECT_EQ(file.size(), expected.size());
+  const std::vector<std::uint8_t> header = Bytes("HEADER");
+  file.WriteAt(10, header);
+  std::copy(header.begin(), header.end(), expected.begin() + 10);
+  file.Close();
+  EXPECT_EQ(ReadAll(path), expected);
+}
+
+TEST(WritableFile, SyncSetsTheLengthOfAFileEndingInAHole) {
+  testing_support::TempDir dir("file-test");
+  const std::string path = (dir.path() / "trailing").string();
+  WritableFile file = WritableFile::Create(path);
+  file.Append(Bytes("x"));
+  file.AppendZeros(1 << 20);
+  file.Sync();
+  EXPECT_EQ(ReadAll(path).size(), (1u << 20) + 1);
+  file.Append(Bytes("y"));
+  file.Close();
+  const std::vector<std::uint8_t> bytes = ReadAll(path);
+  ASSERT_EQ(bytes.size(), (1u << 20) + 2);
+  EXPECT_EQ(bytes.front(), 'x');
+  EXPECT_EQ(bytes.back(), 'y');
+  EXPECT_EQ(std::count(bytes.begin(), bytes.end(), 0), 1 << 20);
+}
+
+}  // namespace
+}  // namespace octocosm
