@@ -117,6 +117,22 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
                                  ", must be finite and > 0");
   }
   const long double k = static_cast<long double>(kWeightTotalUnits);
+  if (std::all_of(weight.begin(), weight.end(), [&](double w) { return w == weight.front(); })) {
+    // Equal weights (a leaf of equal-mass particles, the usual case) share one
+    // ideal, so one floor and one remainder: the leftover units go to the
+    // lowest indices, as the tie rule below would give them, without a
+    // division and a selection per point.
+    const long double ideal = std::min(k, weight.front() / total * k);
+    const auto whole = static_cast<std::uint64_t>(std::floor(ideal));
+    const std::int64_t deficit =
+        static_cast<std::int64_t>(kWeightTotalUnits) - static_cast<std::int64_t>(whole * n);
+    if (deficit >= 0 && static_cast<std::size_t>(deficit) < n) {
+      for (std::size_t i = 0; i < n; ++i) {
+        PutU32(out + 4 * i, static_cast<std::uint32_t>(whole + (i < static_cast<std::size_t>(deficit) ? 1 : 0)));
+      }
+      return static_cast<double>(total / k);
+    }
+  }
   std::vector<std::uint64_t> units(n);
   std::vector<long double> remainder(n);
   std::int64_t assigned = 0;

@@ -194,6 +194,42 @@ TEST(BlockCodec, WeightsSumExactlyInIntegerUnits) {
   }
 }
 
+// Equal weights take a shortcut in the encoder; the units must be what the
+// largest-remainder rule gives: K / n each, rounded down, and the leftover
+// units one each to the first points (equal remainders go to lower indices).
+// The same weights with one nudged by an ulp take the general path and must
+// agree on all other points.
+TEST(BlockCodec, EqualWeightsGiveTheLeftoverUnitsToTheFirstPoints) {
+  std::mt19937_64 rng(5);
+  const NodeKey key = NodeKey::FromPath("r7");
+  for (const std::size_t n : {std::size_t{1}, std::size_t{11}, std::size_t{3000}, std::size_t{16000}}) {
+    NodePoints points = RandomPoints(rng, n, key, kCube, 0);
+    std::fill(points.weight.begin(), points.weight.end(), 0.37);
+    auto units_of = [&](const NodePoints& p) {
+      const Bytes block = EncodeBlock(p, key, kCube);
+      const BlockColumn* column = DecodeBlockHeader(block, key, "w").Find(ColumnId::kWeight);
+      std::vector<std::uint32_t> units(p.size());
+      std::memcpy(units.data(), block.data() + column->offset, 4 * p.size());  // test host is little endian
+      return units;
+    };
+    const std::vector<std::uint32_t> units = units_of(points);
+    const std::uint64_t share = kWeightTotalUnits / n, leftover = kWeightTotalUnits % n;
+    std::uint64_t sum = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      EXPECT_EQ(units[i], share + (i < leftover ? 1 : 0)) << "n " << n << ", point " << i;
+      sum += units[i];
+    }
+    EXPECT_EQ(sum, kWeightTotalUnits);
+    if (n < 2) continue;
+    NodePoints nudged = points;
+    nudged.weight.back() = std::nextafter(nudged.weight.back(), 1.0);
+    const std::vector<std::uint32_t> general = units_of(nudged);
+    for (std::size_t i = 0; i + 1 < n; ++i) {
+      EXPECT_NEAR(static_cast<double>(general[i]), static_cast<double>(units[i]), 1.0) << "n " << n << ", point " << i;
+    }
+  }
+}
+
 TEST(BlockCodec, RangedDecodeEqualsFullDecode) {
   std::mt19937_64 rng(4);
   const NodeKey key = NodeKey::FromPath("r0123");
