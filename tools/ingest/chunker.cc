@@ -10,6 +10,7 @@
 #include <unordered_map>
 
 #include "storage/error.h"
+#include "tools/page_warmer.h"
 #include "tools/parallel_for.h"
 
 namespace octocosm {
@@ -261,7 +262,21 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     if (options_.columns.vectors[v]) reserve(*vectors[v], 3);
   }
-  pass([&](const ParticleChunk& batch) { AppendWhole(batch, resident); });
+  {
+    // The reader fills the columns on this thread; the kernel's zeroing of
+    // their fresh pages goes to another.
+    std::vector<PageWarmer::Range> fresh;
+    const auto add = [&](const auto& column) {
+      if (column.capacity() != 0) fresh.push_back({column.data(), column.capacity() * sizeof(column[0])});
+    };
+    add(resident.position);
+    add(resident.mass);
+    add(resident.type);
+    add(resident.id);
+    for (const std::vector<float>* column : VectorColumns(resident)) add(*column);
+    PageWarmer warmer(std::move(fresh));
+    pass([&](const ParticleChunk& batch) { AppendWhole(batch, resident); });
+  }
   if (resident.size() > UINT32_MAX) {
     throw Error::InvalidArgument("chunker: " + std::to_string(resident.size()) +
                                  " points are more than one resident split takes (2^32 - 1)");
