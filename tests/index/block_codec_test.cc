@@ -207,12 +207,18 @@ TEST(BlockCodec, EqualWeightsGiveTheLeftoverUnitsToTheFirstPoints) {
     std::fill(points.weight.begin(), points.weight.end(), 0.37);
     auto units_of = [&](const NodePoints& p) {
       const Bytes block = EncodeBlock(p, key, kCube);
-      const BlockColumn* column = DecodeBlockHeader(block, key, "w").Find(ColumnId::kWeight);
+      const BlockHeader header = DecodeBlockHeader(block, key, "w");
+      const BlockColumn* column = header.Find(ColumnId::kWeight);
+      if (column == nullptr) {
+        ADD_FAILURE() << "the block has no weight column";
+        return std::vector<std::uint32_t>();
+      }
       std::vector<std::uint32_t> units(p.size());
       std::memcpy(units.data(), block.data() + column->offset, 4 * p.size());  // test host is little endian
       return units;
     };
     const std::vector<std::uint32_t> units = units_of(points);
+    ASSERT_EQ(units.size(), n);
     const std::uint64_t share = kWeightTotalUnits / n, leftover = kWeightTotalUnits % n;
     std::uint64_t sum = 0;
     for (std::size_t i = 0; i < n; ++i) {
@@ -224,6 +230,7 @@ TEST(BlockCodec, EqualWeightsGiveTheLeftoverUnitsToTheFirstPoints) {
     NodePoints nudged = points;
     nudged.weight.back() = std::nextafter(nudged.weight.back(), 1.0);
     const std::vector<std::uint32_t> general = units_of(nudged);
+    ASSERT_EQ(general.size(), n);
     for (std::size_t i = 0; i + 1 < n; ++i) {
       EXPECT_NEAR(static_cast<double>(general[i]), static_cast<double>(units[i]), 1.0) << "n " << n << ", point " << i;
     }
