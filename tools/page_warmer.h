@@ -8,8 +8,9 @@
 // Warming never changes the contents of the memory: it asks the kernel to
 // populate pages for writing (MADV_POPULATE_WRITE, Linux 5.14), which leaves
 // a page already present alone. Where the kernel lacks it, warming does
-// nothing. The ranges must stay allocated until the warmer is destroyed or
-// Stop() returns.
+// nothing. A range freed while the warmer runs (a vector that outgrew its
+// reservation) comes to no harm either: populating leaves contents alone,
+// and an unmapped range ends the warming.
 #pragma once
 
 #include <cstddef>
