@@ -253,7 +253,13 @@ bool Chunker::Oversized(const Chunk& chunk) const {
 std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                           ParticleChunk& resident) {
   resident.clear();
-  const auto reserve = [expected_points](auto& column, std::size_t width) { column.reserve(width * expected_points); };
+  // Each column reserved whole; the reader fills them on this thread while a
+  // warmer faults their fresh pages in on another.
+  std::vector<PageWarmer::Range> fresh;
+  const auto reserve = [&](auto& column, std::size_t width) {
+    column.reserve(width * expected_points);
+    if (column.capacity() != 0) fresh.push_back({column.data(), column.capacity() * sizeof(column[0])});
+  };
   reserve(resident.position, 3);
   reserve(resident.mass, 1);
   reserve(resident.type, 1);
@@ -263,17 +269,6 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
     if (options_.columns.vectors[v]) reserve(*vectors[v], 3);
   }
   {
-    // The reader fills the columns on this thread; the kernel's zeroing of
-    // their fresh pages goes to another.
-    std::vector<PageWarmer::Range> fresh;
-    const auto add = [&](const auto& column) {
-      if (column.capacity() != 0) fresh.push_back({column.data(), column.capacity() * sizeof(column[0])});
-    };
-    add(resident.position);
-    add(resident.mass);
-    add(resident.type);
-    add(resident.id);
-    for (const std::vector<float>* column : VectorColumns(resident)) add(*column);
     PageWarmer warmer(std::move(fresh));
     pass([&](const ParticleChunk& batch) { AppendWhole(batch, resident); });
   }
