@@ -186,15 +186,26 @@ TEST(Chunker, ResidentSplitCutsTheSameChunks) {
         EXPECT_TRUE(chunks[c].path.empty());
         EXPECT_EQ(chunks[c].points.size(), 0u);
         ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
-        std::vector<std::uint64_t> ids;
-        for (std::uint32_t i : chunks[c].resident) ids.push_back(resident.id[i]);
+        // The same points (IDs are unique here), in another order: by octant
+        // of the chunk, and further down, so that a leaf's points lie together.
         const ParticleChunk taken = streamed[c].TakePoints();
-        EXPECT_EQ(ids, taken.id) << chunks[c].key.Path();
-        for (std::size_t k = 0; k < ids.size() && k < taken.size(); ++k) {
-          const std::uint32_t i = chunks[c].resident[k];
+        ASSERT_EQ(taken.size(), chunks[c].resident.size());
+        std::map<std::uint64_t, std::size_t> streamed_at;
+        for (std::size_t k = 0; k < taken.size(); ++k) streamed_at[taken.id[k]] = k;
+        std::uint64_t previous_octant = 0;
+        for (const std::uint32_t i : chunks[c].resident) {
+          const auto found = streamed_at.find(resident.id[i]);
+          ASSERT_NE(found, streamed_at.end()) << "point " << resident.id[i] << " is not in streamed chunk "
+                                              << chunks[c].key.Path();
+          const std::size_t k = found->second;
           EXPECT_EQ(resident.mass[i], taken.mass[k]);
           EXPECT_EQ(resident.type[i], taken.type[k]);
           for (int a = 0; a < 3; ++a) EXPECT_EQ(resident.position[3 * i + a], taken.position[3 * k + a]);
+          const std::uint64_t octant = kCube.LeafKey(&resident.position[3 * i], chunks[c].key.level() + 1).value();
+          if (chunks[c].point_count > 16) {
+            EXPECT_GE(octant, previous_octant) << "chunk " << chunks[c].key.Path();
+          }
+          previous_octant = octant;
         }
       }
       EXPECT_EQ(next, points.size());

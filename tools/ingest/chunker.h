@@ -81,17 +81,20 @@ class Chunker {
   // The same chunks for a point set that fits in memory as a whole: reads the
   // pass once into `resident` (room reserved for `expected_points`; more or
   // fewer are fine) and returns chunks that list their points as indices into
-  // it, in the same order as Split would hold them. `resident` comes back
-  // reordered chunk by chunk, so that each chunk's indices are one contiguous
-  // range (a builder then reads memory in order). Nothing goes through chunk
+  // it: the same chunks with the same points as Split's. `resident` comes
+  // back reordered chunk by chunk, so that each chunk's indices are one
+  // contiguous range, and within a chunk by cells a few levels below it, so
+  // that the points of each of its leaves lie close together (a builder then
+  // reads memory in order and from the cache). Nothing goes through chunk
   // buffers and nothing spills; memory_bytes is not consulted. At most
   // 2^32 - 1 points.
   std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                    ParticleChunk& resident);
   // The scratch memory SplitResident takes per point on top of the resident
-  // points while it runs: each point's cell, its index in its chunk's list,
-  // and a buffer for reordering the widest column (three doubles).
-  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 3 * sizeof(double);
+  // points while it runs: its index in its chunk's list, its cell (in the
+  // split, then within its chunk), where it goes, and a buffer for
+  // reordering the widest column (three doubles).
+  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 4 + 3 * sizeof(double);
 
   std::uint64_t spilled_points() const { return spilled_points_; }
 
@@ -100,7 +103,8 @@ class Chunker {
   bool Oversized(const Chunk& chunk) const;
   int ResplitLevels(std::uint64_t points) const;
   // Reorders the resident points chunk by chunk, each chunk's points
-  // contiguous and in its order, and renumbers the chunks' indices to match.
+  // contiguous and, within it, in the Morton order of cells a few levels
+  // below it, and renumbers the chunks' indices to match.
   void ArrangeByChunk(std::vector<Chunk>& chunks, ParticleChunk& resident) const;
   std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,
                                      std::span<const std::uint32_t> subset);
