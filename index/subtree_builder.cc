@@ -8,6 +8,7 @@
 #include <string>
 #include <utility>
 
+#include "index/radix_sort.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -272,15 +273,28 @@ class SubtreeBuild {
       const std::uint32_t i = begin[k].index;
       order[k] = {c.has_id() ? c.id[i] : SamplingId(&c.position[3 * std::size_t{i}]), i, static_cast<std::uint32_t>(k)};
     }
-    const auto before = [&c](const Keyed& a, const Keyed& b) {
-      if (a.sampling_id != b.sampling_id) return a.sampling_id < b.sampling_id;
+    // By radix on the ID, then by position within the rare runs of equal IDs.
+    const auto by_position = [&c](const Keyed& a, const Keyed& b) {
       const double* pa = &c.position[3 * std::size_t{a.index}];
       const double* pb = &c.position[3 * std::size_t{b.index}];
       return std::lexicographical_compare(pa, pa + 3, pb, pb + 3);
     };
+    std::vector<Keyed> scratch(n);
     for (int o = 0; o < 8; ++o) {
-      std::sort(order.begin() + static_cast<std::ptrdiff_t>(bounds[o]),
-                order.begin() + static_cast<std::ptrdiff_t>(bounds[o + 1]), before);
+      const std::span<Keyed> octant(order.data() + bounds[o], bounds[o + 1] - bounds[o]);
+      const std::span<Keyed> sorted =
+          RadixSortByKey(octant, std::span<Keyed>(scratch.data(), octant.size()),
+                         [](const Keyed& k) { return k.sampling_id; });
+      if (sorted.data() != octant.data()) std::copy(sorted.begin(), sorted.end(), octant.begin());
+      for (std::size_t run = 0; run < octant.size();) {
+        std::size_t run_end = run + 1;
+        while (run_end < octant.size() && octant[run_end].sampling_id == octant[run].sampling_id) ++run_end;
+        if (run_end - run > 1) {
+          std::sort(octant.begin() + static_cast<std::ptrdiff_t>(run), octant.begin() + static_cast<std::ptrdiff_t>(run_end),
+                    by_position);
+        }
+        run = run_end;
+      }
     }
     NodePoints leaf;
     leaf.position.resize(3 * n);
