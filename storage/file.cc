@@ -87,25 +87,24 @@ WritableFile WritableFile::Create(const std::string& path) {
   return WritableFile(path, UniqueFd(fd));
 }
 
-void WritableFile::WriteFully(std::uint64_t offset, const std::uint8_t* data, std::size_t size) {
+void WritableFile::WriteUnbufferedAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) const {
   std::size_t done = 0;
-  while (done < size) {
-    std::size_t want = std::min(size - done, kMaxIoBytes);
-    ssize_t wrote = ::pwrite(fd_.get(), data + done, want, static_cast<off_t>(offset + done));
+  while (done < bytes.size()) {
+    std::size_t want = std::min(bytes.size() - done, kMaxIoBytes);
+    ssize_t wrote = ::pwrite(fd_.get(), bytes.data() + done, want, static_cast<off_t>(offset + done));
     if (wrote < 0) {
       if (errno == EINTR) continue;
-      throw IoErrorFromErrno(path_, "pwrite of " + std::to_string(size) + " bytes at offset " +
+      throw IoErrorFromErrno(path_, "pwrite of " + std::to_string(bytes.size()) + " bytes at offset " +
                                         std::to_string(offset),
                              errno);
     }
     done += static_cast<std::size_t>(wrote);
   }
-  written_end_ = std::max(written_end_, offset + size);
 }
 
 void WritableFile::Flush() {
   if (buffer_.empty()) return;
-  WriteFully(flushed_, buffer_.data(), buffer_.size());
+  WriteUnbufferedAt(flushed_, buffer_);
   flushed_ += buffer_.size();
   buffer_.clear();
 }
@@ -114,7 +113,7 @@ void WritableFile::Append(std::span<const std::uint8_t> bytes) {
   if (buffer_.size() + bytes.size() > kWriteBufferBytes) Flush();
   if (bytes.size() >= kWriteBufferBytes) {
     // Large blocks go straight to the file rather than through the buffer.
-    WriteFully(flushed_, bytes.data(), bytes.size());
+    WriteUnbufferedAt(flushed_, bytes);
     flushed_ += bytes.size();
   } else {
     buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
@@ -130,24 +129,32 @@ void WritableFile::AppendZeros(std::uint64_t count) {
   }
   // Skipped, not written: the gap becomes a hole, which reads as zeros but
   // costs no copy into the page cache and no disk blocks (the padding of
-  // blocks to whole pages is about a fifth of a store). Sync and Close set
-  // the length when the file ends in one.
-  Flush();
-  flushed_ += count;
-  size_ += count;
+  // blocks to whole pages is about a fifth of a store).
+  ReserveRange(count);
 }
 
+std::uint64_t WritableFile::ReserveRange(std::uint64_t count) {
+  Flush();
+  const std::uint64_t begin = size_;
+  flushed_ += count;
+  size_ += count;
+  return begin;
+}
+
+// A file that ends in a hole is shorter than size() until its length is set.
+// Only ever lengthened: writes from WriteUnbufferedAt are not tracked here.
 void WritableFile::ExtendOverTrailingHole() {
-  if (written_end_ >= size_) return;
+  struct stat status {};
+  if (::fstat(fd_.get(), &status) != 0) throw IoErrorFromErrno(path_, "fstat", errno);
+  if (static_cast<std::uint64_t>(status.st_size) >= size_) return;
   if (::ftruncate(fd_.get(), static_cast<off_t>(size_)) != 0) {
     throw IoErrorFromErrno(path_, "ftruncate to " + std::to_string(size_) + " bytes", errno);
   }
-  written_end_ = size_;
 }
 
 void WritableFile::WriteAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) {
   Flush();
-  WriteFully(offset, bytes.data(), bytes.size());
+  WriteUnbufferedAt(offset, bytes);
   size_ = std::max(size_, offset + bytes.size());
   flushed_ = std::max(flushed_, offset + bytes.size());
 }

@@ -71,7 +71,9 @@ class RandomAccessFile {
 };
 
 // A file written front to back through a buffer, with one positioned write
-// for patching a header at the end. Create truncates an existing file.
+// for patching a header at the end, and ranges reserved at the end to be
+// filled by several threads at once (ReserveRange, WriteUnbufferedAt).
+// Create truncates an existing file.
 class WritableFile {
  public:
   static WritableFile Create(const std::string& path);
@@ -88,6 +90,14 @@ class WritableFile {
   void AppendZeros(std::uint64_t count);
   // Writes at an absolute offset (after flushing what was appended).
   void WriteAt(std::uint64_t offset, std::span<const std::uint8_t> bytes);
+  // Moves the end of the file `count` bytes on without writing, as a hole
+  // that reads as zeros where nothing is written into it; returns where the
+  // range starts.
+  std::uint64_t ReserveRange(std::uint64_t count);
+  // Writes `bytes` at `offset`, straight to the file. Unlike the calls above
+  // it may run on several threads at once, for ranges that overlap neither
+  // each other nor what the calls above write: ranges from ReserveRange.
+  void WriteUnbufferedAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) const;
   // Flushes the buffer and fsyncs the file.
   void Sync();
   // Flushes and closes; reports a failed close (NFS reports write errors there).
@@ -100,7 +110,6 @@ class WritableFile {
  private:
   WritableFile(std::string path, UniqueFd fd) : path_(std::move(path)), fd_(std::move(fd)) {}
   void Flush();
-  void WriteFully(std::uint64_t offset, const std::uint8_t* data, std::size_t size);
   void ExtendOverTrailingHole();
 
   std::string path_;
@@ -108,7 +117,6 @@ class WritableFile {
   std::vector<std::uint8_t> buffer_;
   std::uint64_t flushed_ = 0;  // file offset where buffer_ starts
   std::uint64_t size_ = 0;
-  std::uint64_t written_end_ = 0;  // end of the furthest write; below size_ when the file ends in a hole
 };
 
 // rename(2): atomically replaces `to` on the same file system.

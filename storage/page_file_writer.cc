@@ -42,6 +42,12 @@ void PageFileWriter::RequireOpen(const char* operation) const {
   if (!file_) throw Error::InvalidArgument(std::string(operation) + " on finished page file " + path_);
 }
 
+void PageFileWriter::RequireNoFailedWrite(const char* operation) const {
+  if (failed_write_) {
+    throw Error::Io(temporary_path(), std::string(operation) + " refused: an earlier block write failed");
+  }
+}
+
 void PageFileWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count) {
   RequireOpen("AddBlock");
   std::optional<std::uint32_t> pages = PagesForBytes(bytes.size(), page_size_);
@@ -49,30 +55,39 @@ void PageFileWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> b
     throw Error::InvalidArgument("block " + Hex64(key) + " of " + std::to_string(bytes.size()) +
                                  " bytes needs more than 2^32 pages of " + std::to_string(page_size_));
   }
-  if (!keys_.insert(key).second) {
-    throw Error::InvalidArgument("duplicate key: block " + Hex64(key) + " was already added to epoch " +
-                                 std::to_string(epoch_) + " (" + path_ + ")");
-  }
   IndexEntry entry;
   entry.key = key;
-  entry.first_page = bytes.empty() ? 0 : next_page_;
   entry.byte_length = bytes.size();
   entry.point_count = point_count;
   entry.checksum = Checksum64(bytes);
   entry.page_count = *pages;
+  std::uint64_t offset = 0;
+  {
+    std::lock_guard lock(mutex_);
+    RequireNoFailedWrite("AddBlock");
+    if (keys_.count(key) != 0) {
+      throw Error::InvalidArgument("duplicate key: block " + Hex64(key) + " was already added to epoch " +
+                                   std::to_string(epoch_) + " (" + path_ + ")");
+    }
+    // The padding to whole pages is left a hole: it reads as zeros.
+    offset = file_->ReserveRange(std::uint64_t{*pages} * page_size_);
+    entry.first_page = bytes.empty() ? 0 : next_page_;
+    next_page_ += *pages;
+    keys_.insert(key);
+    entries_.push_back(entry);
+  }
   try {
-    file_->Append(bytes);
-    file_->AppendZeros(std::uint64_t{*pages} * page_size_ - bytes.size());
+    file_->WriteUnbufferedAt(offset, bytes);
   } catch (...) {
-    keys_.erase(key);
+    std::lock_guard lock(mutex_);
+    failed_write_ = true;
     throw;
   }
-  next_page_ += *pages;
-  entries_.push_back(entry);
 }
 
 PageFileWriter::Summary PageFileWriter::Finish() {
   RequireOpen("Finish");
+  RequireNoFailedWrite("Finish");
   std::vector<IndexEntry> sorted = entries_;
   std::sort(sorted.begin(), sorted.end(), [](const IndexEntry& a, const IndexEntry& b) { return a.key < b.key; });
 

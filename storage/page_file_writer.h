@@ -1,11 +1,13 @@
 // Writes one page file (docs/FORMAT.md section 2): blocks appended in the
 // caller's order, each on its own run of pages, then the bulk-loaded index,
-// then the header. Crash-safe: everything goes to `<path>.tmp`, which is
+// then the header. Several threads may add blocks at once: each takes its
+// pages under a lock and writes them outside it. Crash-safe: everything goes to `<path>.tmp`, which is
 // fsynced and renamed to `<path>` only by Finish(), followed by an fsync of
 // the directory. A writer destroyed before Finish() removes its .tmp file.
 #pragma once
 
 #include <cstdint>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -32,17 +34,20 @@ class PageFileWriter {
   PageFileWriter& operator=(const PageFileWriter&) = delete;
   ~PageFileWriter();
 
-  // Appends one block. Keys may come in any order; a key added twice is
-  // kInvalidArgument (and the writer stays usable). `point_count` is stored
-  // in the index for the caller's use.
+  // Appends one block; may be called from several threads at once. Keys may
+  // come in any order; a key added twice is kInvalidArgument (and the writer
+  // stays usable). `point_count` is stored in the index for the caller's
+  // use. After a failed write (kIo) the writer refuses further blocks and
+  // Finish: the pages it reserved hold what the failure left there.
   void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
 
   // Writes the index and header, makes the file durable and gives it its
-  // final name. The writer cannot be used afterwards.
+  // final name. The writer cannot be used afterwards. Every AddBlock must
+  // have returned.
   Summary Finish();
 
   // Bytes written to the file so far (data pages with padding, header page,
-  // and after Finish the index pages).
+  // and after Finish the index pages). Not while blocks are being added.
   std::uint64_t bytes_written() const { return file_ ? file_->size() : finished_size_; }
   std::uint64_t block_count() const { return entries_.size(); }
   const std::string& path() const { return path_; }
@@ -50,6 +55,7 @@ class PageFileWriter {
 
  private:
   void RequireOpen(const char* operation) const;
+  void RequireNoFailedWrite(const char* operation) const;
 
   const std::string path_;
   const std::uint32_t page_size_;
@@ -57,9 +63,11 @@ class PageFileWriter {
   const std::uint32_t epoch_;
   std::optional<WritableFile> file_;  // empty once finished
   std::uint64_t finished_size_ = 0;
+  std::mutex mutex_;                  // guards the members below and file_'s end during AddBlock
   std::uint64_t next_page_ = 1;       // page 0 is the header
   std::vector<IndexEntry> entries_;   // in the order added
   std::unordered_set<std::uint64_t> keys_;
+  bool failed_write_ = false;
 };
 
 }  // namespace octocosm

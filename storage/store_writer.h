@@ -47,7 +47,8 @@ class StoreWriter {
   // Starts the next epoch (numbered from 0) and returns its number. `time`
   // and `redshift` must be finite.
   std::uint32_t BeginEpoch(double time, double redshift);
-  // Adds a block to the current epoch (see PageFileWriter::AddBlock).
+  // Adds a block to the current epoch (see PageFileWriter::AddBlock); may be
+  // called from several threads at once, but not beside the other calls.
   void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
   // Finishes the current epoch's page file (durable, under its final name).
   void EndEpoch();

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <thread>
 #include <vector>
 
 #include "tests/support/temp_dir.h"
@@ -61,6 +62,41 @@ TEST(WritableFile, SyncSetsTheLengthOfAFileEndingInAHole) {
   EXPECT_EQ(bytes.front(), 'x');
   EXPECT_EQ(bytes.back(), 'y');
   EXPECT_EQ(std::count(bytes.begin(), bytes.end(), 0), 1 << 20);
+}
+
+// Ranges reserved at the end and filled from several threads at once land
+// where they were reserved; what no thread wrote reads as zeros, and appends
+// go on after the reserved ranges.
+TEST(WritableFile, ReservedRangesFilledFromSeveralThreads) {
+  testing_support::TempDir dir("file-test");
+  const std::string path = (dir.path() / "reserved").string();
+  WritableFile file = WritableFile::Create(path);
+  file.Append(Bytes("head"));
+  constexpr std::size_t kRanges = 64;
+  std::vector<std::uint64_t> offsets;
+  std::vector<std::vector<std::uint8_t>> contents;
+  std::vector<std::uint8_t> expected = Bytes("head");
+  for (std::size_t r = 0; r < kRanges; ++r) {
+    const std::size_t length = 5000 + 700 * r;
+    offsets.push_back(file.ReserveRange(length));
+    // Each range written only in part: the rest stays a hole.
+    contents.emplace_back(length - 1000 - r, static_cast<std::uint8_t>(r + 1));
+    expected.insert(expected.end(), contents.back().begin(), contents.back().end());
+    expected.insert(expected.end(), length - contents.back().size(), 0);
+  }
+  EXPECT_EQ(file.size(), expected.size());
+  std::vector<std::thread> writers;
+  for (std::size_t t = 0; t < 4; ++t) {
+    writers.emplace_back([&, t] {
+      for (std::size_t r = t; r < kRanges; r += 4) file.WriteUnbufferedAt(offsets[r], contents[r]);
+    });
+  }
+  for (std::thread& writer : writers) writer.join();
+  file.Append(Bytes("tail"));
+  const std::vector<std::uint8_t> tail = Bytes("tail");
+  expected.insert(expected.end(), tail.begin(), tail.end());
+  file.Close();
+  EXPECT_EQ(ReadAll(path), expected);
 }
 
 }  // namespace

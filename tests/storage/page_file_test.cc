@@ -1,11 +1,15 @@
 // Page files: round trips, index look-ups and scans against a std::map
 // reference, and every kind of damage a page file can suffer.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
 #include <algorithm>
+#include <csignal>
+#include <cstdlib>
 #include <map>
 #include <numeric>
 #include <random>
+#include <thread>
 
 #include "storage/block_index_format.h"
 #include "storage/checksum.h"
@@ -31,9 +35,10 @@ struct Expected {
 
 // Writes `count` blocks with random keys, random order and sizes from empty
 // to several pages; returns what was written.
+// With `threads` > 1 the blocks are added from that many threads at once.
 std::map<std::uint64_t, Expected> WriteRandomPageFile(const std::string& path, std::uint32_t page_size,
                                                       std::size_t count, std::uint64_t seed,
-                                                      std::uint32_t epoch = 0) {
+                                                      std::uint32_t epoch = 0, std::size_t threads = 1) {
   std::mt19937_64 random(seed);
   std::map<std::uint64_t, Expected> expected;
   while (expected.size() < count) {
@@ -54,7 +59,16 @@ std::map<std::uint64_t, Expected> WriteRandomPageFile(const std::string& path, s
   for (const auto& [key, unused] : expected) order.push_back(key);
   std::shuffle(order.begin(), order.end(), random);
   PageFileWriter writer(path, page_size, kStoreId, epoch);
-  for (std::uint64_t key : order) writer.AddBlock(key, expected[key].bytes, expected[key].point_count);
+  std::vector<std::thread> adders;
+  for (std::size_t t = 0; t < threads; ++t) {
+    adders.emplace_back([&, t] {
+      for (std::size_t k = t; k < order.size(); k += threads) {
+        const Expected& block = expected.at(order[k]);
+        writer.AddBlock(order[k], block.bytes, block.point_count);
+      }
+    });
+  }
+  for (std::thread& adder : adders) adder.join();
   PageFileWriter::Summary summary = writer.Finish();
   EXPECT_EQ(summary.block_count, count);
   EXPECT_EQ(summary.file_size, storagetest::FileSize(path));
@@ -135,6 +149,55 @@ TEST_P(PageFileRoundTrip, RangeScansEqualAStdMap) {
 }
 
 INSTANTIATE_TEST_SUITE_P(PageSizes, PageFileRoundTrip, ::testing::Values(4096u, 65536u, 1048576u));
+
+TEST(PageFileWriter, BlocksAddedFromSeveralThreadsReadBackExactly) {
+  ScratchDirectory dir;
+  const std::string path = dir.File("threads.pages");
+  auto expected = WriteRandomPageFile(path, 4096, 2000, 41, 0, 4);
+  auto reader = PageFileReader::Open(path);
+  EXPECT_EQ(reader->block_count(), expected.size());
+  ExpectAllBlocksRead(*reader, expected);
+  // Every block on pages of its own: none overlaps another.
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> ranges;
+  reader->Scan(0, UINT64_MAX, [&](const IndexEntry& entry) {
+    if (entry.page_count > 0) ranges.emplace_back(entry.first_page, entry.first_page + entry.page_count);
+    return true;
+  });
+  std::sort(ranges.begin(), ranges.end());
+  for (std::size_t i = 1; i < ranges.size(); ++i) EXPECT_LE(ranges[i - 1].second, ranges[i].first);
+}
+
+// A write that fails (here: past the file size limit, EFBIG) is an I/O error,
+// and the writer then refuses to finish a file with a block it could not
+// write. Run in a child process (the limit would hold for the whole test
+// program); exits 0 when all is as expected.
+[[noreturn]] void WriteBeyondTheFileSizeLimit(const std::string& path) {
+  std::signal(SIGXFSZ, SIG_IGN);
+  rlimit limit{};
+  limit.rlim_cur = limit.rlim_max = 1 << 20;
+  if (::setrlimit(RLIMIT_FSIZE, &limit) != 0) std::_Exit(10);
+  PageFileWriter writer(path, 4096, kStoreId, 0);
+  writer.AddBlock(1, BlockContent(1, 1, 1000), 1);
+  try {
+    writer.AddBlock(2, BlockContent(1, 2, 2 << 20), 1);
+    std::_Exit(11);
+  } catch (const Error& error) {
+    if (error.kind() != ErrorKind::kIo) std::_Exit(12);
+  }
+  try {
+    writer.Finish();
+    std::_Exit(13);
+  } catch (const Error& error) {
+    const bool refused = error.kind() == ErrorKind::kIo &&
+                         std::string(error.what()).find("earlier block write failed") != std::string::npos;
+    std::_Exit(refused ? 0 : 14);
+  }
+}
+
+TEST(PageFileWriter, AFailedBlockWriteRefusesFinish) {
+  ScratchDirectory dir;
+  EXPECT_EXIT(WriteBeyondTheFileSizeLimit(dir.File("limited.pages")), ::testing::ExitedWithCode(0), "");
+}
 
 TEST(PageFileWriter, RejectsDuplicateKeysAndBadPageSizes) {
   ScratchDirectory dir;
