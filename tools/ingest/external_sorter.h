@@ -5,12 +5,20 @@
 // reading merges the runs with a heap.
 // A set that fits in one run never touches the disk.
 //
+// Several threads may Add at once. The thread whose records fill a run sorts
+// and writes it outside the lock, while the others go on filling the next
+// run: memory then holds up to three runs' worth (the run, the sort's
+// scratch, the next run), against two for a single adder. Equal keys added
+// by different threads come out in the order their records reached the
+// sorter.
+//
 // Record must be trivially copyable and have a member `std::uint64_t key`.
 #pragma once
 
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
+#include <mutex>
 #include <queue>
 #include <span>
 #include <string>
@@ -39,25 +47,45 @@ class ExternalSorter {
 
   // Makes room for `records` (at most one run) at once, instead of growing
   // the run buffer step by step, copying it and touching new memory each time.
-  void Reserve(std::size_t records) { buffer_.reserve(std::min(records, run_records_)); }
+  void Reserve(std::size_t records) {
+    std::lock_guard lock(mutex_);
+    reserve_ = std::min(records, run_records_);
+    buffer_.reserve(reserve_);
+  }
   void Add(const Record& record) { Add(std::span<const Record>(&record, 1)); }
+  // May be called from several threads at once (see the top of the file).
   void Add(std::span<const Record> records) {
-    if (finished_) throw Error::InvalidArgument("ExternalSorter: Add after Finish");
     while (!records.empty()) {
-      const std::size_t take = std::min(records.size(), run_records_ - buffer_.size());
-      buffer_.insert(buffer_.end(), records.begin(), records.begin() + static_cast<std::ptrdiff_t>(take));
-      size_ += take;
-      records = records.subspan(take);
-      if (buffer_.size() >= run_records_) WriteRun();
+      std::vector<Record> full;
+      std::string path;
+      {
+        std::lock_guard lock(mutex_);
+        if (finished_) throw Error::InvalidArgument("ExternalSorter: Add after Finish");
+        const std::size_t take = std::min(records.size(), run_records_ - buffer_.size());
+        buffer_.insert(buffer_.end(), records.begin(), records.begin() + static_cast<std::ptrdiff_t>(take));
+        size_ += take;
+        records = records.subspan(take);
+        if (buffer_.size() >= run_records_) {
+          full.swap(buffer_);
+          buffer_.reserve(reserve_);
+          path = NextRunPath();
+        }
+      }
+      if (!full.empty()) WriteRun(full, path);
     }
   }
 
-  // Sorts the last run; afterwards only reading is allowed.
+  // Sorts the last run; afterwards only reading is allowed. Every Add must
+  // have returned.
   void Finish() {
+    std::lock_guard lock(mutex_);
     if (finished_) return;
     finished_ = true;
-    SortBuffer();
-    if (!run_paths_.empty() && !buffer_.empty()) WriteRun();
+    SortBuffer(buffer_);
+    if (!run_paths_.empty() && !buffer_.empty()) {
+      WriteRun(buffer_, NextRunPath());
+      buffer_.clear();
+    }
     if (!run_paths_.empty()) {
       buffer_.clear();
       buffer_.shrink_to_fit();
@@ -116,26 +144,34 @@ class ExternalSorter {
 
  private:
   // Stable, so equal keys keep their input order (index/radix_sort.h).
-  void SortBuffer() {
-    if (buffer_.size() < 2) return;
-    std::vector<Record> scratch(buffer_.size());
+  static void SortBuffer(std::vector<Record>& records) {
+    if (records.size() < 2) return;
+    std::vector<Record> scratch(records.size());
     const std::span<Record> sorted =
-        RadixSortByKey(std::span<Record>(buffer_), std::span<Record>(scratch), [](const Record& r) { return r.key; });
-    if (sorted.data() != buffer_.data()) buffer_.swap(scratch);
+        RadixSortByKey(std::span<Record>(records), std::span<Record>(scratch), [](const Record& r) { return r.key; });
+    if (sorted.data() != records.data()) records.swap(scratch);
   }
 
-  void WriteRun() {
-    SortBuffer();
-    const std::string path = prefix_ + "-run-" + std::to_string(run_paths_.size());
+  // The next run's file name, listed at once (under mutex_) so that the
+  // destructor removes the file even if writing it fails, and so that runs
+  // are merged in the order they were filled.
+  std::string NextRunPath() {
+    run_paths_.push_back(prefix_ + "-run-" + std::to_string(run_paths_.size()));
+    return run_paths_.back();
+  }
+
+  // Needs no lock: `records` and the file are this caller's alone.
+  static void WriteRun(std::vector<Record>& records, const std::string& path) {
+    SortBuffer(records);
     RecordFileWriter<Record> file(path, "a sort run");
-    run_paths_.push_back(path);
-    file.Write(buffer_);
+    file.Write(records);
     file.Close();
-    buffer_.clear();
   }
 
   std::string prefix_;
   std::size_t run_records_;
+  std::mutex mutex_;  // guards everything below during Add
+  std::size_t reserve_ = 0;  // what the next run buffer reserves at once (Reserve)
   std::vector<Record> buffer_;
   std::vector<std::string> run_paths_;
   std::uint64_t size_ = 0;

@@ -177,7 +177,7 @@ struct EpochBuild {
   const SubtreeOptions* tree = nullptr;
   StoreWriter* store = nullptr;
   ExternalSorter<IdLeafRecord>* id_pairs = nullptr;  // null without IDs
-  std::mutex mutex;  // guards store, id_pairs and report
+  std::mutex mutex;  // guards report (store and id_pairs take blocks and pairs from several threads)
   EpochReport* report = nullptr;
   Progress* progress = nullptr;
 
@@ -191,12 +191,15 @@ struct EpochBuild {
       pairs.reserve(points.id.size());
       for (std::uint64_t id : points.id) pairs.push_back({id, key.value()});
     }
-    std::lock_guard lock(mutex);
+    // Neither call holds the other workers up for long: a block's copy into
+    // the file and the sorting and writing of a full run of pairs (seconds
+    // at 10^8 points) happen outside their locks.
     store->AddBlock(key.value(), block, points.size());
+    if (!pairs.empty()) id_pairs->Add(pairs);
+    std::lock_guard lock(mutex);
     ++report->nodes;
     report->depth = std::max(report->depth, key.level());
     if (is_leaf) ++report->leaves;
-    if (!pairs.empty()) id_pairs->Add(pairs);
   }
 };
 
@@ -296,7 +299,9 @@ IngestReport Ingest(const IngestOptions& options) {
       std::max<std::uint64_t>(budget * 3 / 10 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity);
   const std::size_t sort_run_records = static_cast<std::size_t>(
       options.sort_run_points ? options.sort_run_points : std::max<std::uint64_t>(budget * 15 / 100 / sizeof(ParticleRecord), 1024));
-  const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 10 / sizeof(IdLeafRecord), 1024));
+  // A third of the pairs' share: while one run is sorted (with a scratch as
+  // large) the workers fill the next (tools/ingest/external_sorter.h).
+  const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 30 / sizeof(IdLeafRecord), 1024));
 
   // Open the first epoch to learn what the series carries.
   std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);
