@@ -1,9 +1,10 @@
 // Writes one page file (docs/FORMAT.md section 2): blocks appended in the
 // caller's order, each on its own run of pages, then the bulk-loaded index,
 // then the header. Several threads may add blocks at once: each takes its
-// pages under a lock and writes them outside it. Crash-safe: everything goes to `<path>.tmp`, which is
-// fsynced and renamed to `<path>` only by Finish(), followed by an fsync of
-// the directory. A writer destroyed before Finish() removes its .tmp file.
+// pages under a lock and writes them outside it. Crash-safe: everything goes
+// to `<path>.tmp`, which is fsynced and renamed to `<path>` only by Finish(),
+// followed by an fsync of the directory. A writer destroyed before Finish()
+// removes its .tmp file.
 #pragma once
 
 #include <cstdint>

@@ -81,15 +81,13 @@ class ExternalSorter {
     std::lock_guard lock(mutex_);
     if (finished_) return;
     finished_ = true;
-    SortBuffer(buffer_);
-    if (!run_paths_.empty() && !buffer_.empty()) {
-      WriteRun(buffer_, NextRunPath());
-      buffer_.clear();
+    if (run_paths_.empty()) {
+      SortBuffer(buffer_);
+      return;
     }
-    if (!run_paths_.empty()) {
-      buffer_.clear();
-      buffer_.shrink_to_fit();
-    }
+    if (!buffer_.empty()) WriteRun(buffer_, NextRunPath());
+    buffer_.clear();
+    buffer_.shrink_to_fit();
   }
 
   std::uint64_t size() const { return size_; }
