@@ -57,54 +57,6 @@ NodeCube Cube::NodeCubeOf(NodeKey key) const {
   return NodeCube{{origin[0] + cell.x * s, origin[1] + cell.y * s, origin[2] + cell.z * s}, s};
 }
 
-namespace {
-
-// floor(x), without the libm call that std::floor is on baseline x86-64 (no
-// SSE4.1 rounding instruction): truncation, corrected below zero, where it
-// is exact (|x| < 2^52); std::floor elsewhere, NaN included.
-double Floor(double x) {
-  if (!(std::fabs(x) < 0x1p52)) return std::floor(x);
-  const double truncated = static_cast<double>(static_cast<std::int64_t>(x));
-  return truncated > x ? truncated - 1 : truncated;
-}
-
-}  // namespace
-
-std::array<std::uint64_t, 3> Cube::GridCoords(const double* point, int bits) const {
-  const std::uint64_t last = (std::uint64_t{1} << bits) - 1;
-  const double cells = static_cast<double>(last + 1);  // exact: bits <= kMaxGridBits < 53
-  std::array<std::uint64_t, 3> grid{};
-  for (int a = 0; a < 3; ++a) {
-    // A division, not a product with 1 / size: the rounded reciprocal put
-    // about one point in fifty that lies exactly on a cell face of a cube
-    // whose size is not a power of two into the cell below (x = 389.97988...
-    // at the midplane of a cube of edge 779.95977...), against the half-open
-    // cells of cube.h and against every other octree (PCL's keys are
-    // divisions too). It costs under 2 ns a call.
-    double t = (point[a] - origin[a]) / size;
-    if (periodic) t -= Floor(t);
-    const double scaled = t * cells;
-    // floor(scaled) > 0 exactly when scaled >= 1, floor(scaled) >= cells
-    // exactly when scaled >= cells, and in between truncation is floor.
-    // Written so that NaN fails the first test: no float-to-int conversion
-    // of an out-of-range value, which would be undefined behaviour.
-    if (!(scaled >= 1)) {
-      grid[a] = 0;
-    } else if (scaled >= cells) {
-      grid[a] = last;
-    } else {
-      grid[a] = static_cast<std::uint64_t>(scaled);
-    }
-  }
-  return grid;
-}
-
-CellCoord Cube::CellOf(const double* point, int level) const {
-  const auto g = GridCoords(point, level);
-  return {static_cast<std::uint32_t>(g[0]), static_cast<std::uint32_t>(g[1]), static_cast<std::uint32_t>(g[2])};
-}
-
-NodeKey Cube::LeafKey(const double* point, int level) const { return NodeKey::FromCell(level, CellOf(point, level)); }
 
 int Cube::ChildOctant(const double* point, int level) const {
   const auto g = GridCoords(point, level + 1);
