@@ -1,13 +1,16 @@
 // Writes one page file (docs/FORMAT.md section 2): blocks appended in the
 // caller's order, each on its own run of pages, then the bulk-loaded index,
 // then the header. Several threads may add blocks at once: each takes its
-// pages under a lock and writes them outside it. Crash-safe: everything goes
+// pages under a lock and writes them outside it, with direct I/O on a
+// background thread where the file system allows it (storage/direct_writer.h).
+// Crash-safe: everything goes
 // to `<path>.tmp`, which is fsynced and renamed to `<path>` only by Finish(),
 // followed by an fsync of the directory. A writer destroyed before Finish()
 // removes its .tmp file.
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <span>
@@ -16,6 +19,7 @@
 #include <vector>
 
 #include "storage/block_index_format.h"
+#include "storage/direct_writer.h"
 #include "storage/file.h"
 #include "storage/page_file_format.h"
 
@@ -38,8 +42,9 @@ class PageFileWriter {
   // Appends one block; may be called from several threads at once. Keys may
   // come in any order; a key added twice is kInvalidArgument (and the writer
   // stays usable). `point_count` is stored in the index for the caller's
-  // use. After a failed write (kIo) the writer refuses further blocks and
-  // Finish: the pages it reserved hold what the failure left there.
+  // use. A write may finish after AddBlock returns, so its failure (kIo)
+  // comes from a later AddBlock or from Finish; after it the writer refuses
+  // further blocks and Finish.
   void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
 
   // Writes the index and header, makes the file durable and gives it its
@@ -63,6 +68,7 @@ class PageFileWriter {
   const std::uint64_t store_id_;
   const std::uint32_t epoch_;
   std::optional<WritableFile> file_;  // empty once finished
+  std::unique_ptr<DirectWriter> direct_;  // blocks' writes; null where direct I/O is refused
   std::uint64_t finished_size_ = 0;
   std::mutex mutex_;                  // guards the members below and file_'s end during AddBlock
   std::uint64_t next_page_ = 1;       // page 0 is the header

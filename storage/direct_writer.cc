@@ -1,0 +1,176 @@
+#include "storage/direct_writer.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+
+#include "storage/error.h"
+
+namespace octocosm {
+namespace {
+
+// Linux caps one write at just under 2 GiB; stay well below (and aligned).
+constexpr std::size_t kMaxIoBytes = std::size_t{1} << 30;
+
+std::size_t RoundUp(std::size_t bytes) {
+  return (bytes + DirectWriter::kAlignment - 1) / DirectWriter::kAlignment * DirectWriter::kAlignment;
+}
+
+}  // namespace
+
+void DirectWriter::AlignedFree::operator()(std::uint8_t* p) const { std::free(p); }
+
+std::unique_ptr<DirectWriter> DirectWriter::Open(const std::string& path, std::size_t max_bytes_in_flight) {
+  int direct = ::open(path.c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
+  if (direct < 0) {
+    if (errno == EINVAL) return nullptr;  // the file system has no direct I/O
+    throw IoErrorFromErrno(path, "open for direct writes", errno);
+  }
+  UniqueFd direct_fd(direct);
+  int plain = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  if (plain < 0) throw IoErrorFromErrno(path, "open for writing", errno);
+  return std::unique_ptr<DirectWriter>(
+      new DirectWriter(path, std::move(direct_fd), UniqueFd(plain), std::max(max_bytes_in_flight, kAlignment)));
+}
+
+DirectWriter::DirectWriter(std::string path, UniqueFd direct, UniqueFd plain, std::size_t max_bytes_in_flight)
+    : path_(std::move(path)),
+      direct_(std::move(direct)),
+      plain_(std::move(plain)),
+      max_bytes_in_flight_(max_bytes_in_flight),
+      thread_([this] { Run(); }) {}
+
+DirectWriter::~DirectWriter() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+    queue_.clear();
+  }
+  work_.notify_all();
+  thread_.join();
+}
+
+void DirectWriter::ThrowIfFailed() const {
+  if (failure_) std::rethrow_exception(failure_);
+}
+
+bool DirectWriter::fell_back() const {
+  std::lock_guard lock(mutex_);
+  return fell_back_;
+}
+
+DirectWriter::Buffered DirectWriter::Acquire(std::size_t capacity, std::unique_lock<std::mutex>& lock) {
+  for (;;) {
+    ThrowIfFailed();
+    // The smallest free buffer that is large enough.
+    auto fit = free_.end();
+    for (auto it = free_.begin(); it != free_.end(); ++it) {
+      if (it->capacity >= capacity && (fit == free_.end() || it->capacity < fit->capacity)) fit = it;
+    }
+    if (fit != free_.end()) {
+      Buffered found = std::move(*fit);
+      free_.erase(fit);
+      return found;
+    }
+    if (allocated_bytes_ + capacity <= max_bytes_in_flight_ || allocated_bytes_ == 0) {
+      void* memory = std::aligned_alloc(kAlignment, capacity);
+      if (memory == nullptr) throw std::bad_alloc();
+      allocated_bytes_ += capacity;
+      return Buffered{Buffer(static_cast<std::uint8_t*>(memory)), capacity};
+    }
+    if (!free_.empty()) {  // too small for this write: give the memory back and try again
+      allocated_bytes_ -= free_.back().capacity;
+      free_.pop_back();
+      continue;
+    }
+    progress_.wait(lock);
+  }
+}
+
+void DirectWriter::Write(std::uint64_t offset, std::span<const std::uint8_t> bytes) {
+  if (offset % kAlignment != 0) {
+    throw Error::InvalidArgument("direct write to " + path_ + " at offset " + std::to_string(offset) +
+                                 ", not a multiple of " + std::to_string(kAlignment));
+  }
+  if (bytes.empty()) return;
+  const std::size_t length = RoundUp(bytes.size());
+  Job job;
+  job.offset = offset;
+  job.length = length;
+  {
+    std::unique_lock lock(mutex_);
+    job.memory = Acquire(length, lock);
+  }
+  // The copy runs outside the lock: other threads queue their own meanwhile.
+  std::memcpy(job.memory.buffer.get(), bytes.data(), bytes.size());
+  std::memset(job.memory.buffer.get() + bytes.size(), 0, length - bytes.size());
+  {
+    std::lock_guard lock(mutex_);
+    ThrowIfFailed();
+    queue_.push_back(std::move(job));
+    ++jobs_unfinished_;
+  }
+  work_.notify_one();
+}
+
+void DirectWriter::Drain() {
+  std::unique_lock lock(mutex_);
+  progress_.wait(lock, [&] { return jobs_unfinished_ == 0 || failure_; });
+  ThrowIfFailed();
+}
+
+void DirectWriter::WriteFully(const Job& job) {
+  std::size_t done = 0;
+  bool direct = !fell_back_;  // only this thread changes it
+  while (done < job.length) {
+    const std::size_t want = std::min(job.length - done, kMaxIoBytes);
+    const int fd = direct ? direct_.get() : plain_.get();
+    const ssize_t wrote = ::pwrite(fd, job.memory.buffer.get() + done, want, static_cast<off_t>(job.offset + done));
+    if (wrote < 0) {
+      if (errno == EINTR) continue;
+      if (errno == EINVAL && direct) {  // the device wants a coarser alignment
+        direct = false;
+        std::lock_guard lock(mutex_);
+        fell_back_ = true;
+        continue;
+      }
+      throw IoErrorFromErrno(path_, "direct write of " + std::to_string(job.length) + " bytes at offset " +
+                                        std::to_string(job.offset),
+                             errno);
+    }
+    done += static_cast<std::size_t>(wrote);
+  }
+}
+
+void DirectWriter::Run() {
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    work_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+    if (stopping_) return;
+    Job job = std::move(queue_.front());
+    queue_.pop_front();
+    lock.unlock();
+    std::exception_ptr failed;
+    try {
+      WriteFully(job);
+    } catch (...) {
+      failed = std::current_exception();
+    }
+    lock.lock();
+    free_.push_back(std::move(job.memory));
+    --jobs_unfinished_;
+    if (failed && !failure_) {
+      failure_ = failed;
+      jobs_unfinished_ -= queue_.size();  // dropped: the file is lost anyway
+      for (Job& dropped : queue_) free_.push_back(std::move(dropped.memory));
+      queue_.clear();
+    }
+    progress_.notify_all();
+  }
+}
+
+}  // namespace octocosm

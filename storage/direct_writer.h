@@ -1,0 +1,106 @@
+// Writes ranges of an existing file with O_DIRECT, on a background thread.
+//
+// A store is written once and read later, so copying its gigabytes through
+// the page cache buys nothing and costs twice: the copy itself and the
+// kernel's writeback, both on the cores the ingest is using. O_DIRECT hands
+// the bytes to the disk from this process's own memory instead; a background
+// thread does the waiting, so the threads that produce blocks go on.
+//
+// Direct I/O wants buffers, offsets and lengths aligned to the device's
+// logical block; kAlignment (4 KiB) covers every common device. Write()
+// copies the bytes into an aligned buffer from a reused pool (bounded by
+// `max_bytes_in_flight`) and zero-pads them to a whole number of
+// kAlignment units: the caller owns the range up to that boundary. Where the
+// file system refuses O_DIRECT (tmpfs) Open() returns nullptr, and where a
+// device refuses a write for its alignment the writer falls back to an
+// ordinary write for the rest of its life: slower, never wrong.
+//
+// Errors surface late: a failed write is reported (kIo, naming the file and
+// offset) by the next Write() or by Drain(); writes queued behind it are
+// dropped. Drain() before relying on the file's contents.
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <exception>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "storage/file.h"
+
+namespace octocosm {
+
+class DirectWriter {
+ public:
+  static constexpr std::size_t kAlignment = 4096;
+
+  // Opens `path`, which must exist, for direct writes; nullptr where the file
+  // system does not support them. kIo for any other failure to open.
+  static std::unique_ptr<DirectWriter> Open(const std::string& path, std::size_t max_bytes_in_flight);
+
+  DirectWriter(const DirectWriter&) = delete;
+  DirectWriter& operator=(const DirectWriter&) = delete;
+  // Stops the thread; writes still queued are dropped (Drain() keeps them).
+  ~DirectWriter();
+
+  // Queues `bytes` for writing at `offset`, a multiple of kAlignment (else
+  // kInvalidArgument), followed by zeros up to the next multiple. Safe to call
+  // from several threads at once for ranges that do not overlap. Waits while
+  // max_bytes_in_flight bytes are queued (a single larger write still goes).
+  // Throws an earlier write's failure.
+  void Write(std::uint64_t offset, std::span<const std::uint8_t> bytes);
+
+  // Waits until every queued write is on its way to the disk (not fsynced);
+  // throws the first failure.
+  void Drain();
+
+  // Whether a device refused an aligned direct write and later writes went
+  // through the page cache.
+  bool fell_back() const;
+
+ private:
+  struct AlignedFree {
+    void operator()(std::uint8_t* p) const;
+  };
+  using Buffer = std::unique_ptr<std::uint8_t[], AlignedFree>;
+  struct Buffered {
+    Buffer buffer;
+    std::size_t capacity = 0;
+  };
+  struct Job {
+    std::uint64_t offset = 0;
+    std::size_t length = 0;  // a multiple of kAlignment
+    Buffered memory;
+  };
+
+  DirectWriter(std::string path, UniqueFd direct, UniqueFd plain, std::size_t max_bytes_in_flight);
+  Buffered Acquire(std::size_t capacity, std::unique_lock<std::mutex>& lock);
+  void ThrowIfFailed() const;
+  void Run();
+  void WriteFully(const Job& job);
+
+  const std::string path_;
+  const UniqueFd direct_;
+  const UniqueFd plain_;  // for the fallback
+  const std::size_t max_bytes_in_flight_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable work_;      // a job was queued, or stopping
+  std::condition_variable progress_;  // a job finished: memory or Drain may proceed
+  std::deque<Job> queue_;
+  std::vector<Buffered> free_;
+  std::size_t allocated_bytes_ = 0;
+  std::size_t jobs_unfinished_ = 0;  // queued or being written
+  std::exception_ptr failure_;
+  bool fell_back_ = false;
+  bool stopping_ = false;
+  std::thread thread_;  // last: starts once the members above exist
+};
+
+}  // namespace octocosm

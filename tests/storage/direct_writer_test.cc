@@ -1,0 +1,118 @@
+// DirectWriter: what is queued lands where it was asked to, zero-padded to
+// the alignment, from any number of threads and through a pool smaller than
+// the data; a misplaced offset is refused; a failed write is reported by the
+// next call rather than lost.
+#include "storage/direct_writer.h"
+
+#include <sys/resource.h>
+
+#include <gtest/gtest.h>
+
+#include <csignal>
+#include <thread>
+#include <vector>
+
+#include "storage/error.h"
+#include "tests/storage/storage_test_util.h"
+#include "tests/support/temp_dir.h"
+
+namespace octocosm {
+namespace {
+
+using storagetest::ExpectError;
+using storagetest::ScratchDirectory;
+
+constexpr std::size_t kAlign = DirectWriter::kAlignment;
+
+// Distinct bytes for write `n`, so a write landing in the wrong place shows.
+std::vector<std::uint8_t> Pattern(std::size_t n, std::size_t length) {
+  std::vector<std::uint8_t> bytes(length);
+  for (std::size_t i = 0; i < length; ++i) bytes[i] = static_cast<std::uint8_t>(1 + (n * 131 + i * 7) % 251);
+  return bytes;
+}
+
+// Opens a direct writer on a new file in `dir`, or skips the test where the
+// temporary directory's file system has no direct I/O (tmpfs).
+std::unique_ptr<DirectWriter> OpenOrSkip(const std::string& path, std::size_t in_flight) {
+  WritableFile::Create(path).Close();
+  return DirectWriter::Open(path, in_flight);
+}
+
+TEST(DirectWriter, WritesLandAtTheirOffsetsZeroPaddedFromSeveralThreads) {
+  ScratchDirectory dir;
+  const std::string path = dir.File("direct");
+  // A pool of two alignment units: most writes wait for an earlier one's
+  // buffer, and the 3-unit writes are larger than the whole pool.
+  auto writer = OpenOrSkip(path, 2 * kAlign);
+  if (!writer) GTEST_SKIP() << "no direct I/O on " << dir.path();
+  constexpr std::size_t kWrites = 200;
+  constexpr std::size_t kSlot = 4 * kAlign;  // each write owns one slot
+  std::vector<std::size_t> lengths(kWrites);
+  for (std::size_t n = 0; n < kWrites; ++n) lengths[n] = 1 + (n * 4099) % (3 * kAlign);
+  std::vector<std::thread> threads;
+  for (std::size_t t = 0; t < 3; ++t) {
+    threads.emplace_back([&, t] {
+      for (std::size_t n = t; n < kWrites; n += 3) writer->Write(n * kSlot, Pattern(n, lengths[n]));
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  writer->Drain();
+  writer.reset();
+
+  const std::vector<std::uint8_t> file = testing_support::ReadFileBytes(path);
+  const std::size_t last = kWrites - 1;
+  ASSERT_EQ(file.size(), last * kSlot + (lengths[last] + kAlign - 1) / kAlign * kAlign);
+  for (std::size_t n = 0; n < kWrites; ++n) {
+    const std::vector<std::uint8_t> expected = Pattern(n, lengths[n]);
+    const std::size_t slot_end = std::min(file.size(), (n + 1) * kSlot);
+    ASSERT_TRUE(std::equal(expected.begin(), expected.end(), file.begin() + static_cast<std::ptrdiff_t>(n * kSlot)))
+        << "write " << n;
+    for (std::size_t i = n * kSlot + lengths[n]; i < slot_end; ++i) ASSERT_EQ(file[i], 0) << "write " << n << " byte " << i;
+  }
+}
+
+TEST(DirectWriter, RefusesAnOffsetOffTheAlignment) {
+  ScratchDirectory dir;
+  auto writer = OpenOrSkip(dir.File("direct"), 1 << 20);
+  if (!writer) GTEST_SKIP() << "no direct I/O on " << dir.path();
+  const std::string message = ExpectError(ErrorKind::kInvalidArgument, [&] { writer->Write(100, Pattern(0, 10)); });
+  EXPECT_NE(message.find("offset 100"), std::string::npos) << message;
+  writer->Write(0, {});  // nothing to write is no error
+  writer->Drain();
+}
+
+// Runs in a child process: lowers the file-size limit so that a write fails.
+[[noreturn]] void FailAWriteAndReport(const std::string& path) {
+  std::signal(SIGXFSZ, SIG_IGN);
+  auto writer = OpenOrSkip(path, 1 << 20);
+  if (!writer) std::_Exit(0);
+  rlimit limit{};
+  limit.rlim_cur = limit.rlim_max = 64 * kAlign;
+  if (::setrlimit(RLIMIT_FSIZE, &limit) != 0) std::_Exit(10);
+  writer->Write(0, Pattern(0, kAlign));
+  writer->Write(128 * kAlign, Pattern(1, kAlign));  // beyond the limit
+  try {
+    writer->Drain();
+    std::_Exit(11);
+  } catch (const Error& error) {
+    const std::string what = error.what();
+    if (error.kind() != ErrorKind::kIo || what.find(path) == std::string::npos ||
+        what.find("offset " + std::to_string(128 * kAlign)) == std::string::npos) {
+      std::_Exit(12);
+    }
+  }
+  try {  // and every later call says so too
+    writer->Write(2 * kAlign, Pattern(2, 10));
+    std::_Exit(13);
+  } catch (const Error& error) {
+    std::_Exit(error.kind() == ErrorKind::kIo ? 0 : 14);
+  }
+}
+
+TEST(DirectWriter, AFailedWriteIsReportedByTheNextCall) {
+  ScratchDirectory dir;
+  EXPECT_EXIT(FailAWriteAndReport(dir.File("limited")), ::testing::ExitedWithCode(0), "");
+}
+
+}  // namespace
+}  // namespace octocosm
