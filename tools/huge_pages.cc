@@ -1,7 +1,9 @@
 #include "tools/huge_pages.h"
 
+#include <sys/mman.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 
@@ -30,6 +32,17 @@ void ReexecuteIngestWithHugePages(int argc, char** argv) {
   ::execv("/proc/self/exe", argv);
   // Still here: no /proc, say. Run on as we are; a child this process starts
   // keeps the tunable, harmlessly.
+}
+
+bool PreferSmallPages(void* begin, std::size_t bytes) {
+  const auto page = static_cast<std::uintptr_t>(::sysconf(_SC_PAGESIZE));
+  if (page == 0 || begin == nullptr) return false;
+  const auto start = reinterpret_cast<std::uintptr_t>(begin);
+  if (bytes > UINTPTR_MAX - start) return false;
+  const std::uintptr_t first = (start + page - 1) / page * page;  // madvise wants whole pages
+  const std::uintptr_t last = (start + bytes) / page * page;
+  if (last <= first) return false;
+  return ::madvise(reinterpret_cast<void*>(first), last - first, MADV_NOHUGEPAGE) == 0;
 }
 
 }  // namespace octocosm

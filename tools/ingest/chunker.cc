@@ -11,6 +11,7 @@
 #include <unordered_map>
 
 #include "storage/error.h"
+#include "tools/huge_pages.h"
 #include "tools/page_warmer.h"
 #include "tools/parallel_for.h"
 
@@ -265,12 +266,15 @@ bool Chunker::Oversized(const Chunk& chunk) const {
 std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                           ParticleChunk& resident) {
   resident.clear();
-  // Each column reserved whole; the reader fills them on this thread while a
-  // warmer faults their fresh pages in on another.
+  // Each column reserved whole, on small pages (filled once and kept:
+  // tools/huge_pages.h); the reader fills them on this thread while a warmer
+  // faults their fresh pages in on another.
   std::vector<PageWarmer::Range> fresh;
   const auto reserve = [&](auto& column, std::size_t width) {
     column.reserve(width * expected_points);
-    if (column.capacity() != 0) fresh.push_back({column.data(), column.capacity() * sizeof(column[0])});
+    if (column.capacity() == 0) return;
+    PreferSmallPages(column.data(), column.capacity() * sizeof(column[0]));
+    fresh.push_back({column.data(), column.capacity() * sizeof(column[0])});
   };
   reserve(resident.position, 3);
   reserve(resident.mass, 1);
