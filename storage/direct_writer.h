@@ -11,9 +11,9 @@
 // copies the bytes into an aligned buffer from a reused pool (bounded by
 // `max_bytes_in_flight`) and zero-pads them to a whole number of
 // kAlignment units: the caller owns the range up to that boundary. Where the
-// file system refuses O_DIRECT (tmpfs) Open() returns nullptr, and where a
-// device refuses a write for its alignment the writer falls back to an
-// ordinary write for the rest of its life: slower, never wrong.
+// file system refuses O_DIRECT (tmpfs before Linux 6.6) Open() returns
+// nullptr, and where a device refuses a write for its alignment the writer
+// falls back to ordinary writes for the rest of its life: slower, never wrong.
 //
 // Errors surface late: a failed write is reported (kIo, naming the file and
 // offset) by the next Write() or by Drain(); writes queued behind it are

@@ -5,14 +5,19 @@
 #include "storage/direct_writer.h"
 
 #include <sys/resource.h>
+#include <sys/vfs.h>
+#include <unistd.h>
 
 #include <gtest/gtest.h>
 
 #include <csignal>
+#include <filesystem>
 #include <thread>
 #include <vector>
 
 #include "storage/error.h"
+#include "storage/page_file_reader.h"
+#include "storage/page_file_writer.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/support/temp_dir.h"
 
@@ -112,6 +117,29 @@ TEST(DirectWriter, RefusesAnOffsetOffTheAlignment) {
 TEST(DirectWriter, AFailedWriteIsReportedByTheNextCall) {
   ScratchDirectory dir;
   EXPECT_EXIT(FailAWriteAndReport(dir.File("limited")), ::testing::ExitedWithCode(0), "");
+}
+
+// Linux before 6.6 refuses O_DIRECT on tmpfs (Open returns nullptr and the
+// page file goes through the page cache); later kernels take it. Either
+// way a page file written to /dev/shm reads back whole.
+TEST(DirectWriter, APageFileOnTmpfsReadsBackWhole) {
+  constexpr long kTmpfsMagic = 0x01021994;
+  struct statfs info {};
+  if (::statfs("/dev/shm", &info) != 0 || static_cast<long>(info.f_type) != kTmpfsMagic) {
+    GTEST_SKIP() << "no tmpfs at /dev/shm";
+  }
+  const std::filesystem::path dir = "/dev/shm/octocosm-direct-writer-test-" + std::to_string(::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string path = (dir / "blocks.pages").string();
+  {
+    PageFileWriter writer(path, 4096, 7, 0);
+    for (std::uint64_t key = 1; key <= 5; ++key) writer.AddBlock(key, Pattern(key, 3000 * key), key);
+    writer.Finish();
+  }
+  auto reader = PageFileReader::Open(path);
+  for (std::uint64_t key = 1; key <= 5; ++key) EXPECT_EQ(reader->ReadBlock(key), Pattern(key, 3000 * key)) << key;
+  reader.reset();
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
