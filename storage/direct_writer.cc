@@ -13,9 +13,6 @@
 namespace octocosm {
 namespace {
 
-// Linux caps one write at just under 2 GiB; stay well below (and aligned).
-constexpr std::size_t kMaxIoBytes = std::size_t{1} << 30;
-
 std::size_t RoundUp(std::size_t bytes) {
   return (bytes + DirectWriter::kAlignment - 1) / DirectWriter::kAlignment * DirectWriter::kAlignment;
 }
@@ -56,11 +53,6 @@ DirectWriter::~DirectWriter() {
 
 void DirectWriter::ThrowIfFailed() const {
   if (failure_) std::rethrow_exception(failure_);
-}
-
-bool DirectWriter::fell_back() const {
-  std::lock_guard lock(mutex_);
-  return fell_back_;
 }
 
 DirectWriter::Buffered DirectWriter::Acquire(std::size_t capacity, std::unique_lock<std::mutex>& lock) {
@@ -124,25 +116,16 @@ void DirectWriter::Drain() {
 }
 
 void DirectWriter::WriteFully(const Job& job) {
-  std::size_t done = 0;
-  bool direct = !fell_back_;  // only this thread changes it
-  while (done < job.length) {
-    const std::size_t want = std::min(job.length - done, kMaxIoBytes);
-    const int fd = direct ? direct_.get() : plain_.get();
-    const ssize_t wrote = ::pwrite(fd, job.memory.buffer.get() + done, want, static_cast<off_t>(job.offset + done));
-    if (wrote < 0) {
-      if (errno == EINTR) continue;
-      if (errno == EINVAL && direct) {  // the device wants a coarser alignment
-        direct = false;
-        std::lock_guard lock(mutex_);
-        fell_back_ = true;
-        continue;
-      }
-      throw IoErrorFromErrno(path_, "direct write of " + std::to_string(job.length) + " bytes at offset " +
-                                        std::to_string(job.offset),
-                             errno);
-    }
-    done += static_cast<std::size_t>(wrote);
+  const std::span<const std::uint8_t> bytes(job.memory.buffer.get(), job.length);
+  int error = fell_back_ ? EINVAL : WriteAllAt(direct_.get(), job.offset, bytes);
+  if (error == EINVAL) {  // the device wants a coarser alignment: write through the page cache
+    fell_back_ = true;
+    error = WriteAllAt(plain_.get(), job.offset, bytes);
+  }
+  if (error != 0) {
+    throw IoErrorFromErrno(path_, "write of " + std::to_string(job.length) + " bytes at offset " +
+                                      std::to_string(job.offset),
+                           error);
   }
 }
 

@@ -60,10 +60,6 @@ class DirectWriter {
   // throws the first failure.
   void Drain();
 
-  // Whether a device refused an aligned direct write and later writes went
-  // through the page cache.
-  bool fell_back() const;
-
  private:
   struct AlignedFree {
     void operator()(std::uint8_t* p) const;
@@ -98,8 +94,8 @@ class DirectWriter {
   std::size_t allocated_bytes_ = 0;
   std::size_t jobs_unfinished_ = 0;  // queued or being written
   std::exception_ptr failure_;
-  bool fell_back_ = false;
   bool stopping_ = false;
+  bool fell_back_ = false;  // the writer thread's alone: no lock
   std::thread thread_;  // last: starts once the members above exist
 };
 

@@ -87,18 +87,25 @@ WritableFile WritableFile::Create(const std::string& path) {
   return WritableFile(path, UniqueFd(fd));
 }
 
-void WritableFile::WriteUnbufferedAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) const {
+int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::uint8_t> bytes) {
   std::size_t done = 0;
   while (done < bytes.size()) {
     std::size_t want = std::min(bytes.size() - done, kMaxIoBytes);
-    ssize_t wrote = ::pwrite(fd_.get(), bytes.data() + done, want, static_cast<off_t>(offset + done));
+    ssize_t wrote = ::pwrite(fd, bytes.data() + done, want, static_cast<off_t>(offset + done));
     if (wrote < 0) {
       if (errno == EINTR) continue;
-      throw IoErrorFromErrno(path_, "pwrite of " + std::to_string(bytes.size()) + " bytes at offset " +
-                                        std::to_string(offset),
-                             errno);
+      return errno;
     }
     done += static_cast<std::size_t>(wrote);
+  }
+  return 0;
+}
+
+void WritableFile::WriteUnbufferedAt(std::uint64_t offset, std::span<const std::uint8_t> bytes) const {
+  if (const int error = WriteAllAt(fd_.get(), offset, bytes); error != 0) {
+    throw IoErrorFromErrno(path_, "pwrite of " + std::to_string(bytes.size()) + " bytes at offset " +
+                                      std::to_string(offset),
+                           error);
   }
 }
 

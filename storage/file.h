@@ -119,6 +119,11 @@ class WritableFile {
   std::uint64_t size_ = 0;
 };
 
+// pwrite(2) of all of `bytes` at `offset`, retrying interrupted and partial
+// writes. Returns 0, or the errno of the write that failed (the caller names
+// the file in its error, or tries another way).
+int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::uint8_t> bytes);
+
 // rename(2): atomically replaces `to` on the same file system.
 void RenameFile(const std::string& from, const std::string& to);
 // fsync on the directory, so that renames and creations in it are durable.

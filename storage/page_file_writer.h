@@ -3,10 +3,9 @@
 // then the header. Several threads may add blocks at once: each takes its
 // pages under a lock and writes them outside it, with direct I/O on a
 // background thread where the file system allows it (storage/direct_writer.h).
-// Crash-safe: everything goes
-// to `<path>.tmp`, which is fsynced and renamed to `<path>` only by Finish(),
-// followed by an fsync of the directory. A writer destroyed before Finish()
-// removes its .tmp file.
+// Crash-safe: everything goes to `<path>.tmp`, which is fsynced and renamed
+// to `<path>` only by Finish(), followed by an fsync of the directory. A
+// writer destroyed before Finish() removes its .tmp file.
 #pragma once
 
 #include <cstdint>

@@ -14,10 +14,11 @@
 // One exception: memory that is filled once and kept (a resident epoch's
 // columns) is better on 4 KiB pages. On a virtual machine whose host backs
 // guest memory lazily, a fresh huge page costs more per byte than fresh small
-// pages (2.3-2.8 s per GiB against 0.5-1.4 s measured here): the guest
-// kernel hands huge pages out of whole 2 MiB blocks that it has given back to
-// the host, small pages out of memory it still holds. What the build allocates
-// and frees again stays on huge pages: there a page is reused, not fresh.
+// pages (2.3-2.8 s per GiB against 0.5-1.4 s measured here), most likely
+// because the guest kernel reports whole free 2 MiB blocks back to the host
+// (free page reporting), which must then back them again, while small pages
+// also come out of memory it still holds. What the build allocates and frees
+// again stays on huge pages: there a page is reused, not fresh.
 #pragma once
 
 #include <cstddef>
