@@ -42,6 +42,8 @@ std::string VmFlagsAt(const void* address) {
     std::uintptr_t begin = 0, end = 0;
     char dash = 0;
     std::istringstream range(line);
+    // A mapping's first line ("7f00-7f80 rw-p 00000000 00:00 0") has its
+    // first colon after a space; its fields ("Size:   8 kB") before one.
     if (range >> std::hex >> begin >> dash >> end && dash == '-' && line.find(':') > line.find(' ')) {
       inside = begin <= at && at < end;
     } else if (inside && line.rfind("VmFlags:", 0) == 0) {
