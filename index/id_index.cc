@@ -25,26 +25,32 @@ std::uint32_t GetU32(const Bytes& in, std::size_t offset) { return octocosm::Get
 
 }  // namespace
 
+IdIndexEpochWriter::IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size)
+    : store_(store),
+      bucket_pairs_(std::max<std::size_t>((page_size - 16) / 16, 1)),
+      bucket_(16 + 16 * bucket_pairs_) {}
+
 void IdIndexEpochWriter::Add(std::uint64_t id, NodeKey leaf) {
   if (finished_) throw Error::InvalidArgument("IdIndexEpochWriter: Add after Finish");
   if (total_ > 0 && id < last_id_) throw Error::InvalidArgument("IdIndexEpochWriter: IDs must arrive in order");
-  if (pairs_.empty()) first_ids_.push_back(id);
-  pairs_.push_back(id);
-  pairs_.push_back(leaf.value());
+  if (bucket_fill_ == 0) first_ids_.push_back(id);
+  // Straight into the block: a pair costs two stores, no vector growth.
+  std::uint8_t* pair = bucket_.data() + 16 + 16 * bucket_fill_;
+  PutU64(pair, id);
+  PutU64(pair + 8, leaf.value());
   last_id_ = id;
   ++total_;
-  if (pairs_.size() == 2 * bucket_pairs_) FlushBucket();
+  if (++bucket_fill_ == bucket_pairs_) FlushBucket();
 }
 
 void IdIndexEpochWriter::FlushBucket() {
-  if (pairs_.empty()) return;
-  Bytes block(16 + 8 * pairs_.size());
-  PutU32(block.data(), kBucketMagic);
-  PutU32(block.data() + 4, kVersion);
-  PutU64(block.data() + 8, pairs_.size() / 2);
-  for (std::size_t i = 0; i < pairs_.size(); ++i) PutU64(block.data() + 16 + 8 * i, pairs_[i]);
-  store_.AddBlock(first_ids_.size() - 1, block, pairs_.size() / 2);
-  pairs_.clear();
+  if (bucket_fill_ == 0) return;
+  PutU32(bucket_.data(), kBucketMagic);
+  PutU32(bucket_.data() + 4, kVersion);
+  PutU64(bucket_.data() + 8, bucket_fill_);
+  store_.AddBlock(first_ids_.size() - 1, std::span<const std::uint8_t>(bucket_.data(), 16 + 16 * bucket_fill_),
+                  bucket_fill_);
+  bucket_fill_ = 0;
 }
 
 void IdIndexEpochWriter::Finish() {

@@ -36,8 +36,7 @@ inline constexpr std::uint64_t kIdIndexDirectoryKey = ~std::uint64_t{0};
 class IdIndexEpochWriter {
  public:
   // Buckets of (page_size - 16) / 16 pairs fill one page each.
-  IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size)
-      : store_(store), bucket_pairs_(std::max<std::size_t>((page_size - 16) / 16, 1)) {}
+  IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size);
   // Pairs must arrive in non-decreasing ID order.
   void Add(std::uint64_t id, NodeKey leaf);
   // Writes the last bucket and the directory.
@@ -48,7 +47,8 @@ class IdIndexEpochWriter {
 
   StoreWriter& store_;
   std::size_t bucket_pairs_;
-  std::vector<std::uint64_t> pairs_;  // id, key, id, key, ...
+  Bytes bucket_;                 // the bucket block being filled
+  std::size_t bucket_fill_ = 0;  // pairs in it
   std::vector<std::uint64_t> first_ids_;
   std::uint64_t total_ = 0;
   std::uint64_t last_id_ = 0;
