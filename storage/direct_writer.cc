@@ -115,37 +115,51 @@ void DirectWriter::Drain() {
   ThrowIfFailed();
 }
 
-void DirectWriter::WriteFully(const Job& job) {
-  const std::span<const std::uint8_t> bytes(job.memory.buffer.get(), job.length);
-  int error = fell_back_ ? EINVAL : WriteAllAt(direct_.get(), job.offset, bytes);
+void DirectWriter::WriteFully(const std::vector<Job>& batch) {
+  std::vector<std::span<const std::uint8_t>> parts;
+  parts.reserve(batch.size());
+  for (const Job& job : batch) parts.emplace_back(job.memory.buffer.get(), job.length);
+  const std::uint64_t offset = batch.front().offset;
+  int error = fell_back_ ? EINVAL : WriteAllAt(direct_.get(), offset, parts);
   if (error == EINVAL) {  // the device wants a coarser alignment: write through the page cache
     fell_back_ = true;
-    error = WriteAllAt(plain_.get(), job.offset, bytes);
+    error = WriteAllAt(plain_.get(), offset, parts);
   }
   if (error != 0) {
-    throw IoErrorFromErrno(path_, "write of " + std::to_string(job.length) + " bytes at offset " +
-                                      std::to_string(job.offset),
+    const std::uint64_t length = batch.back().offset + batch.back().length - offset;
+    throw IoErrorFromErrno(path_, "write of " + std::to_string(length) + " bytes at offset " + std::to_string(offset),
                            error);
   }
 }
 
 void DirectWriter::Run() {
   std::unique_lock lock(mutex_);
+  std::vector<Job> batch;
   for (;;) {
     work_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
     if (stopping_) return;
-    Job job = std::move(queue_.front());
-    queue_.pop_front();
+    // The front job, and the queued jobs that continue it on disk, in one
+    // call: small blocks written one by one (an ID index's 64 KiB buckets)
+    // would each wait for the disk (64 KiB direct writes one at a time ran at
+    // a quarter of the disk's speed here).
+    batch.clear();
+    std::size_t batch_bytes = 0;
+    do {
+      batch_bytes += queue_.front().length;
+      batch.push_back(std::move(queue_.front()));
+      queue_.pop_front();
+    } while (!queue_.empty() && batch.size() < kMaxBatchJobs && batch_bytes < kMaxBatchBytes &&
+             queue_.front().offset == batch.back().offset + batch.back().length);
     lock.unlock();
     std::exception_ptr failed;
     try {
-      WriteFully(job);
+      WriteFully(batch);
     } catch (...) {
       failed = std::current_exception();
     }
     lock.lock();
-    free_.push_back(std::move(job.memory));
-    --jobs_unfinished_;
+    for (Job& job : batch) free_.push_back(std::move(job.memory));
+    jobs_unfinished_ -= batch.size();
     if (failed && !failure_) {
       failure_ = failed;
       jobs_unfinished_ -= queue_.size();  // dropped: the file is lost anyway

@@ -10,7 +10,9 @@
 // logical block; kAlignment (4 KiB) covers every common device. Write()
 // copies the bytes into an aligned buffer from a reused pool (bounded by
 // `max_bytes_in_flight`) and zero-pads them to a whole number of
-// kAlignment units: the caller owns the range up to that boundary. Where the
+// kAlignment units: the caller owns the range up to that boundary. Queued
+// writes that continue each other on disk go out in one call (pwritev): one
+// small write at a time would wait for the disk once each. Where the
 // file system refuses O_DIRECT (tmpfs before Linux 6.6) Open() returns
 // nullptr, and where a device refuses a write for its alignment the writer
 // falls back to ordinary writes for the rest of its life: slower, never wrong.
@@ -39,6 +41,9 @@ namespace octocosm {
 class DirectWriter {
  public:
   static constexpr std::size_t kAlignment = 4096;
+  // At most this many queued writes, and bytes, go to the disk in one call.
+  static constexpr std::size_t kMaxBatchJobs = 64;
+  static constexpr std::size_t kMaxBatchBytes = std::size_t{4} << 20;
 
   // Opens `path`, which must exist, for direct writes; nullptr where the file
   // system does not support them. kIo for any other failure to open.
@@ -79,7 +84,8 @@ class DirectWriter {
   Buffered Acquire(std::size_t capacity, std::unique_lock<std::mutex>& lock);
   void ThrowIfFailed() const;
   void Run();
-  void WriteFully(const Job& job);
+  // Writes jobs that follow each other on disk with one call.
+  void WriteFully(const std::vector<Job>& batch);
 
   const std::string path_;
   const UniqueFd direct_;

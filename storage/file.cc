@@ -3,10 +3,12 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <sys/stat.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <climits>
 #include <filesystem>
 #include <system_error>
 
@@ -97,6 +99,35 @@ int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::uint8_t> bytes
       return errno;
     }
     done += static_cast<std::size_t>(wrote);
+  }
+  return 0;
+}
+
+int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::span<const std::uint8_t>> parts) {
+  std::vector<iovec> pending;
+  pending.reserve(parts.size());
+  for (const auto& part : parts) {
+    if (!part.empty()) pending.push_back({const_cast<std::uint8_t*>(part.data()), part.size()});
+  }
+  std::size_t first = 0;
+  while (first < pending.size()) {
+    const int count = static_cast<int>(std::min<std::size_t>(pending.size() - first, IOV_MAX));
+    ssize_t wrote = ::pwritev(fd, &pending[first], count, static_cast<off_t>(offset));
+    if (wrote < 0) {
+      if (errno == EINTR) continue;
+      return errno;
+    }
+    if (wrote == 0) return EIO;  // no progress on a regular file: do not spin
+    offset += static_cast<std::uint64_t>(wrote);
+    // Skip what went out: whole parts, then the front of a part cut short.
+    for (auto left = static_cast<std::size_t>(wrote); left > 0;) {
+      iovec& part = pending[first];
+      const std::size_t taken = std::min(left, part.iov_len);
+      part.iov_base = static_cast<std::uint8_t*>(part.iov_base) + taken;
+      part.iov_len -= taken;
+      left -= taken;
+      if (part.iov_len == 0) ++first;
+    }
   }
   return 0;
 }

@@ -123,6 +123,9 @@ class WritableFile {
 // writes. Returns 0, or the errno of the write that failed (the caller names
 // the file in its error, or tries another way).
 int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::uint8_t> bytes);
+// The same for `parts` written one after another from `offset` (pwritev(2),
+// at most IOV_MAX parts a call).
+int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::span<const std::uint8_t>> parts);
 
 // rename(2): atomically replaces `to` on the same file system.
 void RenameFile(const std::string& from, const std::string& to);

@@ -76,6 +76,42 @@ TEST(DirectWriter, WritesLandAtTheirOffsetsZeroPaddedFromSeveralThreads) {
   }
 }
 
+TEST(DirectWriter, WritesThatFollowEachOtherLandWhole) {
+  // Writes that continue each other on disk go out several to a call; two
+  // threads each write one stream of them, so the queue mixes the streams.
+  ScratchDirectory dir;
+  const std::string path = dir.File("direct");
+  auto writer = OpenOrSkip(path, 64 * kAlign);
+  if (!writer) GTEST_SKIP() << "no direct I/O on " << dir.path();
+  constexpr std::size_t kWrites = 300;
+  constexpr std::size_t kStreamBytes = kWrites * 3 * kAlign;  // the most one stream can take
+  std::vector<std::vector<std::uint8_t>> expected(2);
+  std::vector<std::thread> threads;
+  for (std::size_t t = 0; t < 2; ++t) {
+    std::vector<std::vector<std::uint8_t>> writes;
+    for (std::size_t n = 0; n < kWrites; ++n) {
+      writes.push_back(Pattern(t * kWrites + n, (1 + (n + t) % 3) * kAlign));
+      expected[t].insert(expected[t].end(), writes.back().begin(), writes.back().end());
+    }
+    threads.emplace_back([&writer, t, writes = std::move(writes)] {
+      std::uint64_t offset = t * kStreamBytes;
+      for (const auto& bytes : writes) {
+        writer->Write(offset, bytes);
+        offset += bytes.size();
+      }
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  writer->Drain();
+  writer.reset();
+
+  const std::vector<std::uint8_t> file = testing_support::ReadFileBytes(path);
+  ASSERT_EQ(file.size(), kStreamBytes + expected[1].size());
+  ASSERT_TRUE(std::equal(expected[0].begin(), expected[0].end(), file.begin()));
+  for (std::size_t i = expected[0].size(); i < kStreamBytes; ++i) ASSERT_EQ(file[i], 0) << "byte " << i;
+  ASSERT_TRUE(std::equal(expected[1].begin(), expected[1].end(), file.begin() + kStreamBytes));
+}
+
 TEST(DirectWriter, RefusesAnOffsetOffTheAlignment) {
   ScratchDirectory dir;
   auto writer = OpenOrSkip(dir.File("direct"), 1 << 20);

@@ -4,6 +4,9 @@
 // positioned write into a hole must land.
 #include "storage/file.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -96,6 +99,26 @@ TEST(WritableFile, ReservedRangesFilledFromSeveralThreads) {
   const std::vector<std::uint8_t> tail = Bytes("tail");
   expected.insert(expected.end(), tail.begin(), tail.end());
   file.Close();
+  EXPECT_EQ(ReadAll(path), expected);
+}
+
+TEST(WriteAllAt, PartsLandOneAfterAnotherBeyondOneCallsWorth) {
+  // More parts than one pwritev takes (IOV_MAX, 1024 on Linux), empty ones among them.
+  testing_support::TempDir dir("file-test");
+  const std::string path = (dir.path() / "parts").string();
+  WritableFile::Create(path).Close();
+  std::vector<std::vector<std::uint8_t>> parts(2500);
+  std::vector<std::uint8_t> expected(100, 0);  // the offset's leading hole
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    parts[p].resize(p % 5 == 0 ? 0 : 1 + p % 37);
+    for (std::size_t i = 0; i < parts[p].size(); ++i) parts[p][i] = static_cast<std::uint8_t>(p * 3 + i);
+    expected.insert(expected.end(), parts[p].begin(), parts[p].end());
+  }
+  std::vector<std::span<const std::uint8_t>> spans(parts.begin(), parts.end());
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  ASSERT_GE(fd, 0);
+  EXPECT_EQ(WriteAllAt(fd, 100, spans), 0);
+  ::close(fd);
   EXPECT_EQ(ReadAll(path), expected);
 }
 
