@@ -419,6 +419,33 @@ TEST_F(IngestTest, SeriesLinksEveryParticleToBothNeighbours) {
   for (std::uint32_t e = 0; e < kEpochs; ++e) EXPECT_EQ(FirstDifference(trees[e], CheckTree(other, e)), "") << e;
 }
 
+TEST_F(IngestTest, IdIndexFindsEveryParticleWhetherItsPairsWerePlacedOrSorted) {
+  // IDs 1000 + 3i fit a table (one slot per value of their range); IDs
+  // 2^40 apart do not, and go through the external sorter.
+  for (const bool sparse : {false, true}) {
+    SCOPED_TRACE(sparse ? "sparse IDs" : "compact IDs");
+    auto particles = Clustered(12000, 9, 20.0);
+    if (sparse) {
+      for (std::size_t i = 0; i < particles.size(); ++i) particles[i].id = (std::uint64_t{i} + 1) << 40;
+    }
+    const std::string name = sparse ? "sparse" : "compact";
+    IngestOptions o = RawOptions({WriteRaw(dir_ / (name + ".raw"), particles)}, name);
+    o.tree.capacity = 500;
+    o.max_chunk_points = 2000;
+    const IngestReport report = Ingest(o);
+    ASSERT_EQ(report.epochs.size(), 1u);
+    EXPECT_EQ(report.epochs[0].ids_sorted, sparse);
+    const Dataset dataset = Dataset::Open(o.output);
+    const TreeCheck check = CheckTree(dataset, 0);
+    IdIndexReader ids(dataset.id_index_directory());
+    for (const Particle& p : particles) ASSERT_EQ(ids.Find(0, p.id), check.leaf_points.at(p.id).leaf) << p.id;
+    EXPECT_FALSE(ids.Find(0, sparse ? (std::uint64_t{5} << 40) + 1 : 1001).has_value());
+    EXPECT_FALSE(ids.Find(0, 0).has_value());
+    EXPECT_FALSE(ids.Find(0, ~std::uint64_t{0}).has_value());
+  }
+  EXPECT_TRUE(TempIsEmpty());
+}
+
 TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
   const auto e0 = Clustered(20000, 5, 20.0);
   auto e1 = e0;

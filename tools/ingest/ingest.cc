@@ -25,6 +25,7 @@
 #include "storage/error.h"
 #include "storage/store_writer.h"
 #include "tools/ingest/chunker.h"
+#include "tools/ingest/dense_id_table.h"
 #include "tools/ingest/epoch_join.h"
 #include "tools/ingest/external_sorter.h"
 #include "tools/progress.h"
@@ -176,8 +177,11 @@ struct EpochBuild {
   const Cube* cube = nullptr;
   const SubtreeOptions* tree = nullptr;
   StoreWriter* store = nullptr;
-  ExternalSorter<IdLeafRecord>* id_pairs = nullptr;  // null without IDs
-  std::mutex mutex;  // guards report (store and id_pairs take blocks and pairs from several threads)
+  // Where the leaves' (ID, leaf) pairs go: the table when the epoch's IDs are
+  // unique and compact, else the sorter; both null without IDs.
+  DenseIdTable* id_table = nullptr;
+  ExternalSorter<IdLeafRecord>* id_pairs = nullptr;
+  std::mutex mutex;  // guards report (the store, the table and the sorter take blocks and pairs from several threads)
   EpochReport* report = nullptr;
   Progress* progress = nullptr;
 
@@ -186,6 +190,7 @@ struct EpochBuild {
   // IDs go to the ID index.
   void Emit(NodeKey key, const NodePoints& points, bool is_leaf, Bytes& block) {
     EncodeBlock(points, key, *cube, block);
+    if (is_leaf && id_table != nullptr) id_table->Add(points.id, key);
     std::vector<IdLeafRecord> pairs;
     if (is_leaf && id_pairs != nullptr) {
       pairs.reserve(points.id.size());
@@ -302,6 +307,8 @@ IngestReport Ingest(const IngestOptions& options) {
   // A third of the pairs' share: while one run is sorted (with a scratch as
   // large) the workers fill the next (tools/ingest/external_sorter.h).
   const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 30 / sizeof(IdLeafRecord), 1024));
+  // Or, for unique IDs in a compact range, the whole share as one table.
+  const std::uint64_t id_table_slots = budget / 10 / sizeof(std::uint64_t);
 
   // Open the first epoch to learn what the series carries.
   std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);
@@ -449,11 +456,13 @@ IngestReport Ingest(const IngestOptions& options) {
                           expected * Chunker::kResidentScratchBytesPerPoint <= budget * 4 / 10;
     ParticleChunk resident_points;
     std::vector<Chunk> chunks;
+    IdCensus id_census(id_table_slots);
     {
       Progress progress(label + ": read + chunk", expected, "points");
       PointPass counted = [&](const std::function<void(const ParticleChunk&)>& consume) {
         pass([&](const ParticleChunk& chunk) {
           consume(chunk);
+          id_census.Add(chunk.id);
           progress.Add(chunk.size());
         });
       };
@@ -482,8 +491,12 @@ IngestReport Ingest(const IngestOptions& options) {
 
     // 3. build, 4. top levels.
     store.BeginEpoch(header.time, header.redshift);
+    std::unique_ptr<DenseIdTable> id_table;
     std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
-    if (has_id) {
+    if (has_id && id_census.dense() && id_census.count() == epoch_report.points) {
+      id_table = std::make_unique<DenseIdTable>(id_census.first(), id_census.span());
+    } else if (has_id) {
+      epoch_report.ids_sorted = true;
       id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp.path() + "/ids-" + std::to_string(e), id_run_records);
       id_pairs->Reserve(static_cast<std::size_t>(epoch_report.points));
     }
@@ -491,6 +504,7 @@ IngestReport Ingest(const IngestOptions& options) {
     build.cube = &cube;
     build.tree = &options.tree;
     build.store = &store;
+    build.id_table = id_table.get();
     build.id_pairs = id_pairs.get();
     build.report = &epoch_report;
     {
@@ -508,12 +522,16 @@ IngestReport Ingest(const IngestOptions& options) {
 
     // 5. ID index.
     if (has_id) {
-      id_pairs->Finish();
+      if (id_pairs) id_pairs->Finish();
       id_store->BeginEpoch(header.time, header.redshift);
       IdIndexEpochWriter ids(*id_store, options.page_size);
-      auto reader = id_pairs->Open();
-      IdLeafRecord r{};
-      while (reader.Next(r)) ids.Add(r.key, NodeKey::FromValue(r.leaf));
+      if (id_table) {
+        id_table->ForEach([&ids](std::uint64_t id, std::uint64_t leaf) { ids.Add(id, NodeKey::FromValue(leaf)); });
+      } else {
+        auto reader = id_pairs->Open();
+        IdLeafRecord r{};
+        while (reader.Next(r)) ids.Add(r.key, NodeKey::FromValue(r.leaf));
+      }
       ids.Finish();
       id_store->EndEpoch();
       clock.Lap("ids");

@@ -70,6 +70,10 @@ struct EpochReport {
   std::uint64_t missing_in_next = 0;  // particles whose ID the next epoch lacks
   std::uint64_t missing_in_prev = 0;  // particles whose ID the previous epoch lacks
   std::uint64_t duplicate_ids = 0;
+  // The (ID, leaf) pairs went through the external sorter: the IDs were not
+  // unique within a range that fits the pairs' share of the budget
+  // (tools/ingest/dense_id_table.h).
+  bool ids_sorted = false;
   std::optional<EpochLink> to_next;   // every epoch but the last of a series with IDs
 };
 

@@ -1,0 +1,92 @@
+#include "tools/ingest/dense_id_table.h"
+
+#include <algorithm>
+#include <new>
+#include <string>
+
+#include "storage/error.h"
+
+namespace octocosm {
+
+void IdCensus::Add(std::span<const std::uint64_t> ids) {
+  if (!dense_) return;
+  for (const std::uint64_t id : ids) {
+    if (count_ == 0) {
+      min_ = max_ = id;
+      base_ = id & ~std::uint64_t{63};
+      words_.assign(1, 0);
+    }
+    std::uint64_t bit = id - base_;  // wraps to a huge value below base_
+    if (bit >= 64 * words_.size()) {
+      if (!Cover(id)) return GiveUp();
+      bit = id - base_;
+    }
+    std::uint64_t& word = words_[bit >> 6];
+    const std::uint64_t mask = std::uint64_t{1} << (bit & 63);
+    if ((word & mask) != 0) return GiveUp();  // a duplicate: pairs must be sorted
+    word |= mask;
+    min_ = std::min(min_, id);
+    max_ = std::max(max_, id);
+    ++count_;
+  }
+  if (span() > max_span_) GiveUp();
+}
+
+bool IdCensus::Cover(std::uint64_t id) {
+  if (std::max(max_, id) - std::min(min_, id) >= max_span_) return false;
+  if (Grow(id)) return true;
+  // Room made earlier below the smallest ID is in the way: drop it.
+  words_.resize(static_cast<std::size_t>((max_ - base_) / 64 + 1));
+  const std::uint64_t unused_below = (min_ - base_) / 64;
+  words_.erase(words_.begin(), words_.begin() + static_cast<std::ptrdiff_t>(unused_below));
+  base_ += 64 * unused_below;
+  return Grow(id);
+}
+
+bool IdCensus::Grow(std::uint64_t id) {
+  // Whole words at most max_span_ bits apart can be needed, plus one at each end.
+  const std::uint64_t max_words = max_span_ / 64 + 2;
+  if (id < base_) {
+    const std::uint64_t needed = (base_ - (id & ~std::uint64_t{63})) / 64;
+    if (words_.size() + needed > max_words) return false;
+    // Room for as many again as the bitmap holds, so that IDs arriving in
+    // decreasing order grow it geometrically, not one copy per word.
+    const std::uint64_t added =
+        std::max(needed, std::min<std::uint64_t>({words_.size(), base_ / 64, max_words - words_.size()}));
+    words_.insert(words_.begin(), static_cast<std::size_t>(added), 0);
+    base_ -= 64 * added;
+  } else {
+    const std::uint64_t words = (id - base_) / 64 + 1;
+    if (words > max_words) return false;
+    words_.resize(static_cast<std::size_t>(words));  // capacity grows geometrically
+  }
+  return true;
+}
+
+void IdCensus::GiveUp() {
+  dense_ = false;
+  std::vector<std::uint64_t>().swap(words_);
+}
+
+DenseIdTable::DenseIdTable(std::uint64_t first, std::uint64_t span) : first_(first), span_(span) {
+  if (span > SIZE_MAX / sizeof(std::uint64_t)) throw std::bad_alloc();
+  // calloc, not a value-initialized array: fresh memory from the kernel is
+  // zero already, and writing the zeros would fault in every page on this
+  // thread instead of where the leaves write.
+  slots_.reset(static_cast<std::uint64_t*>(std::calloc(std::max<std::uint64_t>(span, 1), sizeof(std::uint64_t))));
+  if (!slots_) throw std::bad_alloc();
+}
+
+void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
+  for (const std::uint64_t id : ids) {
+    const std::uint64_t slot = id - first_;
+    if (slot >= span_) {
+      throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " lies outside the table's " +
+                                   std::to_string(first_) + " .. " + std::to_string(first_ + span_ - 1));
+    }
+    if (slots_[slot] != 0) throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " recorded twice");
+    slots_[slot] = leaf.value();
+  }
+}
+
+}  // namespace octocosm

@@ -1,0 +1,89 @@
+// The (ID, leaf) pairs of an epoch whose particle IDs are unique and lie in a
+// compact range, gathered without a sort: each leaf stores its key at slot
+// `id - first` of one array, and reading the array in order gives the pairs
+// sorted by ID. Simulation codes number particles 0..N-1 or 1..N (per type,
+// in ranges that follow each other), so this is the usual case; otherwise
+// ingest sorts the pairs (tools/ingest/external_sorter.h).
+//
+// IdCensus watches the IDs while the epoch is read and says whether the table
+// can be used: every ID seen once, all within `max_span` consecutive values.
+// It keeps one bit per value of the range so far (an eighth of a byte per
+// slot), growing it as IDs arrive in either direction.
+#pragma once
+
+#include <cstdint>
+#include <cstdlib>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "index/morton.h"
+
+namespace octocosm {
+
+class IdCensus {
+ public:
+  // Gives up (dense() false) once the IDs span more than `max_span` values.
+  explicit IdCensus(std::uint64_t max_span) : max_span_(max_span) {}
+
+  void Add(std::span<const std::uint64_t> ids);
+
+  // Whether the IDs added so far are unique and span at most max_span values.
+  bool dense() const { return dense_; }
+  // Meaningful while dense() and count() > 0: the smallest ID and the range
+  // from it to the largest ID, both ends included.
+  std::uint64_t first() const { return min_; }
+  std::uint64_t span() const { return count_ == 0 ? 0 : max_ - min_ + 1; }
+  std::uint64_t count() const { return count_; }
+
+ private:
+  void GiveUp();
+  // Makes bit `id - base_` exist; false when the IDs would span more than
+  // max_span_ values.
+  bool Cover(std::uint64_t id);
+  // Cover's growth, false where the bitmap would outgrow max_span_.
+  bool Grow(std::uint64_t id);
+
+  std::uint64_t max_span_;
+  bool dense_ = true;
+  std::uint64_t count_ = 0;
+  std::uint64_t min_ = 0, max_ = 0;
+  std::uint64_t base_ = 0;  // the ID of bit 0 of words_[0]; a multiple of 64
+  std::vector<std::uint64_t> words_;
+};
+
+// Slot i holds the leaf key of ID first + i, or 0 (no key is 0) where no
+// particle has that ID.
+class DenseIdTable {
+ public:
+  // Allocates span slots, zero (the kernel's zero pages: untouched slots
+  // cost no memory until a leaf writes them).
+  DenseIdTable(std::uint64_t first, std::uint64_t span);
+
+  // Records that `leaf` holds the particles `ids`. Several threads may call
+  // it at once, as long as no ID comes twice (which IdCensus checked); an ID
+  // outside the range or already recorded throws InvalidArgument.
+  void Add(std::span<const std::uint64_t> ids, NodeKey leaf);
+
+  // Calls emit(id, leaf key) for every recorded ID, in increasing ID order.
+  template <typename Emit>
+  void ForEach(Emit&& emit) const {
+    for (std::uint64_t i = 0; i < span_; ++i) {
+      if (slots_[i] != 0) emit(first_ + i, slots_[i]);
+    }
+  }
+
+  std::uint64_t first() const { return first_; }
+  std::uint64_t span() const { return span_; }
+
+ private:
+  struct Free {
+    void operator()(std::uint64_t* p) const { std::free(p); }
+  };
+
+  std::uint64_t first_;
+  std::uint64_t span_;
+  std::unique_ptr<std::uint64_t[], Free> slots_;
+};
+
+}  // namespace octocosm
