@@ -74,7 +74,7 @@ void AddIngestCommand(CLI::App& app) {
       if (r.missing_in_prev) std::printf(", %llu IDs missing in the previous epoch", static_cast<unsigned long long>(r.missing_in_prev));
       if (r.to_next) std::printf(", velocity scale to the next epoch %.6g (fit residual %.3g)", r.to_next->velocity_scale, r.to_next->fit_residual);
       if (r.duplicate_ids) std::printf(", %llu duplicate IDs", static_cast<unsigned long long>(r.duplicate_ids));
-      if (r.ids_sorted) std::printf(", ID pairs sorted (IDs not unique in a compact range)");
+      if (r.ids_sorted) std::printf(", ID pairs sorted (IDs repeat, or their range outgrows a tenth of the budget)");
       std::printf("\n    seconds (CPU):");
       for (const EpochReport::Phase& phase : r.phases) {
         std::printf(" %s %.2f (%.2f)", phase.name.c_str(), phase.seconds, phase.cpu_seconds);

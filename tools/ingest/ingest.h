@@ -70,9 +70,9 @@ struct EpochReport {
   std::uint64_t missing_in_next = 0;  // particles whose ID the next epoch lacks
   std::uint64_t missing_in_prev = 0;  // particles whose ID the previous epoch lacks
   std::uint64_t duplicate_ids = 0;
-  // The (ID, leaf) pairs went through the external sorter: the IDs were not
-  // unique within a range that fits the pairs' share of the budget
-  // (tools/ingest/dense_id_table.h).
+  // The (ID, leaf) pairs went through the external sorter: some ID came
+  // twice, or the IDs' range needs more than the pairs' share of the budget
+  // at 8 bytes a value (tools/ingest/dense_id_table.h).
   bool ids_sorted = false;
   std::optional<EpochLink> to_next;   // every epoch but the last of a series with IDs
 };
