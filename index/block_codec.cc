@@ -138,8 +138,8 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
   std::int64_t assigned = 0;
   // Per point in double, not long double: the units still sum to K exactly
   // (the deficit below settles that), and x87 code per point (a control-word
-  // switch and a store-reload for every floor) cost up to a fifth of an
-  // ingest's encoding time.
+  // switch and a store and reload for every floor) made EncodeBlock twice as
+  // slow in one build of the program.
   const double units_per_weight = static_cast<double>(k / total);
   const double max_units = static_cast<double>(kWeightTotalUnits);
   for (std::size_t i = 0; i < n; ++i) {
