@@ -69,15 +69,24 @@ void IdCensus::GiveUp() {
 }
 
 DenseIdTable::DenseIdTable(std::uint64_t first, std::uint64_t span) : first_(first), span_(span) {
-  if (span > SIZE_MAX / sizeof(std::uint64_t)) throw std::bad_alloc();
+  if (span > SIZE_MAX / sizeof(std::uint32_t)) throw std::bad_alloc();
   // calloc, not a value-initialized array: fresh memory from the kernel is
   // zero already, and writing the zeros would fault in every page on this
   // thread instead of where the leaves write.
-  slots_.reset(static_cast<std::uint64_t*>(std::calloc(std::max<std::uint64_t>(span, 1), sizeof(std::uint64_t))));
+  slots_.reset(static_cast<std::uint32_t*>(std::calloc(std::max<std::uint64_t>(span, 1), sizeof(std::uint32_t))));
   if (!slots_) throw std::bad_alloc();
 }
 
 void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
+  std::uint32_t slot_value = 0;
+  {
+    std::lock_guard lock(mutex_);
+    if (leaves_.size() >= UINT32_MAX - 1) {
+      throw Error::InvalidArgument("DenseIdTable: more than " + std::to_string(UINT32_MAX - 1) + " leaves");
+    }
+    leaves_.push_back(leaf.value());
+    slot_value = static_cast<std::uint32_t>(leaves_.size());
+  }
   for (const std::uint64_t id : ids) {
     const std::uint64_t slot = id - first_;
     if (slot >= span_) {
@@ -85,7 +94,7 @@ void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
                                    std::to_string(first_) + " .. " + std::to_string(first_ + span_ - 1));
     }
     if (slots_[slot] != 0) throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " recorded twice");
-    slots_[slot] = leaf.value();
+    slots_[slot] = slot_value;
   }
 }
 

@@ -1,6 +1,6 @@
 // The (ID, leaf) pairs of an epoch whose particle IDs are unique and lie in a
-// compact range, gathered without a sort: each leaf stores its key at slot
-// `id - first` of one array, and reading the array in order gives the pairs
+// compact range, gathered without a sort: each leaf stores its ordinal at
+// slot `id - first` of one array, and reading the array in order gives the pairs
 // sorted by ID. Simulation codes number particles 0..N-1 or 1..N (per type,
 // in ranges that follow each other), so this is the usual case; otherwise
 // ingest sorts the pairs (tools/ingest/external_sorter.h).
@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <vector>
 
@@ -52,8 +53,10 @@ class IdCensus {
   std::vector<std::uint64_t> words_;
 };
 
-// Slot i holds the leaf key of ID first + i, or 0 (no key is 0) where no
-// particle has that ID.
+// Slot i holds which leaf has ID first + i: 0 where no particle has that ID,
+// else one more than the leaf's ordinal in the order leaves were added (4
+// bytes a slot where the key itself would take 8: a table twice as long fits
+// the same budget, and fresh memory is much of an ingest's cost).
 class DenseIdTable {
  public:
   // Allocates span slots, zero (the kernel's zero pages: untouched slots
@@ -62,14 +65,16 @@ class DenseIdTable {
 
   // Records that `leaf` holds the particles `ids`. Several threads may call
   // it at once, as long as no ID comes twice (which IdCensus checked); an ID
-  // outside the range or already recorded throws InvalidArgument.
+  // outside the range or already recorded throws InvalidArgument, and so do
+  // more than 2^32 - 2 leaves.
   void Add(std::span<const std::uint64_t> ids, NodeKey leaf);
 
   // Calls emit(id, leaf key) for every recorded ID, in increasing ID order.
+  // Not while Add runs.
   template <typename Emit>
   void ForEach(Emit&& emit) const {
     for (std::uint64_t i = 0; i < span_; ++i) {
-      if (slots_[i] != 0) emit(first_ + i, slots_[i]);
+      if (slots_[i] != 0) emit(first_ + i, leaves_[slots_[i] - 1]);
     }
   }
 
@@ -78,12 +83,14 @@ class DenseIdTable {
 
  private:
   struct Free {
-    void operator()(std::uint64_t* p) const { std::free(p); }
+    void operator()(std::uint32_t* p) const { std::free(p); }
   };
 
   std::uint64_t first_;
   std::uint64_t span_;
-  std::unique_ptr<std::uint64_t[], Free> slots_;
+  std::unique_ptr<std::uint32_t[], Free> slots_;
+  std::mutex mutex_;                   // guards leaves_
+  std::vector<std::uint64_t> leaves_;  // leaf keys by ordinal
 };
 
 }  // namespace octocosm

@@ -308,7 +308,7 @@ IngestReport Ingest(const IngestOptions& options) {
   // large) the workers fill the next (tools/ingest/external_sorter.h).
   const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 30 / sizeof(IdLeafRecord), 1024));
   // Or, for unique IDs in a compact range, the whole share as one table.
-  const std::uint64_t id_table_slots = budget / 10 / sizeof(std::uint64_t);
+  const std::uint64_t id_table_slots = budget / 10 / sizeof(std::uint32_t);
 
   // Open the first epoch to learn what the series carries.
   std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);

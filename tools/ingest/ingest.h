@@ -72,7 +72,7 @@ struct EpochReport {
   std::uint64_t duplicate_ids = 0;
   // The (ID, leaf) pairs went through the external sorter: some ID came
   // twice, or the IDs' range needs more than the pairs' share of the budget
-  // at 8 bytes a value (tools/ingest/dense_id_table.h).
+  // at 4 bytes a value (tools/ingest/dense_id_table.h).
   bool ids_sorted = false;
   std::optional<EpochLink> to_next;   // every epoch but the last of a series with IDs
 };
