@@ -7,6 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -149,19 +150,33 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
     assigned += static_cast<std::int64_t>(units[i]);
   }
   std::int64_t deficit = static_cast<std::int64_t>(kWeightTotalUnits) - assigned;
-  if (deficit != 0) {
+  if (deficit > 0 && static_cast<std::size_t>(deficit) < n) {
+    // The usual case: a unit more for each of the `deficit` largest
+    // remainders, ties to the lower index. Selecting the threshold among the
+    // remainders themselves, not through an index order, keeps the selection
+    // a pass over contiguous doubles.
+    std::vector<double> largest(remainder);
+    std::nth_element(largest.begin(), largest.begin() + (deficit - 1), largest.end(), std::greater<>());
+    const double threshold = largest[static_cast<std::size_t>(deficit - 1)];
+    std::int64_t above = 0;
+    for (std::size_t i = 0; i < n; ++i) above += remainder[i] > threshold ? 1 : 0;
+    std::int64_t ties = deficit - above;  // at least 1: the threshold itself
+    for (std::size_t i = 0; i < n; ++i) {
+      if (remainder[i] > threshold) {
+        ++units[i];
+      } else if (remainder[i] == threshold && ties > 0) {
+        ++units[i];
+        --ties;
+      }
+    }
+  } else if (deficit != 0) {
     // Ties go to the lower index, so the result does not depend on the sort.
     std::vector<std::uint32_t> order(n);
     std::iota(order.begin(), order.end(), 0u);
     const auto larger_remainder = [&](std::uint32_t a, std::uint32_t b) {
       return remainder[a] != remainder[b] ? remainder[a] > remainder[b] : a < b;
     };
-    if (deficit > 0 && static_cast<std::size_t>(deficit) < n) {
-      // The usual case needs only the `deficit` largest, in any order.
-      std::nth_element(order.begin(), order.begin() + deficit, order.end(), larger_remainder);
-    } else {
-      std::sort(order.begin(), order.end(), larger_remainder);
-    }
+    std::sort(order.begin(), order.end(), larger_remainder);
     // Rounding can leave the floors a unit or so above K as well as below.
     for (std::size_t j = 0; deficit > 0; j = (j + 1) % n, --deficit) ++units[order[j]];
     for (std::size_t j = n - 1; deficit < 0; j = (j + n - 1) % n) {

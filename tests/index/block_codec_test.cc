@@ -237,6 +237,59 @@ TEST(BlockCodec, EqualWeightsGiveTheLeftoverUnitsToTheFirstPoints) {
   }
 }
 
+// The general path's largest-remainder rule, on weights drawn from a few
+// values so that remainders tie: every point gets the floor of its ideal
+// share or one unit more; a point gets the extra unit before any point whose
+// remainder is smaller, and among equal weights the lower indices get it.
+TEST(BlockCodec, LeftoverUnitsGoToTheLargestRemaindersTiesToLowerIndices) {
+  std::mt19937_64 rng(11);
+  const NodeKey key = NodeKey::FromPath("r7");
+  for (int trial = 0; trial < 40; ++trial) {
+    NodePoints points = RandomPoints(rng, 2 + rng() % 5000, key, kCube, 0);
+    std::array<double, 3> values;
+    for (double& v : values) v = std::uniform_real_distribution<double>(0.1, 10.0)(rng);
+    std::vector<int> value_of(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      value_of[i] = static_cast<int>(rng() % 3);
+      points.weight[i] = values[value_of[i]];
+    }
+    const Bytes block = EncodeBlock(points, key, kCube);
+    const BlockColumn* column = DecodeBlockHeader(block, key, "w").Find(ColumnId::kWeight);
+    ASSERT_NE(column, nullptr);
+    std::vector<std::uint32_t> units(points.size());
+    std::memcpy(units.data(), block.data() + column->offset, 4 * units.size());  // test host is little endian
+    long double total = 0;
+    for (double w : points.weight) total += w;
+    std::array<long double, 3> ideal, remainder;
+    for (int v = 0; v < 3; ++v) {
+      ideal[v] = values[v] / total * static_cast<long double>(kWeightTotalUnits);
+      remainder[v] = ideal[v] - std::floor(ideal[v]);
+    }
+    std::array<bool, 3> some_without_extra{}, some_with_extra{};
+    for (std::size_t i = 0; i < units.size(); ++i) {
+      const int v = value_of[i];
+      const auto floor = static_cast<std::uint32_t>(std::floor(ideal[v]));
+      ASSERT_TRUE(units[i] == floor || units[i] == floor + 1) << "trial " << trial << " point " << i;
+      if (units[i] == floor + 1) {
+        ASSERT_FALSE(some_without_extra[v]) << "trial " << trial << ": point " << i
+                                            << " has the extra unit after a lower one of equal weight had none";
+        some_with_extra[v] = true;
+      } else {
+        some_without_extra[v] = true;
+      }
+    }
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b) {
+        // Remainders this far apart are ordered the same in any precision.
+        if (some_with_extra[a] && some_without_extra[b] && remainder[b] > remainder[a] + 1e-6L) {
+          ADD_FAILURE() << "trial " << trial << ": weight " << values[a] << " got an extra unit before weight "
+                        << values[b] << " with a larger remainder";
+        }
+      }
+    }
+  }
+}
+
 TEST(BlockCodec, RangedDecodeEqualsFullDecode) {
   std::mt19937_64 rng(4);
   const NodeKey key = NodeKey::FromPath("r0123");
