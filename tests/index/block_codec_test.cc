@@ -254,7 +254,8 @@ TEST(BlockCodec, LeftoverUnitsGoToTheLargestRemaindersTiesToLowerIndices) {
       points.weight[i] = values[value_of[i]];
     }
     const Bytes block = EncodeBlock(points, key, kCube);
-    const BlockColumn* column = DecodeBlockHeader(block, key, "w").Find(ColumnId::kWeight);
+    const BlockHeader header = DecodeBlockHeader(block, key, "w");
+    const BlockColumn* column = header.Find(ColumnId::kWeight);
     ASSERT_NE(column, nullptr);
     std::vector<std::uint32_t> units(points.size());
     std::memcpy(units.data(), block.data() + column->offset, 4 * units.size());  // test host is little endian
