@@ -90,17 +90,8 @@ WritableFile WritableFile::Create(const std::string& path) {
 }
 
 int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::uint8_t> bytes) {
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    std::size_t want = std::min(bytes.size() - done, kMaxIoBytes);
-    ssize_t wrote = ::pwrite(fd, bytes.data() + done, want, static_cast<off_t>(offset + done));
-    if (wrote < 0) {
-      if (errno == EINTR) continue;
-      return errno;
-    }
-    done += static_cast<std::size_t>(wrote);
-  }
-  return 0;
+  const std::span<const std::uint8_t> parts[] = {bytes};
+  return WriteAllAt(fd, offset, parts);
 }
 
 int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::span<const std::uint8_t>> parts) {
