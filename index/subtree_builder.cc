@@ -35,9 +35,8 @@ struct Placed {
   std::uint32_t index;
 };
 
-// Checks the particles (all, or those `subset` lists) and places them.
-std::vector<Placed> PlaceParticles(const ParticleChunk& particles, std::span<const std::uint32_t> subset,
-                                   NodeKey region, const Cube& cube) {
+// Checks the particles and places them.
+std::vector<Placed> PlaceParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube) {
   const std::size_t n = particles.size();
   bool lengths_agree = particles.position.size() == 3 * n && particles.type.size() == n &&
                        (!particles.has_id() || particles.id.size() == n);
@@ -52,21 +51,15 @@ std::vector<Placed> PlaceParticles(const ParticleChunk& particles, std::span<con
     throw Error::InvalidArgument("subtree builder: region " + region.Path() + " has " + std::to_string(n) +
                                  " particles, more than one build takes (2^32 - 1)");
   }
-  const bool all = subset.empty();
-  std::vector<Placed> placed(all ? n : subset.size());
-  for (std::size_t k = 0; k < placed.size(); ++k) {
-    const std::size_t i = all ? k : subset[k];
-    if (i >= n) {
-      throw Error::InvalidArgument("subtree builder: region " + region.Path() + " lists particle " + std::to_string(i) +
-                                   " of " + std::to_string(n));
-    }
+  std::vector<Placed> placed(n);
+  for (std::size_t i = 0; i < n; ++i) {
     const double* p = &particles.position[3 * i];
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
       throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " of region " + region.Path() +
                                    " has a non-finite position");
     }
-    placed[k] = {cube.FinestGridCoords(p), static_cast<std::uint32_t>(i)};
-    if (!GridHolds(placed[k].grid, region)) {
+    placed[i] = {cube.FinestGridCoords(p), static_cast<std::uint32_t>(i)};
+    if (!GridHolds(placed[i].grid, region)) {
       throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " at (" + std::to_string(p[0]) +
                                    ", " + std::to_string(p[1]) + ", " + std::to_string(p[2]) +
                                    ") lies outside region " + region.Path());
@@ -327,14 +320,9 @@ class SubtreeBuild {
 
 NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
                         const SubtreeOptions& options, const NodeSink& sink) {
-  return BuildSubtree(particles, {}, region, cube, options, sink);
-}
-
-NodePoints BuildSubtree(const ParticleChunk& particles, std::span<const std::uint32_t> subset, NodeKey region,
-                        const Cube& cube, const SubtreeOptions& options, const NodeSink& sink) {
   cube.Validate();
   CheckOptions(options, region);
-  std::vector<Placed> placed = PlaceParticles(particles, subset, region, cube);
+  std::vector<Placed> placed = PlaceParticles(particles, region, cube);
   if (placed.empty()) return {};
   SubtreeBuild build(particles, cube, options, sink);
   return build.Build(placed.data(), placed.data() + placed.size(), region);

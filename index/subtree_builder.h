@@ -35,7 +35,6 @@
 #include <array>
 #include <cstddef>
 #include <functional>
-#include <span>
 #include <vector>
 
 #include "index/cube.h"
@@ -67,12 +66,6 @@ using NodeSink = std::function<void(NodeKey, const NodePoints&)>;
 // bad options.
 NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
                         const SubtreeOptions& options, const NodeSink& sink);
-// The same for the particles `subset` lists (indices into `particles`, each
-// once; an empty subset means all of them), read in place: an out-of-core
-// build's chunks of a point set held in memory whole. The tree is the one
-// BuildSubtree makes of those particles copied out in the subset's order.
-NodePoints BuildSubtree(const ParticleChunk& particles, std::span<const std::uint32_t> subset, NodeKey region,
-                        const Cube& cube, const SubtreeOptions& options, const NodeSink& sink);
 
 struct RegionRoot {
   NodeKey key;

@@ -227,10 +227,8 @@ TEST(SubtreeBuilder, BuildsASubRegion) {
   ParticleChunk all = Clumpy(rng, 20000);
   const NodeKey region = NodeKey::FromPath("r07");
   ParticleChunk input;
-  std::vector<std::uint32_t> subset;  // the same particles, as indices into `all`
   for (std::size_t i = 0; i < all.size(); ++i) {
     if (!kCube.Holds(region, &all.position[3 * i])) continue;
-    subset.push_back(static_cast<std::uint32_t>(i));
     input.position.insert(input.position.end(), &all.position[3 * i], &all.position[3 * i] + 3);
     input.velocity.insert(input.velocity.end(), &all.velocity[3 * i], &all.velocity[3 * i] + 3);
     input.mass.push_back(all.mass[i]);
@@ -244,17 +242,6 @@ TEST(SubtreeBuilder, BuildsASubRegion) {
   Tree tree;
   BuildSubtree(work, region, kCube, options, tree.Sink());
   CheckTree(tree, input, region, options);
-
-  // Read in place from the whole set, the region's particles make the same tree.
-  Tree in_place;
-  BuildSubtree(all, subset, region, kCube, options, in_place.Sink());
-  EXPECT_EQ(in_place.order, tree.order);
-  for (const auto& [key, node] : tree.nodes) {
-    ASSERT_TRUE(in_place.nodes.count(key)) << key.Path();
-    EXPECT_EQ(EncodeBlock(in_place.nodes[key], key, kCube), EncodeBlock(node, key, kCube)) << key.Path();
-  }
-  subset.push_back(static_cast<std::uint32_t>(all.size()));
-  EXPECT_THROW(BuildSubtree(all, subset, region, kCube, options, Tree().Sink()), Error) << "an index past the end";
 }
 
 TEST(SubtreeBuilder, CoincidentPointsStopAtTheDepthLimit) {

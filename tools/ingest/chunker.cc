@@ -1,10 +1,8 @@
 #include "tools/ingest/chunker.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
-#include <memory>
 #include <numeric>
 #include <optional>
 #include <span>
@@ -21,10 +19,6 @@ namespace {
 // Fewer points per batch than this are placed on one thread: starting another
 // would cost more than it saves.
 constexpr std::size_t kPointsPerThread = 16384;
-// ArrangeByChunk's ordering of each chunk's points: cells of about this many
-// points, at most this many levels below the chunk (8^6 cells).
-constexpr std::size_t kPointsPerOrderingCell = 16;
-constexpr int kMaxOrderingDepth = 6;
 // Points listed by index lie scattered across a resident epoch's columns, so
 // each read of one is a cache miss; fetching this many points ahead lets the
 // misses overlap instead of queueing one behind another.
@@ -294,82 +288,7 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
   }
   std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, {});
   if (options_.leaf_capacity != 0) chunks = MergeLeafSubtrees(root, std::move(chunks));
-  ArrangeByChunk(chunks, resident);
   return chunks;
-}
-
-void Chunker::ArrangeByChunk(std::vector<Chunk>& chunks, ParticleChunk& resident) const {
-  // Where each point goes: chunk after chunk, and within a chunk in the
-  // (Morton) order of the point's cell a few levels below the chunk, about
-  // kPointsPerOrderingCell points to a cell. The tree does not depend on the
-  // order of a chunk's points, but the build does: a leaf copies its points'
-  // columns, and when they lie together, in a stretch that fits the cache,
-  // instead of scattered across the chunk, nearly every read hits the cache.
-  const std::size_t n = resident.size();
-  const int threads = std::max(options_.threads, 1);
-  std::vector<std::uint32_t> target(n);
-  std::vector<std::uint32_t> chunk_first(chunks.size() + 1, 0);
-  for (std::size_t c = 0; c < chunks.size(); ++c) {
-    chunk_first[c + 1] = chunk_first[c] + static_cast<std::uint32_t>(chunks[c].resident.size());
-  }
-  std::atomic<std::size_t> next_chunk{0};
-  ParallelFor(static_cast<std::size_t>(threads), n >= kPointsPerThread ? threads : 1, [&](std::size_t, std::size_t) {
-    std::vector<std::uint32_t> cell_of;
-    std::vector<std::uint32_t> cell_begin;
-    for (std::size_t c = next_chunk++; c < chunks.size(); c = next_chunk++) {
-      const Chunk& chunk = chunks[c];
-      int depth = 0;
-      while (depth < kMaxOrderingDepth && chunk.key.level() + depth < options_.max_level &&
-             (std::uint64_t{kPointsPerOrderingCell} << (3 * depth)) < chunk.resident.size()) {
-        ++depth;
-      }
-      const int level = chunk.key.level() + depth;
-      const std::uint64_t first_cell = chunk.key.DescendantRange(level).first;
-      const std::size_t cells = std::size_t{1} << (3 * depth);
-      cell_of.resize(chunk.resident.size());
-      cell_begin.assign(cells + 1, 0);
-      for (std::size_t k = 0; k < chunk.resident.size(); ++k) {
-        if (k + kPrefetchDistance < chunk.resident.size()) {
-          __builtin_prefetch(&resident.position[3 * std::size_t{chunk.resident[k + kPrefetchDistance]}]);
-        }
-        const std::uint64_t cell = cube_.LeafKey(&resident.position[3 * std::size_t{chunk.resident[k]}], level).value() - first_cell;
-        if (cell >= cells) throw Error::InvalidArgument("chunker: a point lies outside chunk " + chunk.key.Path());
-        cell_of[k] = static_cast<std::uint32_t>(cell);
-        ++cell_begin[cell + 1];
-      }
-      cell_begin[0] = chunk_first[c];
-      for (std::size_t cell = 0; cell < cells; ++cell) cell_begin[cell + 1] += cell_begin[cell];
-      for (std::size_t k = 0; k < chunk.resident.size(); ++k) {
-        if (k + kPrefetchDistance < chunk.resident.size()) __builtin_prefetch(&target[chunk.resident[k + kPrefetchDistance]], 1);
-        target[chunk.resident[k]] = cell_begin[cell_of[k]]++;
-      }
-    }
-  }, 1);
-  for (std::size_t c = 0; c < chunks.size(); ++c) {
-    std::iota(chunks[c].resident.begin(), chunks[c].resident.end(), chunk_first[c]);
-  }
-  // Column by column through one scratch buffer, so that memory holds one
-  // column twice at most and the scratch's pages, once touched, serve every
-  // column (fresh pages cost a fault and zeroing each). Reading in input
-  // order and writing to each chunk's range in turn keeps both sides of the
-  // copy close to sequential.
-  std::unique_ptr<std::byte[]> scratch(new std::byte[3 * sizeof(double) * n]);
-  const auto arrange = [&](auto& column, std::size_t width) {
-    if (column.empty()) return;
-    using Value = typename std::remove_reference_t<decltype(column)>::value_type;
-    Value* arranged = reinterpret_cast<Value*>(scratch.get());
-    ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t i = begin; i < end; ++i) {
-        for (std::size_t a = 0; a < width; ++a) arranged[width * target[i] + a] = column[width * i + a];
-      }
-    }, kPointsPerThread);
-    std::copy(arranged, arranged + column.size(), column.begin());
-  };
-  arrange(resident.position, 3);
-  arrange(resident.mass, 1);
-  arrange(resident.type, 1);
-  arrange(resident.id, 1);
-  for (std::vector<float>* column : VectorColumns(resident)) arrange(*column, 3);
 }
 
 std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,

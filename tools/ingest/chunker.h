@@ -21,11 +21,11 @@
 // chunks under each highest node holding at most `leaf_capacity` points are
 // merged into one chunk for that node.
 //
-// A point set that fits in memory as a whole is better not copied at all:
-// SplitResident reads it once into one ParticleChunk and cuts the same chunks
-// as lists of indices into it, which the tree builder reads in place
-// (BuildSubtree's subset form). That saves the gather into chunk buffers, the
-// buffers' growth and any spilling.
+// A point set that fits in memory as a whole is better not copied into
+// growing buffers: SplitResident reads it once into one ParticleChunk and cuts
+// the same chunks as lists of indices into it, and each chunk is copied out
+// only when it is built (tools/ingest/chunk_gatherer.h), into buffers that
+// serve chunk after chunk. That saves the buffers' growth and any spilling.
 #pragma once
 
 #include <cstdint>
@@ -81,20 +81,15 @@ class Chunker {
   // The same chunks for a point set that fits in memory as a whole: reads the
   // pass once into `resident` (room reserved for `expected_points`; more or
   // fewer are fine) and returns chunks that list their points as indices into
-  // it: the same chunks with the same points as Split's. `resident` comes
-  // back reordered chunk by chunk, so that each chunk's indices are one
-  // contiguous range, and within a chunk by cells a few levels below it, so
-  // that the points of each of its leaves lie close together (a builder then
-  // reads memory in order and from the cache). Nothing goes through chunk
-  // buffers and nothing spills; memory_bytes is not consulted. At most
-  // 2^32 - 1 points.
+  // it: the same chunks with the same points in the same order as Split's.
+  // Nothing goes through chunk buffers and nothing spills; memory_bytes is
+  // not consulted. At most 2^32 - 1 points.
   std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                    ParticleChunk& resident);
-  // The scratch memory SplitResident takes per point on top of the resident
-  // points while it runs: its index in its chunk's list, its cell (in the
-  // split, then within its chunk), where it goes, and a buffer for
-  // reordering the widest column (three doubles).
-  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 4 + 3 * sizeof(double);
+  // The memory SplitResident takes per point on top of the resident points:
+  // its cell while the split runs, and its index in its chunk's list, kept
+  // until the chunk is built.
+  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4;
 
   std::uint64_t spilled_points() const { return spilled_points_; }
 
@@ -102,10 +97,6 @@ class Chunker {
   // Whether a chunk must be split again, and by how many levels.
   bool Oversized(const Chunk& chunk) const;
   int ResplitLevels(std::uint64_t points) const;
-  // Reorders the resident points chunk by chunk, each chunk's points
-  // contiguous and, within it, in the Morton order of cells a few levels
-  // below it, and renumbers the chunks' indices to match.
-  void ArrangeByChunk(std::vector<Chunk>& chunks, ParticleChunk& resident) const;
   std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,
                                      std::span<const std::uint32_t> subset);
   std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);

@@ -24,6 +24,7 @@
 #include "index/id_index.h"
 #include "storage/error.h"
 #include "storage/store_writer.h"
+#include "tools/ingest/chunk_gatherer.h"
 #include "tools/ingest/chunker.h"
 #include "tools/ingest/dense_id_table.h"
 #include "tools/ingest/epoch_join.h"
@@ -223,7 +224,8 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
 // their roots handed to the merger in that order (a root that completes early
 // waits for its predecessors), so memory holds a few chunk roots plus the
 // merger's open ancestors, never every chunk's sample. Returns the root.
-// Resident chunks (Chunker::SplitResident) are read in place from `resident`.
+// Resident chunks (Chunker::SplitResident) are copied out of `resident` one
+// at a time by each worker's gatherer.
 NodePoints BuildChunks(std::vector<Chunk> chunks, const ParticleChunk& resident, EpochBuild& build, unsigned threads) {
   Bytes merger_block;  // the merger runs under merge_mutex: one buffer serves it
   TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
@@ -239,13 +241,14 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ParticleChunk& resident,
   auto work = [&] {
     try {
       Bytes block;  // this worker's encoding buffer
+      ChunkGatherer gatherer(*build.cube, build.tree->max_level);
       for (std::size_t c = next++; c < chunks.size() && !failed; c = next++) {
         const std::uint64_t count = chunks[c].point_count;
         std::unordered_set<std::uint64_t> has_children;
         const NodeSink sink = LeafAwareSink(build, has_children, block);
         NodePoints root;
         if (!chunks[c].resident.empty()) {
-          root = BuildSubtree(resident, chunks[c].resident, chunks[c].key, *build.cube, *build.tree, sink);
+          root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink);
           chunks[c].resident = {};
         } else {
           root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink);

@@ -1,0 +1,126 @@
+// The chunk gatherer (tools/ingest/chunk_gatherer.h): copies exactly the
+// points a resident chunk lists, every column, grouped by cells below the
+// chunk, and its buffers serve one chunk after another.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <random>
+
+#include "storage/error.h"
+#include "tools/ingest/chunk_gatherer.h"
+
+namespace octocosm {
+namespace {
+
+const Cube kCube{{0, 0, 0}, 100, false};
+
+// `n` points in the cube with every column but the epoch links; IDs 1..n, the
+// other columns derived from the index so that a mix-up shows.
+ParticleChunk Resident(std::size_t n, bool with_velocity) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> anywhere(0, 100);
+  ParticleChunk points;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) points.position.push_back(anywhere(rng));
+    points.mass.push_back(1.0 + static_cast<double>(i));
+    points.type.push_back(static_cast<std::uint8_t>(i % 6));
+    points.id.push_back(i + 1);
+    if (with_velocity) {
+      for (int a = 0; a < 3; ++a) points.velocity.push_back(static_cast<float>(3 * i + a));
+    }
+  }
+  return points;
+}
+
+// A chunk for node `key` listing the resident points that lie in it, last
+// one first (any order is allowed).
+Chunk ChunkOf(const ParticleChunk& resident, NodeKey key) {
+  Chunk chunk;
+  chunk.key = key;
+  for (std::size_t i = resident.size(); i-- > 0;) {
+    if (kCube.Holds(key, &resident.position[3 * i])) chunk.resident.push_back(static_cast<std::uint32_t>(i));
+  }
+  chunk.point_count = chunk.resident.size();
+  return chunk;
+}
+
+// Checks that `gathered` holds exactly the points `chunk` lists, each with
+// all its columns, grouped by their cell `depth` levels below the chunk
+// (Morton order), in list order within a cell.
+void ExpectGathered(const ParticleChunk& resident, const Chunk& chunk, const ParticleChunk& gathered, int depth) {
+  ASSERT_EQ(gathered.size(), chunk.resident.size());
+  ASSERT_EQ(gathered.position.size(), 3 * gathered.size());
+  ASSERT_EQ(gathered.type.size(), gathered.size());
+  ASSERT_EQ(gathered.id.size(), gathered.size());
+  ASSERT_EQ(gathered.velocity.size(), resident.velocity.empty() ? 0 : 3 * gathered.size());
+  std::map<std::uint64_t, std::size_t> place_in_list;  // ID -> its place in the chunk's list
+  for (std::size_t k = 0; k < chunk.resident.size(); ++k) place_in_list[resident.id[chunk.resident[k]]] = k;
+  std::uint64_t previous_cell = 0;
+  std::size_t previous_place = 0;
+  for (std::size_t j = 0; j < gathered.size(); ++j) {
+    const auto found = place_in_list.find(gathered.id[j]);
+    ASSERT_NE(found, place_in_list.end()) << "point " << j << " (ID " << gathered.id[j] << ") is not listed";
+    const std::size_t place = found->second;
+    place_in_list.erase(found);
+    const std::size_t i = chunk.resident[place];
+    EXPECT_EQ(gathered.mass[j], resident.mass[i]);
+    EXPECT_EQ(gathered.type[j], resident.type[i]);
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(gathered.position[3 * j + a], resident.position[3 * i + a]);
+    if (!resident.velocity.empty()) {
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(gathered.velocity[3 * j + a], resident.velocity[3 * i + a]);
+    }
+    const std::uint64_t cell = kCube.LeafKey(&gathered.position[3 * j], chunk.key.level() + depth).value();
+    if (j > 0) {
+      ASSERT_GE(cell, previous_cell) << "point " << j << ": cells in Morton order";
+      if (cell == previous_cell) {
+        EXPECT_GT(place, previous_place) << "point " << j << ": list order within a cell";
+      }
+    }
+    previous_cell = cell;
+    previous_place = place;
+  }
+}
+
+TEST(ChunkGatherer, CopiesTheListedPointsGroupedByCellsBelowTheChunk) {
+  const ParticleChunk resident = Resident(40000, true);
+  const Chunk chunk = ChunkOf(resident, NodeKey::Root().Child(5));
+  ASSERT_GT(chunk.resident.size(), 1024u);
+  ASSERT_LE(chunk.resident.size(), 8192u) << "16 points a cell: three levels below the chunk";
+  ChunkGatherer gatherer(kCube, kMaxLevel);
+  ExpectGathered(resident, chunk, gatherer.Gather(resident, chunk), 3);
+}
+
+TEST(ChunkGatherer, BuffersServeTheNextChunk) {
+  ChunkGatherer gatherer(kCube, kMaxLevel);
+  const ParticleChunk large = Resident(40000, true);
+  const Chunk first = ChunkOf(large, NodeKey::Root().Child(2));
+  ExpectGathered(large, first, gatherer.Gather(large, first), 3);
+  // Fewer points, and no velocities: nothing of the first chunk is left.
+  const ParticleChunk small = Resident(3000, false);
+  const Chunk second = ChunkOf(small, NodeKey::Root().Child(7).Child(1));
+  ASSERT_GT(second.resident.size(), 0u);
+  ExpectGathered(small, second, gatherer.Gather(small, second), 1);
+}
+
+TEST(ChunkGatherer, StopsOrderingAtTheDepthLimit) {
+  const ParticleChunk resident = Resident(5000, false);
+  const Chunk chunk = ChunkOf(resident, NodeKey::Root().Child(3));
+  ChunkGatherer gatherer(kCube, /*max_level=*/2);
+  ExpectGathered(resident, chunk, gatherer.Gather(resident, chunk), 1);
+  ChunkGatherer at_the_limit(kCube, /*max_level=*/1);
+  ExpectGathered(resident, chunk, at_the_limit.Gather(resident, chunk), 0);
+}
+
+TEST(ChunkGatherer, RefusesIndicesPastTheSetAndPointsOutsideTheChunk) {
+  const ParticleChunk resident = Resident(1000, false);
+  ChunkGatherer gatherer(kCube, kMaxLevel);
+  Chunk past_the_end = ChunkOf(resident, NodeKey::Root().Child(0));
+  past_the_end.resident.push_back(1000);
+  EXPECT_THROW(gatherer.Gather(resident, past_the_end), Error);
+  Chunk outside = ChunkOf(resident, NodeKey::Root().Child(0));
+  outside.resident.push_back(ChunkOf(resident, NodeKey::Root().Child(6)).resident.front());
+  EXPECT_THROW(gatherer.Gather(resident, outside), Error);
+}
+
+}  // namespace
+}  // namespace octocosm
