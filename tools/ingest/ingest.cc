@@ -452,7 +452,9 @@ IngestReport Ingest(const IngestOptions& options) {
     // A point set that fits in its share of the budget whole (the chunk
     // buffers' share, and the sorted epochs' too when there are none) is read
     // into memory once and chunked in place (Chunker::SplitResident). The
-    // split's scratch is gone before the builds and the ID pairs take theirs.
+    // split's own memory must fit the builds' and the ID pairs' shares: its
+    // cells go before the builds start, its index lists as their chunks are
+    // built.
     const std::uint64_t resident_share = budget * (join_epochs ? 3 : 6) / 10;
     const bool resident = !options.stream_chunks && expected < UINT32_MAX &&
                           expected * chunker_options.columns.BytesPerPoint() <= resident_share &&
