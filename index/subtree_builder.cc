@@ -26,17 +26,10 @@ void CheckOptions(const SubtreeOptions& options, NodeKey region) {
   }
 }
 
-// Where a particle goes in the build: its grid point (index/cube.h),
-// computed once, and its index in the input. Levels are split by reordering
-// these 32-byte records, never the particles' columns, and every placement
-// below (octants, quantized positions, density cells) is a shift of `grid`.
-struct Placed {
-  GridPoint grid;
-  std::uint32_t index;
-};
+using Placed = PlacedParticle;
 
-// Checks the particles and places them.
-std::vector<Placed> PlaceParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube) {
+// Checks the particles and places them into `placed`.
+void PlaceParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube, std::vector<Placed>& placed) {
   const std::size_t n = particles.size();
   bool lengths_agree = particles.position.size() == 3 * n && particles.type.size() == n &&
                        (!particles.has_id() || particles.id.size() == n);
@@ -51,14 +44,15 @@ std::vector<Placed> PlaceParticles(const ParticleChunk& particles, NodeKey regio
     throw Error::InvalidArgument("subtree builder: region " + region.Path() + " has " + std::to_string(n) +
                                  " particles, more than one build takes (2^32 - 1)");
   }
-  std::vector<Placed> placed(n);
+  placed.clear();
+  placed.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
     const double* p = &particles.position[3 * i];
     if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
       throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " of region " + region.Path() +
                                    " has a non-finite position");
     }
-    placed[i] = {cube.FinestGridCoords(p), static_cast<std::uint32_t>(i)};
+    placed.push_back({cube.FinestGridCoords(p), static_cast<std::uint32_t>(i)});
     if (!GridHolds(placed[i].grid, region)) {
       throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " at (" + std::to_string(p[0]) +
                                    ", " + std::to_string(p[1]) + ", " + std::to_string(p[2]) +
@@ -69,7 +63,6 @@ std::vector<Placed> PlaceParticles(const ParticleChunk& particles, NodeKey regio
                                    " has mass " + std::to_string(particles.mass[i]) + ", must be finite and > 0");
     }
   }
-  return placed;
 }
 
 // The vector columns a set of points carries, one bit per VectorColumn.
@@ -110,10 +103,10 @@ void AppendVectors(const From& from, std::size_t i, To& to) {
 // Groups [begin, end) by the child octant at `level` that holds each point,
 // in place (American flag sort: each record is swapped straight into its
 // octant's next free slot). Returns the offsets of the eight groups from
-// `begin`.
-std::array<std::size_t, 9> PartitionByOctant(Placed* begin, Placed* end, int level) {
+// `begin`. `octant` is scratch.
+std::array<std::size_t, 9> PartitionByOctant(Placed* begin, Placed* end, int level, std::vector<std::uint8_t>& octant) {
   const std::size_t n = static_cast<std::size_t>(end - begin);
-  std::vector<std::uint8_t> octant(n);
+  octant.resize(n);
   std::array<std::size_t, 9> bounds{};
   for (std::size_t i = 0; i < n; ++i) {
     octant[i] = static_cast<std::uint8_t>(OctantAt(begin[i].grid, level));
@@ -225,8 +218,9 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
 // One BuildSubtree call: the particles, placed, and where nodes go.
 class SubtreeBuild {
  public:
-  SubtreeBuild(const ParticleChunk& particles, const Cube& cube, const SubtreeOptions& options, const NodeSink& sink)
-      : particles_(particles), cube_(cube), options_(options), sink_(sink) {}
+  SubtreeBuild(const ParticleChunk& particles, const Cube& cube, const SubtreeOptions& options, const NodeSink& sink,
+               std::vector<std::uint8_t>& octant_scratch)
+      : particles_(particles), cube_(cube), options_(options), sink_(sink), octant_scratch_(octant_scratch) {}
 
   // Builds the node `key` from the particles `placed` [begin, end), its
   // subtree first, and hands each node to the sink.
@@ -235,7 +229,7 @@ class SubtreeBuild {
     if (static_cast<std::size_t>(end - begin) <= options_.capacity || key.level() >= options_.max_level) {
       node = MakeLeaf(begin, end, key);
     } else {
-      const auto bounds = PartitionByOctant(begin, end, key.level());
+      const auto bounds = PartitionByOctant(begin, end, key.level(), octant_scratch_);
       std::array<NodePoints, 8> children;
       for (int o = 0; o < 8; ++o) {
         if (bounds[o] < bounds[o + 1]) children[o] = Build(begin + bounds[o], begin + bounds[o + 1], key.Child(o));
@@ -249,7 +243,7 @@ class SubtreeBuild {
  private:
   NodePoints MakeLeaf(Placed* begin, Placed* end, NodeKey key) {
     const ParticleChunk& c = particles_;
-    const auto bounds = PartitionByOctant(begin, end, key.level());
+    const auto bounds = PartitionByOctant(begin, end, key.level(), octant_scratch_);
     // The in-place partition is not stable, so the order it leaves depends on
     // what else shared the array (a whole input or one chunk of it). Ordering
     // each octant's points by sampling ID (then by position, for inputs with
@@ -314,17 +308,21 @@ class SubtreeBuild {
   const Cube& cube_;
   const SubtreeOptions& options_;
   const NodeSink& sink_;
+  std::vector<std::uint8_t>& octant_scratch_;
 };
 
 }  // namespace
 
 NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
-                        const SubtreeOptions& options, const NodeSink& sink) {
+                        const SubtreeOptions& options, const NodeSink& sink, SubtreeWorkspace* workspace) {
   cube.Validate();
   CheckOptions(options, region);
-  std::vector<Placed> placed = PlaceParticles(particles, region, cube);
+  SubtreeWorkspace own;
+  SubtreeWorkspace& work = workspace != nullptr ? *workspace : own;
+  std::vector<Placed>& placed = work.placed;
+  PlaceParticles(particles, region, cube, placed);
   if (placed.empty()) return {};
-  SubtreeBuild build(particles, cube, options, sink);
+  SubtreeBuild build(particles, cube, options, sink, work.octant);
   return build.Build(placed.data(), placed.data() + placed.size(), region);
 }
 

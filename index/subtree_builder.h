@@ -34,6 +34,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <vector>
 
@@ -55,6 +56,24 @@ struct SubtreeOptions {
 // (copy what must outlive it).
 using NodeSink = std::function<void(NodeKey, const NodePoints&)>;
 
+// Where a particle goes in the build: its grid point (index/cube.h),
+// computed once, and its index in the input. Levels are split by reordering
+// these 32-byte records, never the particles' columns, and every placement
+// below (octants, quantized positions, density cells) is a shift of `grid`.
+struct PlacedParticle {
+  GridPoint grid;
+  std::uint32_t index;
+};
+
+// Memory that one thread's BuildSubtree calls reuse, chunk after chunk: the
+// placement records (32 bytes a particle) and the octant partition's
+// scratch (one byte). Taken fresh at every call instead, they are pages the
+// kernel must zero each time. Holds nothing between calls; one per thread.
+struct SubtreeWorkspace {
+  std::vector<PlacedParticle> placed;
+  std::vector<std::uint8_t> octant;
+};
+
 // Builds the subtree of `region` from `particles`, which must all lie in the
 // region (Cube::Holds) with finite positions and finite masses > 0; the
 // optional columns present in `particles` (id and the vector columns) are
@@ -64,8 +83,9 @@ using NodeSink = std::function<void(NodeKey, const NodePoints&)>;
 // returns an empty node and calls no sink. Throws Error::InvalidArgument on
 // input that breaks these rules (naming the first offending particle) or on
 // bad options.
+// `workspace`, when given, lends its memory to the call.
 NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
-                        const SubtreeOptions& options, const NodeSink& sink);
+                        const SubtreeOptions& options, const NodeSink& sink, SubtreeWorkspace* workspace = nullptr);
 
 struct RegionRoot {
   NodeKey key;

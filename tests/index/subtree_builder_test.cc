@@ -244,6 +244,51 @@ TEST(SubtreeBuilder, BuildsASubRegion) {
   CheckTree(tree, input, region, options);
 }
 
+// A workspace lent to call after call (a larger input, then a smaller one
+// in another region, then the first again) changes no node: each tree equals
+// the one built without it.
+TEST(SubtreeBuilder, AWorkspaceServesCallAfterCall) {
+  std::mt19937_64 rng(9);
+  const ParticleChunk large = Clumpy(rng, 30000);
+  ParticleChunk small;
+  const NodeKey region = NodeKey::FromPath("r3");
+  for (std::size_t i = 0; i < large.size(); ++i) {
+    if (!kCube.Holds(region, &large.position[3 * i])) continue;
+    small.position.insert(small.position.end(), &large.position[3 * i], &large.position[3 * i] + 3);
+    small.velocity.insert(small.velocity.end(), &large.velocity[3 * i], &large.velocity[3 * i] + 3);
+    small.mass.push_back(large.mass[i]);
+    small.id.push_back(large.id[i]);
+    small.type.push_back(large.type[i]);
+  }
+  ASSERT_GT(small.size(), 1000u);
+  SubtreeOptions options;
+  options.capacity = 500;
+  const auto expect_same = [](const Tree& a, const Tree& b) {
+    ASSERT_EQ(a.order, b.order);
+    for (const auto& [key, node] : a.nodes) {
+      const NodePoints& other = b.nodes.at(key);
+      EXPECT_EQ(node.position, other.position) << key.Path();
+      EXPECT_EQ(node.weight, other.weight) << key.Path();
+      EXPECT_EQ(node.smoothing, other.smoothing) << key.Path();
+      EXPECT_EQ(node.id, other.id) << key.Path();
+      EXPECT_EQ(node.velocity, other.velocity) << key.Path();
+      EXPECT_EQ(node.octant_offsets, other.octant_offsets) << key.Path();
+    }
+  };
+  Tree large_alone, small_alone;
+  BuildSubtree(large, NodeKey::Root(), kCube, options, large_alone.Sink());
+  BuildSubtree(small, region, kCube, options, small_alone.Sink());
+  SubtreeWorkspace workspace;
+  Tree first, second, third;
+  BuildSubtree(large, NodeKey::Root(), kCube, options, first.Sink(), &workspace);
+  BuildSubtree(small, region, kCube, options, second.Sink(), &workspace);
+  BuildSubtree(large, NodeKey::Root(), kCube, options, third.Sink(), &workspace);
+  expect_same(first, large_alone);
+  expect_same(second, small_alone);
+  expect_same(third, large_alone);
+  CheckTree(second, small, region, options);
+}
+
 TEST(SubtreeBuilder, CoincidentPointsStopAtTheDepthLimit) {
   ParticleChunk input;
   const std::size_t n = 100000;

@@ -39,6 +39,20 @@ void GatherColumn(const std::vector<T>& from, std::span<const std::uint32_t> lis
 
 }  // namespace
 
+void ChunkGatherer::Reserve(const ParticleChunk& resident, std::size_t points) {
+  target_.reserve(points);
+  const auto reserve = [points](const auto& from, std::size_t width, auto& to) {
+    if (!from.empty()) to.reserve(width * points);
+  };
+  reserve(resident.position, 3, points_.position);
+  reserve(resident.mass, 1, points_.mass);
+  reserve(resident.type, 1, points_.type);
+  reserve(resident.id, 1, points_.id);
+  const auto from = VectorColumns(resident);
+  const auto to = VectorColumns(points_);
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) reserve(*from[v], 3, *to[v]);
+}
+
 const ParticleChunk& ChunkGatherer::Gather(const ParticleChunk& resident, const Chunk& chunk) {
   const std::span<const std::uint32_t> listed = chunk.resident;
   const std::size_t n = listed.size();

@@ -16,6 +16,7 @@
 // next, and the copy runs on the build's threads.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -35,6 +36,11 @@ class ChunkGatherer {
   // the order above; valid until the next call. Throws Error::InvalidArgument
   // when an index lies past the resident set or a point outside the chunk.
   const ParticleChunk& Gather(const ParticleChunk& resident, const Chunk& chunk);
+
+  // Sizes the buffers once for chunks of up to `points` points of
+  // `resident`'s columns: grown chunk by chunk instead, each growth takes
+  // fresh pages and copies what the buffer held.
+  void Reserve(const ParticleChunk& resident, std::size_t points);
 
  private:
   Cube cube_;

@@ -238,20 +238,25 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ParticleChunk& resident,
   std::atomic<bool> failed{false};
   std::exception_ptr error;
   std::mutex error_mutex;
+  std::size_t largest_resident = 0;
+  for (const Chunk& chunk : chunks) largest_resident = std::max(largest_resident, chunk.resident.size());
   auto work = [&] {
     try {
       Bytes block;  // this worker's encoding buffer
+      SubtreeWorkspace workspace;
       ChunkGatherer gatherer(*build.cube, build.tree->max_level);
+      gatherer.Reserve(resident, largest_resident);
       for (std::size_t c = next++; c < chunks.size() && !failed; c = next++) {
         const std::uint64_t count = chunks[c].point_count;
         std::unordered_set<std::uint64_t> has_children;
         const NodeSink sink = LeafAwareSink(build, has_children, block);
         NodePoints root;
         if (!chunks[c].resident.empty()) {
-          root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink);
+          root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink,
+                              &workspace);
           chunks[c].resident = {};
         } else {
-          root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink);
+          root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink, &workspace);
         }
         {
           std::lock_guard lock(merge_mutex);
