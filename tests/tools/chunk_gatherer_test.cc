@@ -1,6 +1,7 @@
 // The chunk gatherer (tools/ingest/chunk_gatherer.h): copies exactly the
 // points a resident chunk lists, every column, grouped by cells below the
-// chunk, and its buffers serve one chunk after another.
+// chunk, from wide and narrow resident columns alike, and its buffers serve
+// one chunk after another.
 #include <gtest/gtest.h>
 
 #include <map>
@@ -15,14 +16,18 @@ namespace {
 const Cube kCube{{0, 0, 0}, 100, false};
 
 // `n` points in the cube with every column but the epoch links; IDs 1..n, the
-// other columns derived from the index so that a mix-up shows.
-ParticleChunk Resident(std::size_t n, bool with_velocity) {
+// other columns derived from the index so that a mix-up shows. `narrow`:
+// float positions and one mass per type, which a ResidentEpoch keeps narrow.
+ParticleChunk Resident(std::size_t n, bool with_velocity, bool narrow = false) {
   std::mt19937_64 rng(5);
   std::uniform_real_distribution<double> anywhere(0, 100);
   ParticleChunk points;
   for (std::size_t i = 0; i < n; ++i) {
-    for (int a = 0; a < 3; ++a) points.position.push_back(anywhere(rng));
-    points.mass.push_back(1.0 + static_cast<double>(i));
+    for (int a = 0; a < 3; ++a) {
+      const double x = anywhere(rng);
+      points.position.push_back(narrow ? static_cast<float>(x) : x);
+    }
+    points.mass.push_back(narrow ? 1.0 + static_cast<double>(i % 6) / 3 : 1.0 + static_cast<double>(i));
     points.type.push_back(static_cast<std::uint8_t>(i % 6));
     points.id.push_back(i + 1);
     if (with_velocity) {
@@ -30,6 +35,17 @@ ParticleChunk Resident(std::size_t n, bool with_velocity) {
     }
   }
   return points;
+}
+
+// `points` held as a resident epoch.
+ResidentEpoch Hold(const ParticleChunk& points) {
+  ResidentEpoch epoch;
+  ParticleColumns columns;
+  columns.id = points.has_id();
+  columns.vector(VectorColumn::kVelocity) = points.has_velocity();
+  epoch.Reserve(points.size(), columns);
+  epoch.Append(points);
+  return epoch;
 }
 
 // A chunk for node `key` listing the resident points that lie in it, last
@@ -82,45 +98,54 @@ void ExpectGathered(const ParticleChunk& resident, const Chunk& chunk, const Par
 }
 
 TEST(ChunkGatherer, CopiesTheListedPointsGroupedByCellsBelowTheChunk) {
-  const ParticleChunk resident = Resident(40000, true);
-  const Chunk chunk = ChunkOf(resident, NodeKey::Root().Child(5));
-  ASSERT_GT(chunk.resident.size(), 1024u);
-  ASSERT_LE(chunk.resident.size(), 8192u) << "16 points a cell: three levels below the chunk";
-  ChunkGatherer gatherer(kCube, kMaxLevel);
-  ExpectGathered(resident, chunk, gatherer.Gather(resident, chunk), 3);
+  for (const bool narrow : {false, true}) {
+    SCOPED_TRACE(narrow ? "narrow columns" : "wide columns");
+    const ParticleChunk resident = Resident(40000, true, narrow);
+    const ResidentEpoch held = Hold(resident);
+    ASSERT_EQ(held.positions_narrow(), narrow);
+    ASSERT_EQ(held.masses_per_type(), narrow);
+    const Chunk chunk = ChunkOf(resident, NodeKey::Root().Child(5));
+    ASSERT_GT(chunk.resident.size(), 1024u);
+    ASSERT_LE(chunk.resident.size(), 8192u) << "16 points a cell: three levels below the chunk";
+    ChunkGatherer gatherer(kCube, kMaxLevel);
+    ExpectGathered(resident, chunk, gatherer.Gather(held, chunk), 3);
+  }
 }
 
 TEST(ChunkGatherer, BuffersServeTheNextChunk) {
   ChunkGatherer gatherer(kCube, kMaxLevel);
   const ParticleChunk large = Resident(40000, true);
+  const ResidentEpoch large_held = Hold(large);
   const Chunk first = ChunkOf(large, NodeKey::Root().Child(2));
-  gatherer.Reserve(large, first.resident.size() / 2);  // reserved too small: the buffers still grow
-  ExpectGathered(large, first, gatherer.Gather(large, first), 3);
+  gatherer.Reserve(large_held, first.resident.size() / 2);  // reserved too small: the buffers still grow
+  ExpectGathered(large, first, gatherer.Gather(large_held, first), 3);
   // Fewer points, and no velocities: nothing of the first chunk is left.
   const ParticleChunk small = Resident(3000, false);
   const Chunk second = ChunkOf(small, NodeKey::Root().Child(7).Child(1));
   ASSERT_GT(second.resident.size(), 0u);
-  ExpectGathered(small, second, gatherer.Gather(small, second), 1);
+  ExpectGathered(small, second, gatherer.Gather(Hold(small), second), 1);
 }
 
 TEST(ChunkGatherer, StopsOrderingAtTheDepthLimit) {
   const ParticleChunk resident = Resident(5000, false);
+  const ResidentEpoch held = Hold(resident);
   const Chunk chunk = ChunkOf(resident, NodeKey::Root().Child(3));
   ChunkGatherer gatherer(kCube, /*max_level=*/2);
-  ExpectGathered(resident, chunk, gatherer.Gather(resident, chunk), 1);
+  ExpectGathered(resident, chunk, gatherer.Gather(held, chunk), 1);
   ChunkGatherer at_the_limit(kCube, /*max_level=*/1);
-  ExpectGathered(resident, chunk, at_the_limit.Gather(resident, chunk), 0);
+  ExpectGathered(resident, chunk, at_the_limit.Gather(held, chunk), 0);
 }
 
 TEST(ChunkGatherer, RefusesIndicesPastTheSetAndPointsOutsideTheChunk) {
   const ParticleChunk resident = Resident(1000, false);
+  const ResidentEpoch held = Hold(resident);
   ChunkGatherer gatherer(kCube, kMaxLevel);
   Chunk past_the_end = ChunkOf(resident, NodeKey::Root().Child(0));
   past_the_end.resident.push_back(1000);
-  EXPECT_THROW(gatherer.Gather(resident, past_the_end), Error);
+  EXPECT_THROW(gatherer.Gather(held, past_the_end), Error);
   Chunk outside = ChunkOf(resident, NodeKey::Root().Child(0));
   outside.resident.push_back(ChunkOf(resident, NodeKey::Root().Child(6)).resident.front());
-  EXPECT_THROW(gatherer.Gather(resident, outside), Error);
+  EXPECT_THROW(gatherer.Gather(held, outside), Error);
 }
 
 }  // namespace

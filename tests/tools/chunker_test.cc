@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <map>
+#include <numeric>
 #include <random>
 
 #include "tests/support/temp_dir.h"
@@ -160,50 +161,61 @@ TEST(Chunker, ThreadsChangeNothing) {
 // touches the disk.
 TEST(Chunker, ResidentSplitCutsTheSameChunks) {
   testing_support::TempDir dir("chunker-resident-test");
-  const ParticleChunk points = Points(60000);
-  for (const std::uint64_t leaf_capacity : {std::uint64_t{0}, std::uint64_t{700}}) {
-    for (const int threads : {1, 3}) {
-      SCOPED_TRACE("leaf capacity " + std::to_string(leaf_capacity) + ", threads " + std::to_string(threads));
-      ChunkerOptions options;
-      options.max_chunk_points = 3000;
-      options.split_levels = 2;
-      options.leaf_capacity = leaf_capacity;
-      options.memory_bytes = std::size_t{1} << 30;
-      options.threads = threads;
-      options.temp_dir = dir.path().string();
-      options.columns.id = true;
-      Chunker streaming(kCube, options);
-      std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
-      Chunker in_place(kCube, options);
-      ParticleChunk resident;
-      const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, resident);
-      ASSERT_EQ(resident.size(), points.size()) << "an expected count too small only costs reallocations";
-      EXPECT_EQ(resident.id, points.id) << "the resident set stays in input order";
-      EXPECT_EQ(resident.position, points.position);
-      ASSERT_EQ(chunks.size(), streamed.size());
-      std::vector<int> listed(points.size(), 0);
-      for (std::size_t c = 0; c < chunks.size(); ++c) {
-        EXPECT_EQ(chunks[c].key, streamed[c].key);
-        EXPECT_EQ(chunks[c].point_count, streamed[c].point_count);
-        EXPECT_TRUE(chunks[c].path.empty());
-        EXPECT_EQ(chunks[c].points.size(), 0u);
-        ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
-        const ParticleChunk taken = streamed[c].TakePoints();
-        ASSERT_EQ(taken.size(), chunks[c].resident.size());
-        for (std::size_t k = 0; k < taken.size(); ++k) {
-          const std::uint32_t i = chunks[c].resident[k];
-          ASSERT_LT(i, resident.size());
-          ++listed[i];
-          ASSERT_EQ(resident.id[i], taken.id[k]) << "chunk " << chunks[c].key.Path() << ", point " << k;
-          EXPECT_EQ(resident.mass[i], taken.mass[k]);
-          EXPECT_EQ(resident.type[i], taken.type[k]);
-          for (int a = 0; a < 3; ++a) EXPECT_EQ(resident.position[3 * i + a], taken.position[3 * k + a]);
+  const ParticleChunk double_points = Points(60000);
+  ParticleChunk float_points = Points(60000);  // positions a resident epoch keeps as floats
+  for (double& x : float_points.position) x = static_cast<float>(x);
+  for (const bool float_positions : {false, true}) {
+    const ParticleChunk& points = float_positions ? float_points : double_points;
+    for (const std::uint64_t leaf_capacity : {std::uint64_t{0}, std::uint64_t{700}}) {
+      for (const int threads : {1, 3}) {
+        SCOPED_TRACE("leaf capacity " + std::to_string(leaf_capacity) + ", threads " + std::to_string(threads) +
+                     (float_positions ? ", float positions" : ""));
+        ChunkerOptions options;
+        options.max_chunk_points = 3000;
+        options.split_levels = 2;
+        options.leaf_capacity = leaf_capacity;
+        options.memory_bytes = std::size_t{1} << 30;
+        options.threads = threads;
+        options.temp_dir = dir.path().string();
+        options.columns.id = true;
+        Chunker streaming(kCube, options);
+        std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
+        Chunker in_place(kCube, options);
+        ResidentEpoch held;
+        const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, held);
+        ASSERT_EQ(held.size(), points.size()) << "an expected count too small only costs reallocations";
+        EXPECT_EQ(held.positions_narrow(), float_positions);
+        std::vector<std::uint32_t> every(held.size());
+        std::iota(every.begin(), every.end(), 0u);
+        ParticleChunk resident;
+        held.CopyPoints(every, every, resident);
+        EXPECT_EQ(resident.id, points.id) << "the resident set stays in input order";
+        EXPECT_EQ(resident.position, points.position);
+        ASSERT_EQ(chunks.size(), streamed.size());
+        std::vector<int> listed(points.size(), 0);
+        for (std::size_t c = 0; c < chunks.size(); ++c) {
+          EXPECT_EQ(chunks[c].key, streamed[c].key);
+          EXPECT_EQ(chunks[c].point_count, streamed[c].point_count);
+          EXPECT_TRUE(chunks[c].path.empty());
+          EXPECT_EQ(chunks[c].points.size(), 0u);
+          ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
+          const ParticleChunk taken = streamed[c].TakePoints();
+          ASSERT_EQ(taken.size(), chunks[c].resident.size());
+          for (std::size_t k = 0; k < taken.size(); ++k) {
+            const std::uint32_t i = chunks[c].resident[k];
+            ASSERT_LT(i, resident.size());
+            ++listed[i];
+            ASSERT_EQ(resident.id[i], taken.id[k]) << "chunk " << chunks[c].key.Path() << ", point " << k;
+            EXPECT_EQ(resident.mass[i], taken.mass[k]);
+            EXPECT_EQ(resident.type[i], taken.type[k]);
+            for (int a = 0; a < 3; ++a) EXPECT_EQ(resident.position[3 * i + a], taken.position[3 * k + a]);
+          }
         }
+        EXPECT_EQ(std::count(listed.begin(), listed.end(), 1), static_cast<std::ptrdiff_t>(points.size()))
+            << "every point listed once";
+        EXPECT_EQ(in_place.spilled_points(), 0u);
+        EXPECT_TRUE(fs::is_empty(dir.path()));
       }
-      EXPECT_EQ(std::count(listed.begin(), listed.end(), 1), static_cast<std::ptrdiff_t>(points.size()))
-          << "every point listed once";
-      EXPECT_EQ(in_place.spilled_points(), 0u);
-      EXPECT_TRUE(fs::is_empty(dir.path()));
     }
   }
 }

@@ -23,6 +23,7 @@
 #include "index/cube.h"
 #include "index/particle_chunk.h"
 #include "tools/ingest/chunker.h"
+#include "tools/ingest/resident_epoch.h"
 
 namespace octocosm {
 
@@ -35,12 +36,12 @@ class ChunkGatherer {
   // The points `chunk.resident` lists, every column `resident` carries, in
   // the order above; valid until the next call. Throws Error::InvalidArgument
   // when an index lies past the resident set or a point outside the chunk.
-  const ParticleChunk& Gather(const ParticleChunk& resident, const Chunk& chunk);
+  const ParticleChunk& Gather(const ResidentEpoch& resident, const Chunk& chunk);
 
   // Sizes the buffers once for chunks of up to `points` points of
   // `resident`'s columns: grown chunk by chunk instead, each growth takes
   // fresh pages and copies what the buffer held.
-  void Reserve(const ParticleChunk& resident, std::size_t points);
+  void Reserve(const ResidentEpoch& resident, std::size_t points);
 
  private:
   Cube cube_;

@@ -1,6 +1,7 @@
 #include "tools/ingest/chunker.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -60,6 +61,14 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
   }
 }
 
+// Point i's position, and where it lies in memory, in a batch or a resident epoch.
+std::array<double, 3> PositionOf(const ParticleChunk& points, std::size_t i) {
+  return {points.position[3 * i], points.position[3 * i + 1], points.position[3 * i + 2]};
+}
+std::array<double, 3> PositionOf(const ResidentEpoch& points, std::size_t i) { return points.Position(i); }
+const void* PositionAddress(const ParticleChunk& points, std::size_t i) { return &points.position[3 * i]; }
+const void* PositionAddress(const ResidentEpoch& points, std::size_t i) { return points.PositionAddress(i); }
+
 // The points of `points` (every one, or when `subset` is not empty the ones
 // it lists) sorted into the `cells` cells of `level` that begin at key value
 // `first`: computes each point's cell on all threads, then calls
@@ -68,8 +77,8 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
 // `points`; take may move it away. Cells go to the threads in contiguous
 // groups of about equal point counts, so the result is the same for any
 // thread count.
-template <typename Take>
-void BucketByCell(const Cube& cube, const ParticleChunk& points, std::span<const std::uint32_t> subset, NodeKey root,
+template <typename Points, typename Take>
+void BucketByCell(const Cube& cube, const Points& points, std::span<const std::uint32_t> subset, NodeKey root,
                   int level, int threads, Take&& take) {
   const std::size_t n = subset.empty() ? points.size() : subset.size();
   if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: more than 2^32 - 1 points in one pass");
@@ -79,10 +88,9 @@ void BucketByCell(const Cube& cube, const ParticleChunk& points, std::span<const
   std::vector<std::uint32_t> cell_of(n);
   ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
-      if (!subset.empty() && i + kPrefetchDistance < end) {
-        __builtin_prefetch(&points.position[3 * std::size_t{subset[i + kPrefetchDistance]}]);
-      }
-      const NodeKey cell = cube.LeafKey(&points.position[3 * std::size_t{point(i)}], level);
+      if (!subset.empty() && i + kPrefetchDistance < end) __builtin_prefetch(PositionAddress(points, subset[i + kPrefetchDistance]));
+      const std::array<double, 3> position = PositionOf(points, point(i));
+      const NodeKey cell = cube.LeafKey(position.data(), level);
       const std::uint64_t c = cell.value() - first;
       if (cell.value() < first || c >= cells) {
         throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
@@ -258,29 +266,13 @@ bool Chunker::Oversized(const Chunk& chunk) const {
 }
 
 std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
-                                          ParticleChunk& resident) {
-  resident.clear();
-  // Each column reserved whole, on small pages (filled once and kept:
-  // tools/huge_pages.h); the reader fills them on this thread while a warmer
-  // faults their fresh pages in on another.
-  std::vector<PageWarmer::Range> fresh;
-  const auto reserve = [&](auto& column, std::size_t width) {
-    column.reserve(width * expected_points);
-    if (column.capacity() == 0) return;
-    PreferSmallPages(column.data(), column.capacity() * sizeof(column[0]));
-    fresh.push_back({column.data(), column.capacity() * sizeof(column[0])});
-  };
-  reserve(resident.position, 3);
-  reserve(resident.mass, 1);
-  reserve(resident.type, 1);
-  if (options_.columns.id) reserve(resident.id, 1);
-  const auto vectors = VectorColumns(resident);
-  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (options_.columns.vectors[v]) reserve(*vectors[v], 3);
-  }
+                                          ResidentEpoch& resident) {
+  resident = ResidentEpoch();
+  // Each column reserved whole; the reader fills them on this thread while a
+  // warmer faults their fresh pages in on another.
   {
-    PageWarmer warmer(std::move(fresh));
-    pass([&](const ParticleChunk& batch) { AppendWhole(batch, resident); });
+    PageWarmer warmer(resident.Reserve(expected_points, options_.columns));
+    pass([&](const ParticleChunk& batch) { resident.Append(batch); });
   }
   if (resident.size() > UINT32_MAX) {
     throw Error::InvalidArgument("chunker: " + std::to_string(resident.size()) +
@@ -291,7 +283,7 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
   return chunks;
 }
 
-std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,
+std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const ResidentEpoch& resident,
                                             std::span<const std::uint32_t> subset) {
   levels = std::max(std::min(levels, options_.max_level - root.level()), 0);
   const int level = root.level() + levels;

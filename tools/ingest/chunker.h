@@ -22,8 +22,9 @@
 // merged into one chunk for that node.
 //
 // A point set that fits in memory as a whole is better not copied into
-// growing buffers: SplitResident reads it once into one ParticleChunk and cuts
-// the same chunks as lists of indices into it, and each chunk is copied out
+// growing buffers: SplitResident reads it once into a ResidentEpoch (its
+// columns as narrow as their values allow: tools/ingest/resident_epoch.h) and
+// cuts the same chunks as lists of indices into it, and each chunk is copied out
 // only when it is built (tools/ingest/chunk_gatherer.h), into buffers that
 // serve chunk after chunk. That saves the buffers' growth and any spilling.
 #pragma once
@@ -38,6 +39,7 @@
 #include "index/morton.h"
 #include "index/particle_chunk.h"
 #include "tools/ingest/particle_file.h"
+#include "tools/ingest/resident_epoch.h"
 
 namespace octocosm {
 
@@ -85,7 +87,7 @@ class Chunker {
   // Nothing goes through chunk buffers and nothing spills; memory_bytes is
   // not consulted. At most 2^32 - 1 points.
   std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
-                                   ParticleChunk& resident);
+                                   ResidentEpoch& resident);
   // The memory SplitResident takes per point on top of the resident points:
   // its cell while the split runs, and its index in its chunk's list, kept
   // until the chunk is built.
@@ -97,7 +99,7 @@ class Chunker {
   // Whether a chunk must be split again, and by how many levels.
   bool Oversized(const Chunk& chunk) const;
   int ResplitLevels(std::uint64_t points) const;
-  std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ParticleChunk& resident,
+  std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ResidentEpoch& resident,
                                      std::span<const std::uint32_t> subset);
   std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);

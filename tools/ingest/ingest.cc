@@ -29,6 +29,7 @@
 #include "tools/ingest/dense_id_table.h"
 #include "tools/ingest/epoch_join.h"
 #include "tools/ingest/external_sorter.h"
+#include "tools/ingest/resident_epoch.h"
 #include "tools/progress.h"
 
 namespace octocosm {
@@ -226,7 +227,7 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
 // merger's open ancestors, never every chunk's sample. Returns the root.
 // Resident chunks (Chunker::SplitResident) are copied out of `resident` one
 // at a time by each worker's gatherer.
-NodePoints BuildChunks(std::vector<Chunk> chunks, const ParticleChunk& resident, EpochBuild& build, unsigned threads) {
+NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident, EpochBuild& build, unsigned threads) {
   Bytes merger_block;  // the merger runs under merge_mutex: one buffer serves it
   TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
     build.Emit(key, points, /*is_leaf=*/false, merger_block);
@@ -464,7 +465,7 @@ IngestReport Ingest(const IngestOptions& options) {
     const bool resident = !options.stream_chunks && expected < UINT32_MAX &&
                           expected * chunker_options.columns.BytesPerPoint() <= resident_share &&
                           expected * Chunker::kResidentScratchBytesPerPoint <= budget * 4 / 10;
-    ParticleChunk resident_points;
+    ResidentEpoch resident_points;
     std::vector<Chunk> chunks;
     IdCensus id_census(id_table_slots);
     {
@@ -521,7 +522,7 @@ IngestReport Ingest(const IngestOptions& options) {
       Progress progress(label + ": build", epoch_report.points, "points");
       build.progress = &progress;
       const NodePoints root = BuildChunks(std::move(chunks), resident_points, build, threads);
-      resident_points = ParticleChunk();
+      resident_points = ResidentEpoch();
       for (double w : root.weight) epoch_report.mass += w;
       progress.Finish();
     }
