@@ -47,6 +47,24 @@ ParticleChunk Clumpy(std::mt19937_64& rng, std::size_t n, bool with_ids = true, 
   return c;
 }
 
+// Appends point i of `from` (made by Clumpy: IDs and velocities) to `to`.
+void AppendPoint(const ParticleChunk& from, std::size_t i, ParticleChunk& to) {
+  to.position.insert(to.position.end(), &from.position[3 * i], &from.position[3 * i] + 3);
+  to.velocity.insert(to.velocity.end(), &from.velocity[3 * i], &from.velocity[3 * i] + 3);
+  to.mass.push_back(from.mass[i]);
+  to.id.push_back(from.id[i]);
+  to.type.push_back(from.type[i]);
+}
+
+// The points of `all` (made by Clumpy) that lie in node `region`.
+ParticleChunk PointsIn(const ParticleChunk& all, NodeKey region) {
+  ParticleChunk in;
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (kCube.Holds(region, &all.position[3 * i])) AppendPoint(all, i, in);
+  }
+  return in;
+}
+
 struct Tree {
   std::map<NodeKey, NodePoints> nodes;
   std::vector<NodeKey> order;  // sink call order
@@ -224,17 +242,8 @@ TEST(SubtreeBuilder, ParentOctantsEstimateTheirChildsMassWithoutBias) {
 
 TEST(SubtreeBuilder, BuildsASubRegion) {
   std::mt19937_64 rng(2);
-  ParticleChunk all = Clumpy(rng, 20000);
   const NodeKey region = NodeKey::FromPath("r07");
-  ParticleChunk input;
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    if (!kCube.Holds(region, &all.position[3 * i])) continue;
-    input.position.insert(input.position.end(), &all.position[3 * i], &all.position[3 * i] + 3);
-    input.velocity.insert(input.velocity.end(), &all.velocity[3 * i], &all.velocity[3 * i] + 3);
-    input.mass.push_back(all.mass[i]);
-    input.id.push_back(all.id[i]);
-    input.type.push_back(all.type[i]);
-  }
+  const ParticleChunk input = PointsIn(Clumpy(rng, 20000), region);
   ASSERT_GT(input.size(), 100u);
   ParticleChunk work = input;
   SubtreeOptions options;
@@ -250,16 +259,8 @@ TEST(SubtreeBuilder, BuildsASubRegion) {
 TEST(SubtreeBuilder, AWorkspaceServesCallAfterCall) {
   std::mt19937_64 rng(9);
   const ParticleChunk large = Clumpy(rng, 30000);
-  ParticleChunk small;
   const NodeKey region = NodeKey::FromPath("r3");
-  for (std::size_t i = 0; i < large.size(); ++i) {
-    if (!kCube.Holds(region, &large.position[3 * i])) continue;
-    small.position.insert(small.position.end(), &large.position[3 * i], &large.position[3 * i] + 3);
-    small.velocity.insert(small.velocity.end(), &large.velocity[3 * i], &large.velocity[3 * i] + 3);
-    small.mass.push_back(large.mass[i]);
-    small.id.push_back(large.id[i]);
-    small.type.push_back(large.type[i]);
-  }
+  const ParticleChunk small = PointsIn(large, region);
   ASSERT_GT(small.size(), 1000u);
   SubtreeOptions options;
   options.capacity = 500;
@@ -502,14 +503,7 @@ TEST(SubtreeBuilder, TopLevelsMatchOneBuildOverTheWholeCube) {
 
   // Split into the level-2 regions, as the out-of-core pipeline would.
   std::map<NodeKey, ParticleChunk> chunks;
-  for (std::size_t i = 0; i < input.size(); ++i) {
-    ParticleChunk& c = chunks[kCube.LeafKey(&input.position[3 * i], 2)];
-    c.position.insert(c.position.end(), &input.position[3 * i], &input.position[3 * i] + 3);
-    c.velocity.insert(c.velocity.end(), &input.velocity[3 * i], &input.velocity[3 * i] + 3);
-    c.mass.push_back(input.mass[i]);
-    c.id.push_back(input.id[i]);
-    c.type.push_back(input.type[i]);
-  }
+  for (std::size_t i = 0; i < input.size(); ++i) AppendPoint(input, i, chunks[kCube.LeafKey(&input.position[3 * i], 2)]);
   Tree pieces;
   std::vector<RegionRoot> roots;
   for (auto& [key, chunk] : chunks) {
