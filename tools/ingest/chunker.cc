@@ -10,7 +10,6 @@
 #include <unordered_map>
 
 #include "storage/error.h"
-#include "tools/huge_pages.h"
 #include "tools/page_warmer.h"
 #include "tools/parallel_for.h"
 
@@ -88,7 +87,9 @@ void BucketByCell(const Cube& cube, const Points& points, std::span<const std::u
   std::vector<std::uint32_t> cell_of(n);
   ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
-      if (!subset.empty() && i + kPrefetchDistance < end) __builtin_prefetch(PositionAddress(points, subset[i + kPrefetchDistance]));
+      if (!subset.empty() && i + kPrefetchDistance < end) {
+        __builtin_prefetch(PositionAddress(points, subset[i + kPrefetchDistance]));
+      }
       const std::array<double, 3> position = PositionOf(points, point(i));
       const NodeKey cell = cube.LeafKey(position.data(), level);
       const std::uint64_t c = cell.value() - first;

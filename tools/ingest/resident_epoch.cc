@@ -62,6 +62,12 @@ void AddFreshRange(std::vector<T>& column, std::vector<PageWarmer::Range>& range
 }  // namespace
 
 template <typename Narrow, typename Wide>
+void NarrowableColumn<Narrow, Wide>::Reserve(std::size_t values, std::vector<PageWarmer::Range>& fresh) {
+  narrow_.reserve(values);
+  AddFreshRange(narrow_, fresh);
+}
+
+template <typename Narrow, typename Wide>
 void NarrowableColumn<Narrow, Wide>::Append(std::span<const Wide> values) {
   if (!is_wide_) {
     bool fits = true;
@@ -86,13 +92,11 @@ template class NarrowableColumn<std::uint32_t, std::uint64_t>;
 std::vector<PageWarmer::Range> ResidentEpoch::Reserve(std::size_t points, const ParticleColumns& columns) {
   columns_ = columns;
   std::vector<PageWarmer::Range> fresh;
-  position_.Reserve(3 * points);
-  AddFreshRange(position_.narrow_storage(), fresh);
+  position_.Reserve(3 * points, fresh);
   type_.reserve(points);
   AddFreshRange(type_, fresh);
   if (columns_.id) {
-    id_.Reserve(points);
-    AddFreshRange(id_.narrow_storage(), fresh);
+    id_.Reserve(points, fresh);
   }
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     if (!columns_.vectors[v]) continue;

@@ -31,9 +31,8 @@ namespace octocosm {
 template <typename Narrow, typename Wide>
 class NarrowableColumn {
  public:
-  void Reserve(std::size_t values) { narrow_.reserve(values); }
-  // The narrow values' storage, for Reserve's callers to advise and warm.
-  std::vector<Narrow>& narrow_storage() { return narrow_; }
+  // Room for `values` narrow values, on small pages, listed in `fresh`.
+  void Reserve(std::size_t values, std::vector<PageWarmer::Range>& fresh);
   void Append(std::span<const Wide> values);
   bool is_narrow() const { return !is_wide_; }
   std::size_t size() const { return is_wide_ ? wide_.size() : narrow_.size(); }
