@@ -35,7 +35,6 @@ class NarrowableColumn {
   void Reserve(std::size_t values, std::vector<PageWarmer::Range>& fresh);
   void Append(std::span<const Wide> values);
   bool is_narrow() const { return !is_wide_; }
-  std::size_t size() const { return is_wide_ ? wide_.size() : narrow_.size(); }
   Wide operator[](std::size_t i) const { return is_wide_ ? wide_[i] : static_cast<Wide>(narrow_[i]); }
   // The values, in the form they are kept in (the other is empty).
   const std::vector<Narrow>& narrow_values() const { return narrow_; }
