@@ -89,6 +89,7 @@ Split SplitAndCheck(const ParticleChunk& points, const SplitSettings& settings, 
     EXPECT_EQ(taken.size(), chunk.point_count);
     EXPECT_TRUE(split.counts.emplace(chunk.key.value(), chunk.point_count).second) << "one chunk per key";
     split.ids[chunk.key.value()] = taken.id;
+    EXPECT_TRUE(std::is_sorted(taken.id.begin(), taken.id.end())) << "chunk " << chunk.key.Path() << " keeps input order";
     for (std::size_t i = 0; i < taken.size(); ++i) {
       const std::uint64_t id = taken.id[i];
       EXPECT_TRUE(id >= 1 && id <= points.size());
@@ -154,11 +155,67 @@ TEST(Chunker, ThreadsChangeNothing) {
   }
 }
 
+// Splits `points` held in memory whole and as a stream of batches, with
+// `options`, and checks that the chunks are the same, each listing (as
+// indices into the held set, which stays in input order) the same points in
+// the same order, and that nothing touched the disk.
+void ExpectResidentSplitLikeStreamed(const ParticleChunk& points, const ChunkerOptions& options, const fs::path& temp) {
+  Chunker streaming(kCube, options);
+  std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
+  Chunker in_place(kCube, options);
+  ResidentEpoch held;
+  const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, held);
+  ASSERT_EQ(held.size(), points.size()) << "an expected count too small only costs reallocations";
+  std::vector<std::uint32_t> every(held.size());
+  std::iota(every.begin(), every.end(), 0u);
+  ParticleChunk resident;
+  held.CopyPoints(every, every, resident);
+  EXPECT_EQ(resident.id, points.id) << "the resident set stays in input order";
+  EXPECT_EQ(resident.position, points.position);
+  ASSERT_EQ(chunks.size(), streamed.size());
+  std::vector<int> listed(points.size(), 0);
+  for (std::size_t c = 0; c < chunks.size(); ++c) {
+    EXPECT_EQ(chunks[c].key, streamed[c].key);
+    EXPECT_EQ(chunks[c].point_count, streamed[c].point_count);
+    EXPECT_TRUE(chunks[c].path.empty());
+    EXPECT_EQ(chunks[c].points.size(), 0u);
+    ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
+    if (options.leaf_capacity == 0) {  // a merged chunk lists its parts one after another
+      EXPECT_TRUE(std::adjacent_find(chunks[c].resident.begin(), chunks[c].resident.end(), std::greater_equal<>()) ==
+                  chunks[c].resident.end())
+          << "chunk " << chunks[c].key.Path() << " lists its points in input order";
+    }
+    const ParticleChunk taken = streamed[c].TakePoints();
+    ASSERT_EQ(taken.size(), chunks[c].resident.size());
+    for (std::size_t k = 0; k < taken.size(); ++k) {
+      const std::uint32_t i = chunks[c].resident[k];
+      ASSERT_LT(i, resident.size());
+      ++listed[i];
+      ASSERT_EQ(resident.id[i], taken.id[k]) << "chunk " << chunks[c].key.Path() << ", point " << k;
+      EXPECT_EQ(resident.mass[i], taken.mass[k]);
+      EXPECT_EQ(resident.type[i], taken.type[k]);
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(resident.position[3 * i + a], taken.position[3 * k + a]);
+    }
+  }
+  EXPECT_EQ(std::count(listed.begin(), listed.end(), 1), static_cast<std::ptrdiff_t>(points.size()))
+      << "every point listed once";
+  EXPECT_EQ(in_place.spilled_points(), 0u);
+  EXPECT_TRUE(fs::is_empty(temp));
+}
+
+ChunkerOptions ResidentTestOptions(const fs::path& temp) {
+  ChunkerOptions options;
+  options.max_chunk_points = 3000;
+  options.split_levels = 2;
+  options.memory_bytes = std::size_t{1} << 30;
+  options.temp_dir = temp.string();
+  options.columns.id = true;
+  return options;
+}
+
 // A point set held in memory whole is cut into the same chunks as a stream
-// of batches, each listing (as indices into the set, which stays in input
-// order) the same points in the same order, whether the chunks under a
-// leaf-sized node are merged or not and for any thread count; nothing
-// touches the disk.
+// of batches, whether the chunks under a leaf-sized node are merged or not,
+// for any thread count, and whether its positions are held as floats.
 TEST(Chunker, ResidentSplitCutsTheSameChunks) {
   testing_support::TempDir dir("chunker-resident-test");
   const ParticleChunk double_points = Points(60000);
@@ -170,53 +227,41 @@ TEST(Chunker, ResidentSplitCutsTheSameChunks) {
       for (const int threads : {1, 3}) {
         SCOPED_TRACE("leaf capacity " + std::to_string(leaf_capacity) + ", threads " + std::to_string(threads) +
                      (float_positions ? ", float positions" : ""));
-        ChunkerOptions options;
-        options.max_chunk_points = 3000;
-        options.split_levels = 2;
+        ChunkerOptions options = ResidentTestOptions(dir.path());
         options.leaf_capacity = leaf_capacity;
-        options.memory_bytes = std::size_t{1} << 30;
         options.threads = threads;
-        options.temp_dir = dir.path().string();
-        options.columns.id = true;
-        Chunker streaming(kCube, options);
-        std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
-        Chunker in_place(kCube, options);
-        ResidentEpoch held;
-        const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, held);
-        ASSERT_EQ(held.size(), points.size()) << "an expected count too small only costs reallocations";
-        EXPECT_EQ(held.positions_narrow(), float_positions);
-        std::vector<std::uint32_t> every(held.size());
-        std::iota(every.begin(), every.end(), 0u);
-        ParticleChunk resident;
-        held.CopyPoints(every, every, resident);
-        EXPECT_EQ(resident.id, points.id) << "the resident set stays in input order";
-        EXPECT_EQ(resident.position, points.position);
-        ASSERT_EQ(chunks.size(), streamed.size());
-        std::vector<int> listed(points.size(), 0);
-        for (std::size_t c = 0; c < chunks.size(); ++c) {
-          EXPECT_EQ(chunks[c].key, streamed[c].key);
-          EXPECT_EQ(chunks[c].point_count, streamed[c].point_count);
-          EXPECT_TRUE(chunks[c].path.empty());
-          EXPECT_EQ(chunks[c].points.size(), 0u);
-          ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
-          const ParticleChunk taken = streamed[c].TakePoints();
-          ASSERT_EQ(taken.size(), chunks[c].resident.size());
-          for (std::size_t k = 0; k < taken.size(); ++k) {
-            const std::uint32_t i = chunks[c].resident[k];
-            ASSERT_LT(i, resident.size());
-            ++listed[i];
-            ASSERT_EQ(resident.id[i], taken.id[k]) << "chunk " << chunks[c].key.Path() << ", point " << k;
-            EXPECT_EQ(resident.mass[i], taken.mass[k]);
-            EXPECT_EQ(resident.type[i], taken.type[k]);
-            for (int a = 0; a < 3; ++a) EXPECT_EQ(resident.position[3 * i + a], taken.position[3 * k + a]);
-          }
-        }
-        EXPECT_EQ(std::count(listed.begin(), listed.end(), 1), static_cast<std::ptrdiff_t>(points.size()))
-            << "every point listed once";
-        EXPECT_EQ(in_place.spilled_points(), 0u);
-        EXPECT_TRUE(fs::is_empty(dir.path()));
+        ExpectResidentSplitLikeStreamed(points, options, dir.path());
       }
     }
+  }
+}
+
+// The resident split reads each point's cell down to ten levels below the
+// region from codes computed once; a clump denser than a chunk within one
+// such cell is split further from its positions, into the same chunks as a
+// stream's.
+TEST(Chunker, ResidentSplitGoesBelowItsPrecomputedCells) {
+  testing_support::TempDir dir("chunker-resident-deep-test");
+  ParticleChunk points = Points(20000);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> speck(61.3, 1e-4);  // 100 / 2^10 is ~0.1: deep inside one such cell
+  for (std::size_t i = 0; i < points.size(); i += 2) {
+    for (int a = 0; a < 3; ++a) points.position[3 * i + a] = speck(rng);
+  }
+  for (const int threads : {1, 3}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    ChunkerOptions options = ResidentTestOptions(dir.path());
+    options.threads = threads;
+    ExpectResidentSplitLikeStreamed(points, options, dir.path());
+    Chunker chunker(kCube, options);
+    ResidentEpoch held;
+    const std::vector<Chunk> chunks = chunker.SplitResident(NodeKey::Root(), PassOver(points, 7000), 0, held);
+    int deepest = 0;
+    for (const Chunk& chunk : chunks) {
+      EXPECT_LE(chunk.point_count, options.max_chunk_points) << chunk.key.Path();
+      deepest = std::max(deepest, chunk.key.level());
+    }
+    EXPECT_GT(deepest, 10) << "the speck is split below the precomputed cells";
   }
 }
 

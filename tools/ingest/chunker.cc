@@ -28,7 +28,7 @@ constexpr std::size_t kPrefetchDistance = 16;
 // The target is sized once and written through a pointer: a per-point
 // vector::insert was a call per point and column.
 template <typename T>
-void AppendSelected(const std::vector<T>& from, const std::vector<std::uint32_t>& indices, std::size_t width,
+void AppendSelected(const std::vector<T>& from, std::span<const std::uint32_t> indices, std::size_t width,
                     std::vector<T>& to) {
   const std::size_t old = to.size();
   to.resize(old + width * indices.size());  // grows geometrically, like push_back
@@ -48,7 +48,7 @@ void AppendSelected(const std::vector<T>& from, const std::vector<std::uint32_t>
 
 // Copies the points `indices` of `from` to the end of `to` (all columns
 // `from` carries).
-void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& indices, ParticleChunk& to) {
+void AppendPoints(const ParticleChunk& from, std::span<const std::uint32_t> indices, ParticleChunk& to) {
   AppendSelected(from.position, indices, 3, to.position);
   AppendSelected(from.mass, indices, 1, to.mass);
   AppendSelected(from.type, indices, 1, to.type);
@@ -60,67 +60,93 @@ void AppendPoints(const ParticleChunk& from, const std::vector<std::uint32_t>& i
   }
 }
 
-// Point i's position, and where it lies in memory, in a batch or a resident epoch.
-std::array<double, 3> PositionOf(const ParticleChunk& points, std::size_t i) {
-  return {points.position[3 * i], points.position[3 * i + 1], points.position[3 * i + 2]};
-}
-std::array<double, 3> PositionOf(const ResidentEpoch& points, std::size_t i) { return points.Position(i); }
-const void* PositionAddress(const ParticleChunk& points, std::size_t i) { return &points.position[3 * i]; }
-const void* PositionAddress(const ResidentEpoch& points, std::size_t i) { return points.PositionAddress(i); }
-
-// The points of `points` (every one, or when `subset` is not empty the ones
-// it lists) sorted into the `cells` cells of `level` that begin at key value
-// `first`: computes each point's cell on all threads, then calls
-// take(c, picks) for every cell c with points, on the one thread that gathers
-// that cell. `picks` lists the cell's points in input order, as positions in
-// `points`; take may move it away. Cells go to the threads in contiguous
-// groups of about equal point counts, so the result is the same for any
-// thread count.
-template <typename Points, typename Take>
-void BucketByCell(const Cube& cube, const Points& points, std::span<const std::uint32_t> subset, NodeKey root,
-                  int level, int threads, Take&& take) {
-  const std::size_t n = subset.empty() ? points.size() : subset.size();
-  if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: more than 2^32 - 1 points in one pass");
+// Point i's cell at `level` as an offset into the cells below `root` at that
+// level (there are 8^(level - root level)); throws when it lies outside root.
+std::uint32_t CellBelow(const Cube& cube, const double* position, NodeKey root, int level) {
   const std::uint64_t first = root.DescendantRange(level).first;
+  const std::uint64_t cell = cube.LeafKey(position, level).value();
+  if (cell < first || cell - first > UINT32_MAX || ((cell - first) >> (3 * (level - root.level()))) != 0) {
+    throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
+  }
+  return static_cast<std::uint32_t>(cell - first);
+}
+
+// Listed points ordered by cell: points[begin[c], begin[c + 1]) are the
+// points of cell c, in the order they were listed.
+struct CellOrder {
+  std::vector<std::uint32_t> points;
+  std::vector<std::size_t> begin;  // cells + 1 entries
+};
+
+// A stable counting sort of `n` listed points into `cells` cells: cell_of(k)
+// is the cell of the k-th listed point, point_of(k) what goes into the
+// order for it. Each thread counts, then places, one contiguous part of the
+// list, and the parts' places are laid out part after part within each
+// cell: the result is the same for any thread count. cell_of is called
+// twice per point; it must be cheap.
+template <typename CellOf, typename PointOf>
+CellOrder OrderByCell(std::size_t n, std::size_t cells, int threads, const CellOf& cell_of, const PointOf& point_of) {
+  const std::size_t parts = n >= kPointsPerThread * static_cast<std::size_t>(threads) ? static_cast<std::size_t>(threads) : 1;
+  const auto part_range = [n, parts](std::size_t part) { return std::pair{n * part / parts, n * (part + 1) / parts}; };
+  std::vector<std::vector<std::size_t>> next(parts, std::vector<std::size_t>(cells, 0));
+  ParallelFor(parts, static_cast<int>(parts), [&](std::size_t part_begin, std::size_t part_end) {
+    for (std::size_t part = part_begin; part < part_end; ++part) {
+      const auto [begin, end] = part_range(part);
+      std::vector<std::size_t>& count = next[part];
+      for (std::size_t k = begin; k < end; ++k) ++count[cell_of(k)];
+    }
+  }, 1);
+  CellOrder order;
+  order.begin.resize(cells + 1);
+  std::size_t placed = 0;
+  for (std::size_t c = 0; c < cells; ++c) {
+    order.begin[c] = placed;
+    for (std::size_t part = 0; part < parts; ++part) {
+      const std::size_t count = next[part][c];
+      next[part][c] = placed;
+      placed += count;
+    }
+  }
+  order.begin[cells] = placed;
+  order.points.resize(n);
+  ParallelFor(parts, static_cast<int>(parts), [&](std::size_t part_begin, std::size_t part_end) {
+    for (std::size_t part = part_begin; part < part_end; ++part) {
+      const auto [begin, end] = part_range(part);
+      std::vector<std::size_t>& place = next[part];
+      for (std::size_t k = begin; k < end; ++k) order.points[place[cell_of(k)]++] = point_of(k);
+    }
+  }, 1);
+  return order;
+}
+
+// The points of `batch` sorted into the `cells` cells of `level` below
+// `root`: then calls take(c, picks) for every cell c with points, on the
+// one thread that handles that cell; `picks` lists the cell's points in
+// input order, as positions in `batch`. Cells go to the threads in
+// contiguous groups of about equal point counts.
+template <typename Take>
+void BucketByCell(const Cube& cube, const ParticleChunk& batch, NodeKey root, int level, int threads, Take&& take) {
+  const std::size_t n = batch.size();
+  if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: more than 2^32 - 1 points in one pass");
   const std::size_t cells = std::size_t{1} << (3 * (level - root.level()));
-  const auto point = [&](std::size_t i) { return subset.empty() ? static_cast<std::uint32_t>(i) : subset[i]; };
   std::vector<std::uint32_t> cell_of(n);
   ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      if (!subset.empty() && i + kPrefetchDistance < end) {
-        __builtin_prefetch(PositionAddress(points, subset[i + kPrefetchDistance]));
-      }
-      const std::array<double, 3> position = PositionOf(points, point(i));
-      const NodeKey cell = cube.LeafKey(position.data(), level);
-      const std::uint64_t c = cell.value() - first;
-      if (cell.value() < first || c >= cells) {
-        throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
-      }
-      cell_of[i] = static_cast<std::uint32_t>(c);
-    }
+    for (std::size_t i = begin; i < end; ++i) cell_of[i] = CellBelow(cube, &batch.position[3 * i], root, level);
   }, kPointsPerThread);
-  std::vector<std::uint64_t> count(cells, 0);
-  for (std::uint32_t c : cell_of) ++count[c];
+  const CellOrder order = OrderByCell(n, cells, threads, [&cell_of](std::size_t k) { return cell_of[k]; },
+                                      [](std::size_t k) { return static_cast<std::uint32_t>(k); });
   std::vector<std::size_t> group_begin = {0};
-  std::uint64_t counted = 0;
   for (std::size_t c = 0; c < cells; ++c) {
-    counted += count[c];
     const std::size_t group = group_begin.size();
-    if (group < static_cast<std::size_t>(threads) && counted * threads >= n * group) group_begin.push_back(c + 1);
+    if (group < static_cast<std::size_t>(threads) && order.begin[c + 1] * threads >= n * group) group_begin.push_back(c + 1);
   }
   while (group_begin.size() <= static_cast<std::size_t>(threads)) group_begin.push_back(cells);
   ParallelFor(static_cast<std::size_t>(threads), n >= kPointsPerThread ? threads : 1,
               [&](std::size_t group_first, std::size_t group_last) {
-                const std::size_t cell_begin = group_begin[group_first], cell_end = group_begin[group_last];
-                if (cell_begin == cell_end) return;
-                std::vector<std::vector<std::uint32_t>> picks(cell_end - cell_begin);
-                for (std::size_t c = cell_begin; c < cell_end; ++c) picks[c - cell_begin].reserve(count[c]);
-                for (std::size_t i = 0; i < n; ++i) {
-                  const std::uint32_t c = cell_of[i];
-                  if (c >= cell_begin && c < cell_end) picks[c - cell_begin].push_back(point(i));
-                }
-                for (std::size_t c = cell_begin; c < cell_end; ++c) {
-                  if (!picks[c - cell_begin].empty()) take(c, picks[c - cell_begin]);
+                for (std::size_t c = group_begin[group_first]; c < group_begin[group_last]; ++c) {
+                  const std::span<const std::uint32_t> picks(order.points.data() + order.begin[c],
+                                                             order.begin[c + 1] - order.begin[c]);
+                  if (!picks.empty()) take(c, picks);
                 }
               },
               1);
@@ -218,7 +244,7 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
   };
 
   pass([&](const ParticleChunk& batch) {
-    BucketByCell(cube_, batch, {}, root, level, threads, [&](std::size_t c, std::vector<std::uint32_t>& picks) {
+    BucketByCell(cube_, batch, root, level, threads, [&](std::size_t c, std::span<const std::uint32_t> picks) {
       AppendPoints(batch, picks, chunks[c].points);
       chunks[c].point_count += picks.size();
     });
@@ -266,6 +292,20 @@ bool Chunker::Oversized(const Chunk& chunk) const {
   return chunk.point_count > options_.max_chunk_points && chunk.key.level() < options_.max_level;
 }
 
+// Each resident point's cell `level - region.level()` levels below the
+// region, as a Morton code relative to it: computed from the positions once,
+// so that every split of the resident points, at any level down to `level`,
+// reads a point's cell as a prefix of it (a shift) instead of from its
+// position (three divisions and a read of a scattered position per point and
+// split).
+struct Chunker::ResidentCells {
+  // Ten levels make a 30-bit code.
+  static constexpr int kLevels = 10;
+  NodeKey region;
+  int level = 0;
+  std::vector<std::uint32_t> cell;
+};
+
 std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                           ResidentEpoch& resident) {
   resident = ResidentEpoch();
@@ -279,32 +319,64 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
     throw Error::InvalidArgument("chunker: " + std::to_string(resident.size()) +
                                  " points are more than one resident split takes (2^32 - 1)");
   }
-  std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, {});
+  ResidentCells cells;
+  cells.region = root;
+  cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
+  cells.cell.resize(resident.size());
+  ParallelFor(resident.size(), std::max(options_.threads, 1), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      cells.cell[i] = CellBelow(cube_, resident.Position(i).data(), root, cells.level);
+    }
+  }, kPointsPerThread);
+  std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, cells, {});
+  cells = ResidentCells();
   if (options_.leaf_capacity != 0) chunks = MergeLeafSubtrees(root, std::move(chunks));
   return chunks;
 }
 
 std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const ResidentEpoch& resident,
-                                            std::span<const std::uint32_t> subset) {
+                                            const ResidentCells& cells, std::span<const std::uint32_t> subset) {
   levels = std::max(std::min(levels, options_.max_level - root.level()), 0);
   const int level = root.level() + levels;
   const std::uint64_t first = root.DescendantRange(level).first;
-  std::vector<Chunk> chunks(std::size_t{1} << (3 * levels));
-  BucketByCell(cube_, resident, subset, root, level, std::max(options_.threads, 1),
-               [&](std::size_t c, std::vector<std::uint32_t>& picks) {
-                 chunks[c].point_count = picks.size();
-                 chunks[c].resident = std::move(picks);
-               });
+  const std::size_t cell_count = std::size_t{1} << (3 * levels);
+  const int threads = std::max(options_.threads, 1);
+  const std::size_t n = subset.empty() ? resident.size() : subset.size();
+  const auto point_of = [subset](std::size_t k) { return subset.empty() ? static_cast<std::uint32_t>(k) : subset[k]; };
+  CellOrder order;
+  if (level <= cells.level) {
+    // The cell is a prefix of the point's finer one.
+    const int shift = 3 * (cells.level - level);
+    const std::uint32_t mask = static_cast<std::uint32_t>(cell_count - 1);
+    const std::uint32_t* cell = cells.cell.data();
+    order = OrderByCell(n, cell_count, threads, [&](std::size_t k) {
+      if (!subset.empty() && k + kPrefetchDistance < n) __builtin_prefetch(cell + subset[k + kPrefetchDistance]);
+      return (cell[point_of(k)] >> shift) & mask;
+    }, point_of);
+  } else {
+    // Deeper than the cells computed once (a dense clump): from the positions.
+    std::vector<std::uint32_t> cell_of(n);
+    ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t k = begin; k < end; ++k) {
+        if (k + kPrefetchDistance < end) __builtin_prefetch(resident.PositionAddress(point_of(k + kPrefetchDistance)));
+        cell_of[k] = CellBelow(cube_, resident.Position(point_of(k)).data(), root, level);
+      }
+    }, kPointsPerThread);
+    order = OrderByCell(n, cell_count, threads, [&cell_of](std::size_t k) { return cell_of[k]; }, point_of);
+  }
   std::vector<Chunk> result;
-  for (std::size_t c = 0; c < chunks.size(); ++c) {
-    Chunk& chunk = chunks[c];
-    if (chunk.point_count == 0) continue;
+  for (std::size_t c = 0; c < cell_count; ++c) {
+    const std::span<const std::uint32_t> points(order.points.data() + order.begin[c], order.begin[c + 1] - order.begin[c]);
+    if (points.empty()) continue;
+    Chunk chunk;
     chunk.key = NodeKey::FromValue(first + c);
+    chunk.point_count = points.size();
     if (!Oversized(chunk)) {
+      chunk.resident.assign(points.begin(), points.end());
       result.push_back(std::move(chunk));
       continue;
     }
-    for (Chunk& part : SplitResidentAt(chunk.key, ResplitLevels(chunk.point_count), resident, chunk.resident)) {
+    for (Chunk& part : SplitResidentAt(chunk.key, ResplitLevels(chunk.point_count), resident, cells, points)) {
       result.push_back(std::move(part));
     }
   }

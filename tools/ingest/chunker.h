@@ -27,6 +27,10 @@
 // cuts the same chunks as lists of indices into it, and each chunk is copied out
 // only when it is built (tools/ingest/chunk_gatherer.h), into buffers that
 // serve chunk after chunk. That saves the buffers' growth and any spilling.
+// Its split computes each point's cell ten levels down once, on all
+// threads, and every later cut reads a coarser cell as a prefix of that one
+// (only a clump denser than a chunk inside one such cell is placed from its
+// positions again); each cut is a stable counting sort of the listed points.
 #pragma once
 
 #include <cstdint>
@@ -89,9 +93,9 @@ class Chunker {
   std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
                                    ResidentEpoch& resident);
   // The memory SplitResident takes per point on top of the resident points:
-  // its cell while the split runs, and its index in its chunk's list, kept
-  // until the chunk is built.
-  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4;
+  // its cell and its place in the split's order while the split runs, and
+  // its index in its chunk's list, kept until the chunk is built.
+  static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 4;
 
   std::uint64_t spilled_points() const { return spilled_points_; }
 
@@ -99,8 +103,9 @@ class Chunker {
   // Whether a chunk must be split again, and by how many levels.
   bool Oversized(const Chunk& chunk) const;
   int ResplitLevels(std::uint64_t points) const;
+  struct ResidentCells;
   std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ResidentEpoch& resident,
-                                     std::span<const std::uint32_t> subset);
+                                     const ResidentCells& cells, std::span<const std::uint32_t> subset);
   std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks);
