@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <memory>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -74,7 +75,10 @@ std::uint32_t CellBelow(const Cube& cube, const double* position, NodeKey root, 
 // Listed points ordered by cell: points[begin[c], begin[c + 1]) are the
 // points of cell c, in the order they were listed.
 struct CellOrder {
-  std::vector<std::uint32_t> points;
+  // Not value-initialised: every entry is written by the parallel placing
+  // pass, which so also takes the fresh pages' faults on all threads instead
+  // of a zeroing pass on one.
+  std::unique_ptr<std::uint32_t[]> points;
   std::vector<std::size_t> begin;  // cells + 1 entries
 };
 
@@ -108,7 +112,7 @@ CellOrder OrderByCell(std::size_t n, std::size_t cells, int threads, const CellO
     }
   }
   order.begin[cells] = placed;
-  order.points.resize(n);
+  order.points = std::make_unique_for_overwrite<std::uint32_t[]>(n);
   ParallelFor(parts, static_cast<int>(parts), [&](std::size_t part_begin, std::size_t part_end) {
     for (std::size_t part = part_begin; part < part_end; ++part) {
       const auto [begin, end] = part_range(part);
@@ -144,7 +148,7 @@ void BucketByCell(const Cube& cube, const ParticleChunk& batch, NodeKey root, in
   ParallelFor(static_cast<std::size_t>(threads), n >= kPointsPerThread ? threads : 1,
               [&](std::size_t group_first, std::size_t group_last) {
                 for (std::size_t c = group_begin[group_first]; c < group_begin[group_last]; ++c) {
-                  const std::span<const std::uint32_t> picks(order.points.data() + order.begin[c],
+                  const std::span<const std::uint32_t> picks(order.points.get() + order.begin[c],
                                                              order.begin[c + 1] - order.begin[c]);
                   if (!picks.empty()) take(c, picks);
                 }
@@ -303,7 +307,7 @@ struct Chunker::ResidentCells {
   static constexpr int kLevels = 10;
   NodeKey region;
   int level = 0;
-  std::vector<std::uint32_t> cell;
+  std::unique_ptr<std::uint32_t[]> cell;  // per resident point; not value-initialised, as CellOrder::points
 };
 
 std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
@@ -322,7 +326,7 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
   ResidentCells cells;
   cells.region = root;
   cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
-  cells.cell.resize(resident.size());
+  cells.cell = std::make_unique_for_overwrite<std::uint32_t[]>(resident.size());
   ParallelFor(resident.size(), std::max(options_.threads, 1), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       cells.cell[i] = CellBelow(cube_, resident.Position(i).data(), root, cells.level);
@@ -348,7 +352,7 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
     // The cell is a prefix of the point's finer one.
     const int shift = 3 * (cells.level - level);
     const std::uint32_t mask = static_cast<std::uint32_t>(cell_count - 1);
-    const std::uint32_t* cell = cells.cell.data();
+    const std::uint32_t* cell = cells.cell.get();
     order = OrderByCell(n, cell_count, threads, [&](std::size_t k) {
       if (!subset.empty() && k + kPrefetchDistance < n) __builtin_prefetch(cell + subset[k + kPrefetchDistance]);
       return (cell[point_of(k)] >> shift) & mask;
@@ -365,14 +369,15 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
     order = OrderByCell(n, cell_count, threads, [&cell_of](std::size_t k) { return cell_of[k]; }, point_of);
   }
   std::vector<Chunk> result;
+  std::vector<std::pair<std::size_t, std::span<const std::uint32_t>>> lists;  // chunk in result, its points
   for (std::size_t c = 0; c < cell_count; ++c) {
-    const std::span<const std::uint32_t> points(order.points.data() + order.begin[c], order.begin[c + 1] - order.begin[c]);
+    const std::span<const std::uint32_t> points(order.points.get() + order.begin[c], order.begin[c + 1] - order.begin[c]);
     if (points.empty()) continue;
     Chunk chunk;
     chunk.key = NodeKey::FromValue(first + c);
     chunk.point_count = points.size();
     if (!Oversized(chunk)) {
-      chunk.resident.assign(points.begin(), points.end());
+      lists.emplace_back(result.size(), points);
       result.push_back(std::move(chunk));
       continue;
     }
@@ -380,6 +385,11 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
       result.push_back(std::move(part));
     }
   }
+  // The lists are copied out on all threads: fresh memory, whose first touch
+  // costs more than the copy.
+  ParallelFor(lists.size(), threads, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t j = begin; j < end; ++j) result[lists[j].first].resident.assign(lists[j].second.begin(), lists[j].second.end());
+  }, 1);
   return result;
 }
 
