@@ -158,14 +158,17 @@ TEST(Chunker, ThreadsChangeNothing) {
 // Splits `points` held in memory whole and as a stream of batches, with
 // `options`, and checks that the chunks are the same, each listing (as
 // indices into the held set, which stays in input order) the same points in
-// the same order, and that nothing touched the disk.
-void ExpectResidentSplitLikeStreamed(const ParticleChunk& points, const ChunkerOptions& options, const fs::path& temp) {
+// the same order, and that nothing touched the disk; and that the held set
+// kept its positions as floats when `held_as_floats` says so.
+void ExpectResidentSplitLikeStreamed(const ParticleChunk& points, const ChunkerOptions& options, bool held_as_floats,
+                                     const fs::path& temp) {
   Chunker streaming(kCube, options);
   std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
   Chunker in_place(kCube, options);
   ResidentEpoch held;
   const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, held);
   ASSERT_EQ(held.size(), points.size()) << "an expected count too small only costs reallocations";
+  EXPECT_EQ(held.positions_narrow(), held_as_floats);
   std::vector<std::uint32_t> every(held.size());
   std::iota(every.begin(), every.end(), 0u);
   ParticleChunk resident;
@@ -230,7 +233,7 @@ TEST(Chunker, ResidentSplitCutsTheSameChunks) {
         ChunkerOptions options = ResidentTestOptions(dir.path());
         options.leaf_capacity = leaf_capacity;
         options.threads = threads;
-        ExpectResidentSplitLikeStreamed(points, options, dir.path());
+        ExpectResidentSplitLikeStreamed(points, options, float_positions, dir.path());
       }
     }
   }
@@ -252,7 +255,7 @@ TEST(Chunker, ResidentSplitGoesBelowItsPrecomputedCells) {
     SCOPED_TRACE("threads " + std::to_string(threads));
     ChunkerOptions options = ResidentTestOptions(dir.path());
     options.threads = threads;
-    ExpectResidentSplitLikeStreamed(points, options, dir.path());
+    ExpectResidentSplitLikeStreamed(points, options, /*held_as_floats=*/false, dir.path());
     Chunker chunker(kCube, options);
     ResidentEpoch held;
     const std::vector<Chunk> chunks = chunker.SplitResident(NodeKey::Root(), PassOver(points, 7000), 0, held);

@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <array>
-#include <memory>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <numeric>
 #include <optional>
 #include <span>
@@ -296,16 +296,14 @@ bool Chunker::Oversized(const Chunk& chunk) const {
   return chunk.point_count > options_.max_chunk_points && chunk.key.level() < options_.max_level;
 }
 
-// Each resident point's cell `level - region.level()` levels below the
-// region, as a Morton code relative to it: computed from the positions once,
-// so that every split of the resident points, at any level down to `level`,
-// reads a point's cell as a prefix of it (a shift) instead of from its
-// position (three divisions and a read of a scattered position per point and
-// split).
+// Each resident point's cell at `level`, as a Morton code relative to the
+// region being split: computed from the positions once, so that every split
+// of the resident points, at any level down to `level`, reads a point's cell
+// as a prefix of it (a shift) instead of from its position (three divisions
+// and a read of a scattered position per point and split).
 struct Chunker::ResidentCells {
-  // Ten levels make a 30-bit code.
+  // Ten levels below the region make a 30-bit code.
   static constexpr int kLevels = 10;
-  NodeKey region;
   int level = 0;
   std::unique_ptr<std::uint32_t[]> cell;  // per resident point; not value-initialised, as CellOrder::points
 };
@@ -324,7 +322,6 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, s
                                  " points are more than one resident split takes (2^32 - 1)");
   }
   ResidentCells cells;
-  cells.region = root;
   cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
   cells.cell = std::make_unique_for_overwrite<std::uint32_t[]>(resident.size());
   ParallelFor(resident.size(), std::max(options_.threads, 1), [&](std::size_t begin, std::size_t end) {
