@@ -61,8 +61,8 @@ void AppendPoints(const ParticleChunk& from, std::span<const std::uint32_t> indi
   }
 }
 
-// Point i's cell at `level` as an offset into the cells below `root` at that
-// level (there are 8^(level - root level)); throws when it lies outside root.
+// The cell at `level` that holds `position`, as an offset into the cells below
+// `root` at that level (8^(level - root level) of them); throws when it lies outside root.
 std::uint32_t CellBelow(const Cube& cube, const double* position, NodeKey root, int level) {
   const std::uint64_t first = root.DescendantRange(level).first;
   const std::uint64_t cell = cube.LeafKey(position, level).value();
