@@ -147,7 +147,8 @@ inline std::array<std::uint64_t, 3> Cube::GridCoords(const double* point, int bi
     // cells of cube.h and against every other octree (PCL's keys are
     // divisions too). It costs under 2 ns a call.
     double t = (point[a] - origin[a]) / size;
-    if (periodic) t -= cube_detail::Floor(t);
+    // Inside the box already (the usual case), t - Floor(t) is t.
+    if (periodic && !(t >= 0 && t < 1)) t -= cube_detail::Floor(t);
     const double scaled = t * cells;
     // floor(scaled) > 0 exactly when scaled >= 1, floor(scaled) >= cells
     // exactly when scaled >= cells, and in between truncation is floor.
