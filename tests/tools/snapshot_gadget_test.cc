@@ -2,116 +2,21 @@
 // reader supports (format 1/2, both byte orders, 4/8-byte reals and IDs, mass
 // table vs MASS block, multi-file) and the malformed inputs it must reject.
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 
 #include <gtest/gtest.h>
 
 #include "storage/error.h"
+#include "tests/tools/gadget_test_file.h"
 #include "tests/tools/snapshot_test_util.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
 namespace {
-
-struct GadgetSpec {
-  int format = 1;
-  bool big_endian = false;
-  int real_bytes = 4;  // POS, VEL, MASS
-  int id_bytes = 4;
-  std::array<std::int32_t, 6> npart{};
-  std::array<double, 6> mass_table{};
-  std::optional<std::array<std::uint32_t, 6>> total;  // default: npart
-  std::array<std::uint32_t, 6> total_high{};
-  std::int32_t num_files = 1;
-  double time = 0.5, redshift = 1.0, box = 100;
-  bool write_velocity = true, write_ids = true, write_mass = true;
-  // Per-particle data in file order (type 0 first).
-  std::vector<double> position, velocity, mass_block;
-  std::vector<std::uint64_t> ids;
-};
-
-class Encoder {
- public:
-  explicit Encoder(bool big_endian) : big_endian_(big_endian) {}
-  template <typename T>
-  void Put(T value) {
-    std::uint8_t bytes[sizeof(T)];
-    std::memcpy(bytes, &value, sizeof(T));
-    if (big_endian_) std::reverse(bytes, bytes + sizeof(T));
-    out_.append(reinterpret_cast<char*>(bytes), sizeof(T));
-  }
-  void Raw(const std::string& bytes) { out_ += bytes; }
-  std::string& bytes() { return out_; }
-
- private:
-  bool big_endian_;
-  std::string out_;
-};
-
-std::string EncodeGadget(const GadgetSpec& spec) {
-  Encoder file(spec.big_endian);
-  auto record = [&](const char* name, const std::string& payload) {
-    if (spec.format == 2) {
-      file.Put<std::int32_t>(8);
-      std::string tag = std::string(name) + "    ";
-      file.Raw(tag.substr(0, 4));
-      file.Put<std::int32_t>(static_cast<std::int32_t>(payload.size() + 8));
-      file.Put<std::int32_t>(8);
-    }
-    file.Put<std::int32_t>(static_cast<std::int32_t>(payload.size()));
-    file.Raw(payload);
-    file.Put<std::int32_t>(static_cast<std::int32_t>(payload.size()));
-  };
-  Encoder header(spec.big_endian);
-  for (auto n : spec.npart) header.Put<std::int32_t>(n);
-  for (auto m : spec.mass_table) header.Put<double>(m);
-  header.Put<double>(spec.time);
-  header.Put<double>(spec.redshift);
-  header.Put<std::int32_t>(0);
-  header.Put<std::int32_t>(0);
-  for (int t = 0; t < 6; ++t) header.Put<std::uint32_t>(spec.total ? (*spec.total)[t] : static_cast<std::uint32_t>(spec.npart[t]));
-  header.Put<std::int32_t>(0);
-  header.Put<std::int32_t>(spec.num_files);
-  header.Put<double>(spec.box);
-  header.Put<double>(0.3);
-  header.Put<double>(0.7);
-  header.Put<double>(0.7);
-  header.Put<std::int32_t>(0);
-  header.Put<std::int32_t>(0);
-  for (auto h : spec.total_high) header.Put<std::uint32_t>(h);
-  header.bytes().resize(256, '\0');
-  record("HEAD", header.bytes());
-
-  auto reals = [&](const std::vector<double>& values) {
-    Encoder e(spec.big_endian);
-    for (double v : values) {
-      if (spec.real_bytes == 4) {
-        e.Put<float>(static_cast<float>(v));
-      } else {
-        e.Put<double>(v);
-      }
-    }
-    return e.bytes();
-  };
-  record("POS", reals(spec.position));
-  if (spec.write_velocity) record("VEL", reals(spec.velocity));
-  if (spec.write_ids) {
-    Encoder e(spec.big_endian);
-    for (auto id : spec.ids) {
-      if (spec.id_bytes == 4) {
-        e.Put<std::uint32_t>(static_cast<std::uint32_t>(id));
-      } else {
-        e.Put<std::uint64_t>(id);
-      }
-    }
-    record("ID", e.bytes());
-  }
-  if (spec.write_mass && !spec.mass_block.empty()) record("MASS", reals(spec.mass_block));
-  record("U", std::string(16, '\0'));  // a block the reader must skip
-  return file.bytes();
-}
 
 // A small two-type snapshot: 3 gas particles with MASS-block masses and 4 dark
 // matter particles with a table mass.
@@ -128,11 +33,6 @@ GadgetSpec SmallSpec() {
   }
   spec.mass_block = {0.5, 0.75, 1.25};
   return spec;
-}
-
-void WriteFile(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
 }
 
 void ExpectMatchesSpec(const ParticleChunk& all, const GadgetSpec& spec) {
@@ -168,7 +68,7 @@ TEST_P(GadgetRoundTrip, ReadsBackWhatWasWritten) {
   spec.real_bytes = GetParam().real_bytes;
   spec.id_bytes = GetParam().id_bytes;
   if (spec.id_bytes == 8) spec.ids[6] = (std::uint64_t{1} << 40) + 7;
-  WriteFile(dir.File("snap"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
   for (std::size_t chunk : {std::size_t{1}, std::size_t{2}, std::size_t{1000}}) {
     ReadOptions options;
     options.chunk_particles = chunk;
@@ -188,6 +88,84 @@ INSTANTIATE_TEST_SUITE_P(Variants, GadgetRoundTrip,
                          ::testing::Values(Variant{1, false, 4, 4}, Variant{1, true, 4, 4}, Variant{2, false, 8, 8},
                                            Variant{2, true, 8, 4}, Variant{1, false, 8, 8}, Variant{2, true, 4, 8}));
 
+// The bytes MappableSegments points at, decoded as a mapping reader would
+// (float positions and velocities, 4- or 8-byte IDs, this machine's order).
+ParticleChunk ReadMappable(const ParticleSource& source) {
+  ParticleChunk all;
+  for (const MappableSegment& segment : source.MappableSegments()) {
+    std::ifstream in(source.header().files.at(segment.file), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    for (std::uint64_t i = 0; i < segment.count; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        float x, v;
+        std::memcpy(&x, bytes.data() + segment.position_offset + 12 * i + 4 * a, 4);
+        std::memcpy(&v, bytes.data() + segment.velocity_offset + 12 * i + 4 * a, 4);
+        all.position.push_back(x);
+        all.velocity.push_back(v);
+      }
+      std::uint64_t id = 0;  // little-endian: the low bytes first
+      std::memcpy(&id, bytes.data() + segment.id_offset + segment.id_bytes * i, segment.id_bytes);
+      all.id.push_back(id);
+      all.mass.push_back(segment.mass);
+      all.type.push_back(static_cast<std::uint8_t>(segment.type));
+    }
+  }
+  return all;
+}
+
+TEST(GadgetReader, MappableSegmentsLieWhereNextReads) {
+  static_assert(std::endian::native == std::endian::little, "the files below are written little-endian");
+  ScratchDir dir;
+  GadgetSpec spec = SmallSpec();
+  spec.npart = {3, 4, 0, 2, 0, 0};  // three types, all with table masses
+  spec.mass_table = {0.5, 2.5, 0, 4, 0, 0};
+  spec.mass_block.clear();
+  for (int i = 7; i < 9; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      spec.position.push_back(10.0 * i + k + 0.25);
+      spec.velocity.push_back(-1.0 * i - k);
+    }
+    spec.ids.push_back(100 + static_cast<std::uint64_t>(i));
+  }
+  for (const int format : {1, 2}) {
+    for (const int id_bytes : {4, 8}) {
+      SCOPED_TRACE("format " + std::to_string(format) + ", IDs of " + std::to_string(id_bytes) + " bytes");
+      spec.format = format;
+      spec.id_bytes = id_bytes;
+      spec.ids[8] = id_bytes == 8 ? (std::uint64_t{1} << 40) + 8 : 108;
+      WriteBytes(dir.File("snap"), EncodeGadget(spec));
+      for (const std::vector<int>& types : {std::vector<int>{}, std::vector<int>{3, 1}}) {
+        ReadOptions options;
+        options.types = types;
+        auto source = OpenSnapshot(dir.File("snap"), options);
+        ASSERT_EQ(source->MappableSegments().size(), types.empty() ? 3u : 2u);
+        EXPECT_TRUE(SameParticles(ReadMappable(*source), ReadAll(*source)));
+      }
+    }
+  }
+}
+
+TEST(GadgetReader, NoMappableSegmentsWhereAColumnIsNotAPlainFloatArray) {
+  ScratchDir dir;
+  const auto mappable = [&](const GadgetSpec& spec, const ReadOptions& options = {}) {
+    WriteBytes(dir.File("snap"), EncodeGadget(spec));
+    return OpenSnapshot(dir.File("snap"), options)->MappableSegments().size();
+  };
+  GadgetSpec spec = SmallSpec();
+  EXPECT_EQ(mappable(spec), 0u) << "the gas particles' masses are in the MASS block";
+  ReadOptions dark_matter;
+  dark_matter.types = {1};
+  EXPECT_EQ(mappable(spec, dark_matter), 1u) << "the dark matter's mass is the table's";
+  spec.big_endian = true;
+  EXPECT_EQ(mappable(spec, dark_matter), 0u) << "another byte order";
+  spec.big_endian = false;
+  spec.real_bytes = 8;
+  EXPECT_EQ(mappable(spec, dark_matter), 0u) << "double positions";
+  spec.real_bytes = 4;
+  spec.mass_table[1] = -2.5;
+  EXPECT_EQ(mappable(spec, dark_matter), 0u) << "a negative table mass (which Next() reports)";
+}
+
 TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
   ScratchDir dir;
   GadgetSpec a = SmallSpec();
@@ -196,8 +174,8 @@ TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
   a.total = b.total = std::array<std::uint32_t, 6>{6, 8, 0, 0, 0, 0};
   a.num_files = b.num_files = 0;
   a.format = b.format = 2;
-  WriteFile(dir.File("out.0"), EncodeGadget(a));
-  WriteFile(dir.File("out.1"), EncodeGadget(b));
+  WriteBytes(dir.File("out.0"), EncodeGadget(a));
+  WriteBytes(dir.File("out.1"), EncodeGadget(b));
   auto source = OpenSnapshot(dir.File("out"), {});
   EXPECT_EQ(source->header().files.size(), 2u);
   EXPECT_EQ(source->header().total_count, 14u);
@@ -210,8 +188,8 @@ TEST(GadgetReader, DeclaredFileMissingIsNotFound) {
   ScratchDir dir;
   GadgetSpec spec = SmallSpec();
   spec.num_files = 3;
-  WriteFile(dir.File("snap.0"), EncodeGadget(spec));
-  WriteFile(dir.File("snap.1"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap.0"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap.1"), EncodeGadget(spec));
   try {
     OpenSnapshot(dir.File("snap.0"), {});
     ADD_FAILURE() << "missing snap.2 not noticed";
@@ -225,7 +203,7 @@ TEST(GadgetReader, CountsThatDoNotAddUp) {
   ScratchDir dir;
   GadgetSpec spec = SmallSpec();
   spec.total = std::array<std::uint32_t, 6>{3, 5, 0, 0, 0, 0};
-  WriteFile(dir.File("snap"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
   ExpectBadInput(dir.File("snap"), "counts do not add up: the header total for type 1 is 5");
 }
 
@@ -233,7 +211,7 @@ TEST(GadgetReader, JunkHighWordIsIgnoredWhenTheLowWordMatches) {
   ScratchDir dir;
   GadgetSpec spec = SmallSpec();
   spec.total_high = {0, 0, 0, 0, 0, 77};
-  WriteFile(dir.File("snap"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
   auto source = OpenSnapshot(dir.File("snap"), {});
   EXPECT_EQ(source->header().extra["ignored_total_high_words"]["5"], 77);
   EXPECT_EQ(source->header().total_count, 7u);
@@ -244,7 +222,7 @@ TEST(GadgetReader, BlockSizeDisagreeingWithNpart) {
   GadgetSpec spec = SmallSpec();
   spec.npart = {3, 5, 0, 0, 0, 0};  // one more particle than the blocks hold
   spec.total = std::array<std::uint32_t, 6>{3, 5, 0, 0, 0, 0};
-  WriteFile(dir.File("snap"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
   ExpectBadInput(dir.File("snap"), "block POS holds 84 bytes; expected 3 x 8 particles");
 }
 
@@ -253,7 +231,7 @@ TEST(GadgetReader, MissingMassBlock) {
   GadgetSpec spec = SmallSpec();
   spec.format = 2;
   spec.write_mass = false;
-  WriteFile(dir.File("snap"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
   ExpectBadInput(dir.File("snap"), "missing block MASS");
 }
 
@@ -264,24 +242,24 @@ TEST(GadgetReader, DisagreeingRecordMarkers) {
   // POS: begin marker at 264, 84 payload bytes, end marker at 352.
   std::string flipped = bytes;
   flipped[352] = 85;
-  WriteFile(dir.File("end_marker"), flipped);
+  WriteBytes(dir.File("end_marker"), flipped);
   ExpectBadInput(dir.File("end_marker"), "record markers disagree in block POS (record 1) at offset 264");
 
   flipped = bytes;
   flipped[260] = 1;  // the header's end marker
-  WriteFile(dir.File("header_marker"), flipped);
+  WriteBytes(dir.File("header_marker"), flipped);
   ExpectBadInput(dir.File("header_marker"), "record markers disagree in block HEAD");
 
   spec.format = 2;
   bytes = EncodeGadget(spec);
   flipped = bytes;
   flipped[288] = 9;  // the "next block size" of POS's name record
-  WriteFile(dir.File("name_record"), flipped);
+  WriteBytes(dir.File("name_record"), flipped);
   ExpectBadInput(dir.File("name_record"), "the name record of block POS");
 
   flipped = bytes;
   flipped[280] = 7;  // POS's name record begin marker
-  WriteFile(dir.File("name_marker"), flipped);
+  WriteBytes(dir.File("name_marker"), flipped);
   ExpectBadInput(dir.File("name_marker"), "block-name record at offset 280 has markers 7 and 8");
 }
 
@@ -306,7 +284,7 @@ TEST(GadgetReader, EveryTruncationInsideARecordIsReported) {
     for (std::size_t n = 0; n < bytes.size(); ++n) {
       if (std::find(boundaries.begin(), boundaries.end(), n) != boundaries.end()) continue;
       std::string name = "cut" + std::to_string(format) + "_" + std::to_string(n);
-      WriteFile(dir.File(name), bytes.substr(0, n));
+      WriteBytes(dir.File(name), bytes.substr(0, n));
       SCOPED_TRACE(name);
       std::string problem = n == 0 ? "empty input" : n < 4 ? "unrecognised snapshot format" : "truncated";
       ExpectBadInput(dir.File(name), problem);
@@ -319,16 +297,16 @@ TEST(GadgetReader, NonFiniteCoordinateNamesTheParticle) {
   for (double bad : {NAN, INFINITY}) {
     GadgetSpec spec = SmallSpec();
     spec.position[3 * 4 + 1] = bad;  // type 1, second particle, ID 104
-    WriteFile(dir.File("snap"), EncodeGadget(spec));
+    WriteBytes(dir.File("snap"), EncodeGadget(spec));
     ExpectBadInput(dir.File("snap"), "particle type 1 particle 1 (ID 104) has a non-finite coordinate");
   }
 }
 
 TEST(GadgetReader, NotAGadgetFile) {
   ScratchDir dir;
-  WriteFile(dir.File("junk.dat"), std::string(300, 'x'));
+  WriteBytes(dir.File("junk.dat"), std::string(300, 'x'));
   ExpectBadInput(dir.File("junk.dat"), "unrecognised snapshot format");
-  WriteFile(dir.File("empty"), "");
+  WriteBytes(dir.File("empty"), "");
   ExpectBadInput(dir.File("empty"), "empty input");
   ReadOptions forced;
   forced.format = "gadget";
@@ -338,7 +316,7 @@ TEST(GadgetReader, NotAGadgetFile) {
 TEST(GadgetReader, HeaderWithoutParticlesIsEmptyInput) {
   ScratchDir dir;
   GadgetSpec spec;
-  WriteFile(dir.File("snap"), EncodeGadget(spec));
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
   ExpectBadInput(dir.File("snap"), "empty input");
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cmath>
 #include <optional>
 
 #include "storage/error.h"
@@ -118,6 +119,23 @@ class GadgetSource final : public SegmentedSource {
       DecodeReals(buffer_.data(), count, file.mass.width, swap, chunk.mass.data() + old);
     }
     chunk.type.resize(old + count, static_cast<std::uint8_t>(t));
+  }
+
+  std::vector<MappableSegment> MappableSegments() const override {
+    std::vector<MappableSegment> mappable;
+    for (const Segment& segment : segments_) {
+      const GadgetFile& file = files_[segment.file];
+      const int t = segment.type;
+      const double mass = file.structure.header.mass_table[t];
+      const bool plain = !file.structure.swap && file.position.width == 4 &&
+                         (!header_.has_velocity || file.velocity.width == 4) && std::isfinite(mass) && mass > 0;
+      if (!plain) return {};
+      const std::uint64_t first = file.type_start[t];
+      mappable.push_back(MappableSegment{segment.file, t, segment.count, mass, file.position.offset + 12 * first,
+                                         file.velocity.offset + 12 * first, file.id.offset + file.id.width * first,
+                                         file.id.width});
+    }
+    return mappable;
   }
 
   std::string DescribeParticle(const Segment& segment, std::uint64_t index) const override {

@@ -99,6 +99,22 @@ struct ReadOptions {
   double box_size_override = -1;  // >= 0 replaces the header's box size (e.g. 0-box ICs)
 };
 
+// Where one segment of a snapshot (the particles of one type in one file)
+// lies in its file when every column is a plain array in this machine's byte
+// order, so that a reader may map the file instead of copying it: 3 floats a
+// particle for positions (and velocities), 4- or 8-byte unsigned IDs, and one
+// mass for all the segment's particles (a header's mass table).
+struct MappableSegment {
+  std::size_t file = 0;  // index into SnapshotHeader::files
+  int type = 0;
+  std::uint64_t count = 0;
+  double mass = 0;
+  std::uint64_t position_offset = 0;  // byte offset of the first particle's x
+  std::uint64_t velocity_offset = 0;  // meaningful when the header has velocities
+  std::uint64_t id_offset = 0;        // meaningful when the header has IDs
+  std::size_t id_bytes = 0;           // 4 or 8
+};
+
 // A rewindable stream of particle batches. Not thread-safe; one source per
 // thread. (HDF5 sources also share the non-thread-safe HDF5 library, so
 // several HDF5 sources must not be read concurrently.)
@@ -111,6 +127,12 @@ class ParticleSource {
   virtual bool Next(ParticleChunk& chunk) = 0;
   // Starts again from the first particle.
   virtual void Rewind() = 0;
+  // The particles Next() hands out, in the same order, as segments a reader
+  // may map (MappableSegment), when the format stores every column so; else
+  // empty. The values are not checked: a reader of the segments must check
+  // what Next() checks (finite positions and velocities) or read through
+  // Next() instead. Masses are finite and > 0.
+  virtual std::vector<MappableSegment> MappableSegments() const { return {}; }
 };
 
 // Opens a snapshot. `path` is a single file, any one file of a multi-file set
