@@ -68,7 +68,7 @@ void AddIngestCommand(CLI::App& app) {
       std::printf("  epoch %zu: %llu points, %llu nodes (%llu leaves), depth %d, %llu chunks, mass %.9g",
                   e, static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
                   static_cast<unsigned long long>(r.leaves), r.depth, static_cast<unsigned long long>(r.chunks), r.mass);
-      if (r.resident) std::printf(", held in memory whole");
+      if (r.resident) std::printf(r.mapped ? ", held in memory whole (mapped from its files)" : ", held in memory whole");
       if (r.spilled_points) std::printf(", %llu points spilled to disk", static_cast<unsigned long long>(r.spilled_points));
       if (r.missing_in_next) std::printf(", %llu IDs missing in the next epoch", static_cast<unsigned long long>(r.missing_in_next));
       if (r.missing_in_prev) std::printf(", %llu IDs missing in the previous epoch", static_cast<unsigned long long>(r.missing_in_prev));

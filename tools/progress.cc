@@ -63,6 +63,12 @@ void Progress::Add(std::uint64_t done) {
   }
 }
 
+void Progress::Restart() {
+  std::lock_guard lock(mutex_);
+  done_ = 0;
+  start_ = Clock::now();
+}
+
 void Progress::Finish() {
   std::lock_guard lock(mutex_);
   if (finished_) return;

@@ -24,6 +24,8 @@ class Progress {
   // Thread-safe; cheap when called often (redraws at most ~10 times a second).
   void Add(std::uint64_t done);
   void Finish();
+  // Counts from zero again, for a phase that starts over another way.
+  void Restart();
 
   // Disables all output (tests, --quiet).
   static void SetQuiet(bool quiet);

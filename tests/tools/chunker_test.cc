@@ -166,7 +166,8 @@ void ExpectResidentSplitLikeStreamed(const ParticleChunk& points, const ChunkerO
   std::vector<Chunk> streamed = streaming.Split(NodeKey::Root(), PassOver(points, 7000));
   Chunker in_place(kCube, options);
   ResidentEpoch held;
-  const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), PassOver(points, 7000), 1000, held);
+  held.Read(PassOver(points, 7000), 1000, options.columns);
+  const std::vector<Chunk> chunks = in_place.SplitResident(NodeKey::Root(), held);
   ASSERT_EQ(held.size(), points.size()) << "an expected count too small only costs reallocations";
   EXPECT_EQ(held.positions_narrow(), held_as_floats);
   std::vector<std::uint32_t> every(held.size());
@@ -258,7 +259,8 @@ TEST(Chunker, ResidentSplitGoesBelowItsPrecomputedCells) {
     ExpectResidentSplitLikeStreamed(points, options, /*held_as_floats=*/false, dir.path());
     Chunker chunker(kCube, options);
     ResidentEpoch held;
-    const std::vector<Chunk> chunks = chunker.SplitResident(NodeKey::Root(), PassOver(points, 7000), 0, held);
+    held.Read(PassOver(points, 7000), 0, options.columns);
+    const std::vector<Chunk> chunks = chunker.SplitResident(NodeKey::Root(), held);
     int deepest = 0;
     for (const Chunk& chunk : chunks) {
       EXPECT_LE(chunk.point_count, options.max_chunk_points) << chunk.key.Path();

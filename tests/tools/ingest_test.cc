@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -20,6 +21,7 @@
 #include "storage/error.h"
 #include "tools/snapshot/snapshot_source.h"
 #include "tools/store_verify.h"
+#include "tests/tools/gadget_test_file.h"
 #include "tests/tools/ingest_fixture.h"
 #include "tests/tools/store_check.h"
 
@@ -462,6 +464,85 @@ TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {
   for (std::uint32_t e = 0; e < 2; ++e) {
     EXPECT_EQ(FirstDifference(CheckTree(Dataset::Open(big.output), e), CheckTree(Dataset::Open(small.output), e)), "");
   }
+  EXPECT_TRUE(TempIsEmpty());
+}
+
+// `particles` as a GADGET snapshot of two files (types 1 and 2, table
+// masses, 4-byte IDs, float positions) in a periodic box of 100, little-
+// or big-endian; returns the name of the set.
+std::string WriteGadgetSet(const fs::path& dir, const std::string& name, const std::vector<Particle>& particles,
+                           bool big_endian) {
+  const std::size_t half = particles.size() / 2;
+  for (int f = 0; f < 2; ++f) {
+    const std::size_t begin = f == 0 ? 0 : half, end = f == 0 ? half : particles.size();
+    const auto type1 = static_cast<std::int32_t>((end - begin) / 3);  // the rest are type 2
+    GadgetSpec spec;
+    spec.big_endian = big_endian;
+    spec.num_files = 2;
+    spec.npart = {0, type1, static_cast<std::int32_t>(end - begin) - type1, 0, 0, 0};
+    spec.total = std::array<std::uint32_t, 6>{};
+    spec.mass_table = {0, 2.5, 0.75, 0, 0, 0};
+    for (std::size_t i = begin; i < end; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        spec.position.push_back(particles[i].x[a]);
+        spec.velocity.push_back(static_cast<double>(i % 17) - a);
+      }
+      spec.ids.push_back(particles[i].id);
+    }
+    WriteBytes((dir / (name + "." + std::to_string(f))).string(), EncodeGadget(spec));
+  }
+  return (dir / name).string();
+}
+
+// A GADGET snapshot in this machine's byte order is mapped, not copied
+// (ResidentEpoch::Map); its other-endian twin is read through the source.
+// Both give the same store, and so does a mapped snapshot with a point the
+// read must wrap into the box, which makes ingest read it instead.
+TEST_F(IngestTest, MappedAndReadGadgetSnapshotsGiveTheSameStore) {
+  static_assert(std::endian::native == std::endian::little, "the mapped files are written little-endian");
+  auto particles = Clustered(30000, 12, 100.0);
+  particles[20000].x[2] = 37.5;  // a float, and one box over (below) exactly too
+  IngestOptions mapped = Options({WriteGadgetSet(dir_, "little", particles, false)}, "mapped");
+  mapped.tree.capacity = 500;
+  mapped.max_chunk_points = 3000;
+  mapped.threads = 2;
+  IngestOptions read = mapped;
+  read.inputs = {WriteGadgetSet(dir_, "big", particles, true)};
+  read.output = (dir_ / "read").string();
+  const IngestReport mapped_report = Ingest(mapped);
+  const IngestReport read_report = Ingest(read);
+  ASSERT_TRUE(mapped_report.epochs[0].resident);
+  EXPECT_TRUE(mapped_report.epochs[0].mapped);
+  EXPECT_TRUE(read_report.epochs[0].resident);
+  EXPECT_FALSE(read_report.epochs[0].mapped);
+  EXPECT_EQ(mapped_report.epochs[0].ids_sorted, false) << "the IDs were counted dense from the mapped files";
+  const TreeCheck reference = CheckTree(Dataset::Open(read.output), 0);
+  EXPECT_EQ(reference.leaf_points.size(), particles.size());
+  EXPECT_EQ(FirstDifference(CheckTree(Dataset::Open(mapped.output), 0), reference), "");
+
+  particles[20000].x[2] = 137.5;
+  IngestOptions outside = mapped;
+  outside.inputs = {WriteGadgetSet(dir_, "outside", particles, false)};
+  outside.output = (dir_ / "outside").string();
+  const IngestReport outside_report = Ingest(outside);
+  EXPECT_FALSE(outside_report.epochs[0].mapped);
+  EXPECT_EQ(FirstDifference(CheckTree(Dataset::Open(outside.output), 0), reference), "");
+  EXPECT_TRUE(TempIsEmpty());
+}
+
+TEST_F(IngestTest, ANonFiniteCoordinateInAMappableSnapshotIsReported) {
+  auto particles = Clustered(5000, 13, 100.0);
+  particles[4000].x[0] = std::nan("");  // in the second file, of type 2
+  IngestOptions o = Options({WriteGadgetSet(dir_, "nan", particles, false)}, "nan-store");
+  try {
+    Ingest(o);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& error) {
+    EXPECT_EQ(error.kind(), ErrorKind::kBadInput);
+    EXPECT_NE(std::string(error.what()).find((dir_ / "nan.1").string()), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("non-finite coordinate"), std::string::npos) << error.what();
+  }
+  EXPECT_FALSE(fs::exists(o.output));
   EXPECT_TRUE(TempIsEmpty());
 }
 

@@ -11,7 +11,6 @@
 #include <unordered_map>
 
 #include "storage/error.h"
-#include "tools/page_warmer.h"
 #include "tools/parallel_for.h"
 
 namespace octocosm {
@@ -308,19 +307,7 @@ struct Chunker::ResidentCells {
   std::unique_ptr<std::uint32_t[]> cell;  // per resident point; not value-initialised, as CellOrder::points
 };
 
-std::vector<Chunk> Chunker::SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
-                                          ResidentEpoch& resident) {
-  resident = ResidentEpoch();
-  // Each column reserved whole; the reader fills them on this thread while a
-  // warmer faults their fresh pages in on another.
-  {
-    PageWarmer warmer(resident.Reserve(expected_points, options_.columns));
-    pass([&](const ParticleChunk& batch) { resident.Append(batch); });
-  }
-  if (resident.size() > UINT32_MAX) {
-    throw Error::InvalidArgument("chunker: " + std::to_string(resident.size()) +
-                                 " points are more than one resident split takes (2^32 - 1)");
-  }
+std::vector<Chunk> Chunker::SplitResident(NodeKey root, const ResidentEpoch& resident) {
   ResidentCells cells;
   cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
   cells.cell = std::make_unique_for_overwrite<std::uint32_t[]>(resident.size());

@@ -22,9 +22,9 @@
 // merged into one chunk for that node.
 //
 // A point set that fits in memory as a whole is better not copied into
-// growing buffers: SplitResident reads it once into a ResidentEpoch (its
-// columns as narrow as their values allow: tools/ingest/resident_epoch.h) and
-// cuts the same chunks as lists of indices into it, and each chunk is copied out
+// growing buffers: it is read once into a ResidentEpoch (its columns as
+// narrow as their values allow, or mapped from the files:
+// tools/ingest/resident_epoch.h) and SplitResident cuts the same chunks as lists of indices into it, and each chunk is copied out
 // only when it is built (tools/ingest/chunk_gatherer.h), into buffers that
 // serve chunk after chunk. That saves the buffers' growth and any spilling.
 // Its split computes each point's cell ten levels down once, on all
@@ -46,9 +46,6 @@
 #include "tools/ingest/resident_epoch.h"
 
 namespace octocosm {
-
-// One pass over a point set: calls `consume` for each batch, in order.
-using PointPass = std::function<void(const std::function<void(const ParticleChunk&)>& consume)>;
 
 struct Chunk {
   NodeKey key;
@@ -84,14 +81,12 @@ class Chunker {
   // point ends in exactly one chunk; chunks come in depth-first key order.
   std::vector<Chunk> Split(NodeKey root, const PointPass& pass);
 
-  // The same chunks for a point set that fits in memory as a whole: reads the
-  // pass once into `resident` (room reserved for `expected_points`; more or
-  // fewer are fine) and returns chunks that list their points as indices into
-  // it: the same chunks with the same points in the same order as Split's.
+  // The same chunks for a point set held in memory as a whole (read or
+  // mapped into `resident`): chunks that list their points as indices into
+  // it, the same chunks with the same points in the same order as Split's.
   // Nothing goes through chunk buffers and nothing spills; memory_bytes is
-  // not consulted. At most 2^32 - 1 points.
-  std::vector<Chunk> SplitResident(NodeKey root, const PointPass& pass, std::uint64_t expected_points,
-                                   ResidentEpoch& resident);
+  // not consulted.
+  std::vector<Chunk> SplitResident(NodeKey root, const ResidentEpoch& resident);
   // The memory SplitResident takes per point on top of the resident points:
   // its cell and its place in the split's order while the split runs, and
   // its index in its chunk's list, kept until the chunk is built.

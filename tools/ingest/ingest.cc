@@ -150,6 +150,35 @@ void WrapIntoBox(ParticleChunk& chunk, const Cube& cube) {
   for (std::size_t i = 0; i + 3 <= chunk.position.size(); i += 3) cube.Wrap(&chunk.position[i]);
 }
 
+// Holds the epoch of `source` in `resident` mapped from its files
+// (ResidentEpoch::Map) when the source's format allows and every value is
+// as reading through the source would give it, its IDs counted into
+// `census` (fresh) meanwhile. Returns false, nothing held and nothing
+// counted, otherwise: the caller then reads through the source, which
+// reports or wraps what stopped the mapping.
+bool MapResident(const ParticleSource& source, const Cube& cube, const ParticleColumns& columns, unsigned threads,
+                 ResidentEpoch& resident, IdCensus& census, Progress& progress) {
+  const std::vector<MappableSegment> segments = source.MappableSegments();
+  if (segments.empty() || !resident.Map(segments, source.header().files, columns)) return false;
+  IdCensus counted = census;
+  bool usable = false;
+  {
+    // The IDs are counted on a thread of their own while all threads check the values.
+    std::jthread count_ids;
+    if (columns.id) {
+      count_ids = std::jthread([&] { resident.VisitIds([&counted](std::span<const std::uint64_t> ids) { counted.Add(ids); }); });
+    }
+    usable = resident.ValuesAsRead(cube, static_cast<int>(threads), [&progress](std::size_t n) { progress.Add(n); });
+  }
+  if (!usable) {
+    resident = ResidentEpoch();
+    progress.Restart();
+    return false;
+  }
+  census = std::move(counted);
+  return true;
+}
+
 // Wall time of consecutive phases.
 class PhaseClock {
  public:
@@ -478,10 +507,17 @@ IngestReport Ingest(const IngestOptions& options) {
         });
       };
       Chunker chunker(cube, chunker_options);
-      chunks = resident ? chunker.SplitResident(NodeKey::Root(), counted, expected, resident_points)
-                        : chunker.Split(NodeKey::Root(), counted);
+      if (resident) {
+        const bool mapped = !join_epochs && MapResident(*source, cube, chunker_options.columns, threads, resident_points,
+                                                        id_census, progress);
+        if (!mapped) resident_points.Read(counted, expected, chunker_options.columns);
+        chunks = chunker.SplitResident(NodeKey::Root(), resident_points);
+      } else {
+        chunks = chunker.Split(NodeKey::Root(), counted);
+      }
       epoch_report.spilled_points = chunker.spilled_points();
       epoch_report.resident = resident;
+      epoch_report.mapped = resident_points.mapped();
     }
     clock.Lap("read+chunk");
     for (const Chunk& c : chunks) epoch_report.points += c.point_count;

@@ -59,6 +59,7 @@ struct EpochReport {
   std::uint64_t chunks = 0;
   std::uint64_t spilled_points = 0;  // points that went through temporary chunk files
   bool resident = false;             // held in memory whole and chunked in place (Chunker::SplitResident)
+  bool mapped = false;               // resident, mapped from the input files (ResidentEpoch::Map)
   struct Phase {
     std::string name;
     double seconds = 0;      // wall time

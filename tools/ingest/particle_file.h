@@ -24,6 +24,7 @@ struct ParticleColumns {
   std::array<bool, kVectorColumnCount> vectors{};  // indexed by VectorColumn
 
   bool& vector(VectorColumn column) { return vectors[static_cast<std::size_t>(column)]; }
+  bool vector(VectorColumn column) const { return vectors[static_cast<std::size_t>(column)]; }
   // Bytes one point takes in a file: position 24, mass 8, type 1 + options.
   std::size_t BytesPerPoint() const;
 };

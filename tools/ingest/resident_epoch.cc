@@ -1,14 +1,24 @@
 #include "tools/ingest/resident_epoch.h"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <limits>
+#include <map>
 #include <string>
 #include <type_traits>
 
 #include "storage/error.h"
 #include "tools/huge_pages.h"
+#include "tools/parallel_for.h"
 
 namespace octocosm {
 namespace {
@@ -28,26 +38,30 @@ bool FitsNarrow(Wide value) {
   }
 }
 
-// to[width * target[k] + a] = from[width * listed[k] + a], converted to To.
-template <typename From, typename To>
-void CopyListed(const From* from, std::span<const std::uint32_t> listed, std::span<const std::uint32_t> target,
-                std::size_t width, To* to) {
-  for (std::size_t k = 0; k < listed.size(); ++k) {
-    if (k + kPrefetchDistance < listed.size()) __builtin_prefetch(&from[width * listed[k + kPrefetchDistance]]);
-    const std::size_t i = width * std::size_t{listed[k]};
-    const std::size_t j = width * std::size_t{target[k]};
-    for (std::size_t a = 0; a < width; ++a) to[j + a] = static_cast<To>(from[i + a]);
-  }
+// Points a run of the epoch is looked up by: the run holding each block's
+// first point, from which a lookup steps forward.
+constexpr int kRunBlockBits = 16;
+
+// Value `index` of an array of T at `base`, wherever it is aligned.
+template <typename T>
+T LoadAt(const void* base, std::size_t index) {
+  T value;
+  std::memcpy(&value, static_cast<const std::byte*>(base) + index * sizeof(T), sizeof(T));
+  return value;
 }
 
-template <typename Narrow, typename Wide>
-void CopyListed(const NarrowableColumn<Narrow, Wide>& from, std::span<const std::uint32_t> listed,
-                std::span<const std::uint32_t> target, std::size_t width, std::vector<Wide>& to) {
-  to.resize(width * listed.size());
-  if (from.is_narrow()) {
-    CopyListed(from.narrow_values().data(), listed, target, width, to.data());
-  } else {
-    CopyListed(from.wide_values().data(), listed, target, width, to.data());
+// to[width * target[k] + a] = from[width * (listed[k] - first) + a], converted to To.
+template <typename From, typename To>
+void CopyListed(const void* from, std::size_t first, std::span<const std::uint32_t> listed,
+                std::span<const std::uint32_t> target, std::size_t width, To* to) {
+  const auto* bytes = static_cast<const std::byte*>(from);
+  for (std::size_t k = 0; k < listed.size(); ++k) {
+    if (k + kPrefetchDistance < listed.size()) {
+      __builtin_prefetch(bytes + sizeof(From) * width * (listed[k + kPrefetchDistance] - first));
+    }
+    const std::size_t i = width * (std::size_t{listed[k]} - first);
+    const std::size_t j = width * std::size_t{target[k]};
+    for (std::size_t a = 0; a < width; ++a) to[j + a] = static_cast<To>(LoadAt<From>(from, i + a));
   }
 }
 
@@ -89,6 +103,58 @@ void NarrowableColumn<Narrow, Wide>::Append(std::span<const Wide> values) {
 template class NarrowableColumn<float, double>;
 template class NarrowableColumn<std::uint32_t, std::uint64_t>;
 
+// Bytes [offset, offset + bytes) of a file, mapped read-only.
+class ResidentEpoch::Mapping {
+ public:
+  // Null where the file cannot be opened or mapped or is too short.
+  static std::unique_ptr<Mapping> Map(const std::string& path, std::uint64_t offset, std::uint64_t bytes) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return nullptr;
+    struct stat status{};
+    const std::uint64_t page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
+    const std::uint64_t start = offset / page * page;
+    void* data = MAP_FAILED;
+    if (::fstat(fd, &status) == 0 && bytes > 0 && offset + bytes <= static_cast<std::uint64_t>(status.st_size)) {
+      data = ::mmap(nullptr, offset + bytes - start, PROT_READ, MAP_PRIVATE, fd, static_cast<off_t>(start));
+    }
+    // Pages not cached are read ahead while the first are looked at.
+    if (data != MAP_FAILED) ::madvise(data, offset + bytes - start, MADV_WILLNEED);
+    ::close(fd);  // the mapping keeps the file
+    if (data == MAP_FAILED) return nullptr;
+    return std::unique_ptr<Mapping>(new Mapping(data, offset + bytes - start, offset - start));
+  }
+  ~Mapping() { ::munmap(data_, length_); }
+  Mapping(const Mapping&) = delete;
+  Mapping& operator=(const Mapping&) = delete;
+
+  // The byte `from_start` bytes past the offset asked for.
+  const std::byte* at(std::uint64_t from_start) const { return static_cast<const std::byte*>(data_) + lead_ + from_start; }
+  std::size_t length() const { return length_; }
+
+ private:
+  Mapping(void* data, std::size_t length, std::size_t lead) : data_(data), length_(length), lead_(lead) {}
+  void* data_;
+  std::size_t length_;
+  std::size_t lead_;  // bytes mapped before the requested offset, to start on a page
+};
+
+ResidentEpoch::ResidentEpoch() = default;
+ResidentEpoch::~ResidentEpoch() = default;
+ResidentEpoch::ResidentEpoch(ResidentEpoch&&) noexcept = default;
+ResidentEpoch& ResidentEpoch::operator=(ResidentEpoch&&) noexcept = default;
+
+void ResidentEpoch::Read(const PointPass& pass, std::size_t expected_points, const ParticleColumns& columns) {
+  *this = ResidentEpoch();
+  {
+    PageWarmer warmer(Reserve(expected_points, columns));
+    pass([&](const ParticleChunk& batch) { Append(batch); });
+  }
+  if (size_ > UINT32_MAX) {
+    throw Error::InvalidArgument("resident epoch: " + std::to_string(size_) +
+                                 " points are more than one resident epoch holds (2^32 - 1)");
+  }
+}
+
 std::vector<PageWarmer::Range> ResidentEpoch::Reserve(std::size_t points, const ParticleColumns& columns) {
   columns_ = columns;
   std::vector<PageWarmer::Range> fresh;
@@ -103,10 +169,12 @@ std::vector<PageWarmer::Range> ResidentEpoch::Reserve(std::size_t points, const 
     vectors_[v].reserve(3 * points);
     AddFreshRange(vectors_[v], fresh);
   }
+  DescribeOwnColumns();
   return fresh;
 }
 
 void ResidentEpoch::Append(const ParticleChunk& batch) {
+  if (mapped()) throw Error::InvalidArgument("resident epoch: a mapped epoch takes no appended points");
   const std::size_t n = batch.size();
   bool agree = batch.position.size() == 3 * n && batch.type.size() == n && batch.id.size() == (columns_.id ? n : 0);
   const auto vectors = VectorColumns(batch);
@@ -133,6 +201,8 @@ void ResidentEpoch::Append(const ParticleChunk& batch) {
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     vectors_[v].insert(vectors_[v].end(), vectors[v]->begin(), vectors[v]->end());
   }
+  size_ = type_.size();
+  DescribeOwnColumns();
 }
 
 void ResidentEpoch::WidenMasses() {
@@ -143,7 +213,142 @@ void ResidentEpoch::WidenMasses() {
   per_type_mass_ = false;
 }
 
+void ResidentEpoch::DescribeOwnColumns() {
+  Run run;
+  run.count = size_;
+  run.positions_wide = !position_.is_narrow();
+  run.position = run.positions_wide ? static_cast<const void*>(position_.wide_values().data())
+                                    : static_cast<const void*>(position_.narrow_values().data());
+  run.type = type_.data();
+  run.mass = per_type_mass_ ? nullptr : mass_.data();
+  if (columns_.id) {
+    run.id_bytes = id_.is_narrow() ? sizeof(std::uint32_t) : sizeof(std::uint64_t);
+    run.id = id_.is_narrow() ? static_cast<const void*>(id_.narrow_values().data())
+                             : static_cast<const void*>(id_.wide_values().data());
+  }
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) run.vectors[v] = vectors_[v].data();
+  runs_.assign(1, run);
+  run_of_block_.clear();
+}
+
+bool ResidentEpoch::Map(std::span<const MappableSegment> segments, std::span<const std::string> files,
+                        const ParticleColumns& columns) {
+  *this = ResidentEpoch();
+  const auto refuse = [this] {
+    *this = ResidentEpoch();
+    return false;
+  };
+  ParticleColumns allowed;
+  allowed.id = columns.id;
+  allowed.vector(VectorColumn::kVelocity) = columns.vector(VectorColumn::kVelocity);
+  if (allowed.vectors != columns.vectors || segments.empty()) return refuse();
+  const bool velocity = columns.vector(VectorColumn::kVelocity);
+
+  // Each file's range: from its first needed byte to its last.
+  std::map<std::size_t, std::pair<std::uint64_t, std::uint64_t>> ranges;  // file -> [lo, hi)
+  std::uint64_t points = 0;
+  for (const MappableSegment& s : segments) {
+    if (s.file >= files.size() || s.type < 0 || s.type > 255 || s.count == 0) return refuse();
+    if (columns.id && s.id_bytes != 4 && s.id_bytes != 8) return refuse();
+    const auto t = static_cast<std::size_t>(s.type);
+    if (type_mass_known_[t] && std::bit_cast<std::uint64_t>(type_mass_[t]) != std::bit_cast<std::uint64_t>(s.mass)) {
+      return refuse();
+    }
+    type_mass_known_[t] = true;
+    type_mass_[t] = s.mass;
+    auto [it, fresh] = ranges.try_emplace(s.file, UINT64_MAX, 0);
+    auto cover = [&range = it->second](std::uint64_t offset, std::uint64_t bytes) {
+      range.first = std::min(range.first, offset);
+      range.second = std::max(range.second, offset + bytes);
+    };
+    cover(s.position_offset, 12 * s.count);
+    if (velocity) cover(s.velocity_offset, 12 * s.count);
+    if (columns.id) cover(s.id_offset, s.id_bytes * s.count);
+    points += s.count;
+  }
+  if (points > UINT32_MAX) return refuse();
+
+  std::map<std::size_t, const Mapping*> mapping_of;
+  for (const auto& [file, range] : ranges) {
+    std::unique_ptr<Mapping> mapping = Mapping::Map(files[file], range.first, range.second - range.first);
+    if (!mapping) return refuse();
+    mapping_of[file] = mapping.get();
+    mappings_.push_back(std::move(mapping));
+  }
+  columns_ = columns;
+  for (const MappableSegment& s : segments) {
+    const Mapping& mapping = *mapping_of.at(s.file);
+    const std::uint64_t lo = ranges.at(s.file).first;
+    Run run;
+    run.begin = size_;
+    run.count = s.count;
+    run.position = mapping.at(s.position_offset - lo);
+    run.run_type = static_cast<std::uint8_t>(s.type);
+    if (columns.id) {
+      run.id = mapping.at(s.id_offset - lo);
+      run.id_bytes = s.id_bytes;
+    }
+    if (velocity) run.vectors[static_cast<std::size_t>(VectorColumn::kVelocity)] = mapping.at(s.velocity_offset - lo);
+    runs_.push_back(run);
+    size_ += s.count;
+  }
+  run_of_block_.resize((size_ >> kRunBlockBits) + 1);
+  std::size_t r = 0;
+  for (std::size_t block = 0; block < run_of_block_.size(); ++block) {
+    while (r + 1 < runs_.size() && runs_[r].begin + runs_[r].count <= block << kRunBlockBits) ++r;
+    run_of_block_[block] = static_cast<std::uint32_t>(r);
+  }
+  return true;
+}
+
+bool ResidentEpoch::ValuesAsRead(const Cube& cube, int threads, const std::function<void(std::size_t)>& progress) const {
+  const std::size_t velocity = static_cast<std::size_t>(VectorColumn::kVelocity);
+  std::atomic<bool> usable = true;
+  for (const Run& run : runs_) {
+    ParallelFor(run.count, threads, [&](std::size_t begin, std::size_t end) {
+      bool ok = true;
+      for (std::size_t i = begin; i < end; ++i) {
+        for (std::size_t a = 0; a < 3; ++a) {
+          const double x = run.positions_wide ? LoadAt<double>(run.position, 3 * i + a)
+                                              : LoadAt<float>(run.position, 3 * i + a);
+          const double t = x - cube.origin[a];
+          // As ingest's InsideBox, and a non-finite x fails it too.
+          ok &= cube.periodic ? (t >= 0 && t < cube.size) : std::isfinite(x);
+        }
+        if (run.vectors[velocity] != nullptr) {
+          for (std::size_t a = 0; a < 3; ++a) ok &= std::isfinite(LoadAt<float>(run.vectors[velocity], 3 * i + a));
+        }
+      }
+      if (!ok) usable = false;
+    }, std::size_t{1} << 16);
+    if (!usable) return false;
+    progress(run.count);
+  }
+  return true;
+}
+
+void ResidentEpoch::VisitIds(const std::function<void(std::span<const std::uint64_t>)>& visit) const {
+  if (!columns_.id) throw Error::InvalidArgument("resident epoch: VisitIds needs the ID column");
+  constexpr std::size_t kBatch = std::size_t{1} << 16;
+  std::vector<std::uint64_t> batch;
+  for (const Run& run : runs_) {
+    for (std::size_t begin = 0; begin < run.count; begin += kBatch) {
+      const std::size_t n = std::min(kBatch, run.count - begin);
+      batch.resize(n);
+      for (std::size_t k = 0; k < n; ++k) {
+        batch[k] = run.id_bytes == 4 ? LoadAt<std::uint32_t>(run.id, begin + k) : LoadAt<std::uint64_t>(run.id, begin + k);
+      }
+      visit(batch);
+    }
+  }
+}
+
 std::size_t ResidentEpoch::BytesPerPoint() const {
+  if (mapped()) {
+    std::size_t bytes = 0;
+    for (const auto& mapping : mappings_) bytes += mapping->length();
+    return size_ == 0 ? 0 : bytes / size_;
+  }
   std::size_t bytes = 3 * (position_.is_narrow() ? sizeof(float) : sizeof(double)) + sizeof(std::uint8_t);
   if (!per_type_mass_) bytes += sizeof(double);
   if (columns_.id) bytes += id_.is_narrow() ? sizeof(std::uint32_t) : sizeof(std::uint64_t);
@@ -151,40 +356,81 @@ std::size_t ResidentEpoch::BytesPerPoint() const {
   return bytes;
 }
 
+bool ResidentEpoch::positions_narrow() const {
+  return std::none_of(runs_.begin(), runs_.end(), [](const Run& run) { return run.positions_wide; });
+}
+
+bool ResidentEpoch::ids_narrow() const {
+  return std::all_of(runs_.begin(), runs_.end(), [](const Run& run) { return run.id_bytes != 8; });
+}
+
+const ResidentEpoch::Run& ResidentEpoch::RunOf(std::size_t i) const {
+  if (runs_.size() == 1) return runs_.front();
+  std::size_t r = run_of_block_[i >> kRunBlockBits];
+  while (i - runs_[r].begin >= runs_[r].count) ++r;
+  return runs_[r];
+}
+
 std::array<double, 3> ResidentEpoch::Position(std::size_t i) const {
-  return {position_[3 * i], position_[3 * i + 1], position_[3 * i + 2]};
+  const Run& run = RunOf(i);
+  const std::size_t j = 3 * (i - run.begin);
+  if (run.positions_wide) {
+    return {LoadAt<double>(run.position, j), LoadAt<double>(run.position, j + 1), LoadAt<double>(run.position, j + 2)};
+  }
+  return {LoadAt<float>(run.position, j), LoadAt<float>(run.position, j + 1), LoadAt<float>(run.position, j + 2)};
 }
 
 const void* ResidentEpoch::PositionAddress(std::size_t i) const {
-  return position_.is_narrow() ? static_cast<const void*>(&position_.narrow_values()[3 * i])
-                               : static_cast<const void*>(&position_.wide_values()[3 * i]);
+  const Run& run = RunOf(i);
+  const std::size_t bytes = run.positions_wide ? sizeof(double) : sizeof(float);
+  return static_cast<const std::byte*>(run.position) + 3 * bytes * (i - run.begin);
 }
 
 void ResidentEpoch::CopyPoints(std::span<const std::uint32_t> listed, std::span<const std::uint32_t> target,
                                ParticleChunk& to) const {
   const std::size_t n = listed.size();
-  CopyListed(position_, listed, target, 3, to.position);
+  to.position.resize(3 * n);
   to.mass.resize(n);
-  if (per_type_mass_) {
-    for (std::size_t k = 0; k < n; ++k) to.mass[target[k]] = type_mass_[type_[listed[k]]];
-  } else {
-    CopyListed(mass_.data(), listed, target, 1, to.mass.data());
-  }
   to.type.resize(n);
-  CopyListed(type_.data(), listed, target, 1, to.type.data());
-  if (columns_.id) {
-    CopyListed(id_, listed, target, 1, to.id);
-  } else {
-    to.id.clear();
-  }
+  to.id.resize(columns_.id ? n : 0);
   const auto out = VectorColumns(to);
-  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (!columns_.vectors[v]) {
-      out[v]->clear();
-      continue;
+  for (std::size_t v = 0; v < kVectorColumnCount; ++v) out[v]->resize(columns_.vectors[v] ? 3 * n : 0);
+
+  // Stretch by stretch of listed points that lie in one run.
+  for (std::size_t k0 = 0; k0 < n;) {
+    const Run& run = RunOf(listed[k0]);
+    std::size_t k1 = k0 + 1;
+    while (k1 < n && listed[k1] - run.begin < run.count) ++k1;
+    const std::span<const std::uint32_t> from = listed.subspan(k0, k1 - k0);
+    const std::span<const std::uint32_t> into = target.subspan(k0, k1 - k0);
+    k0 = k1;
+    if (run.positions_wide) {
+      CopyListed<double>(run.position, run.begin, from, into, 3, to.position.data());
+    } else {
+      CopyListed<float>(run.position, run.begin, from, into, 3, to.position.data());
     }
-    out[v]->resize(3 * n);
-    CopyListed(vectors_[v].data(), listed, target, 3, out[v]->data());
+    if (run.type != nullptr) {
+      CopyListed<std::uint8_t>(run.type, run.begin, from, into, 1, to.type.data());
+    } else {
+      for (const std::uint32_t t : into) to.type[t] = run.run_type;
+    }
+    if (run.mass != nullptr) {
+      CopyListed<double>(run.mass, run.begin, from, into, 1, to.mass.data());
+    } else if (run.type != nullptr) {
+      for (std::size_t k = 0; k < from.size(); ++k) to.mass[into[k]] = type_mass_[run.type[from[k] - run.begin]];
+    } else {
+      for (const std::uint32_t t : into) to.mass[t] = type_mass_[run.run_type];
+    }
+    if (columns_.id) {
+      if (run.id_bytes == 4) {
+        CopyListed<std::uint32_t>(run.id, run.begin, from, into, 1, to.id.data());
+      } else {
+        CopyListed<std::uint64_t>(run.id, run.begin, from, into, 1, to.id.data());
+      }
+    }
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (columns_.vectors[v]) CopyListed<float>(run.vectors[v], run.begin, from, into, 3, out[v]->data());
+    }
   }
 }
 

@@ -12,17 +12,29 @@
 // epoch, and on the virtual machines this runs on the first touch of fresh
 // memory is the read's largest cost (PageWarmer, tools/page_warmer.h).
 // Narrow, a GADGET point with velocity and ID takes 29 bytes instead of 53.
+//
+// Better still, an epoch whose files hold every column as a plain array in
+// this machine's byte order (GADGET files written on a little-endian machine
+// with float positions and a mass table) is not copied at all: Map() maps
+// the files' position, velocity and ID blocks read-only and the points are
+// read where they lie, in the page cache. Mapping cached pages costs a
+// fraction of zeroing fresh ones and copying into them (docs/INGEST.md).
 #pragma once
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
+#include "index/cube.h"
 #include "index/particle_chunk.h"
 #include "tools/ingest/particle_file.h"
 #include "tools/page_warmer.h"
+#include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
 
@@ -46,8 +58,23 @@ class NarrowableColumn {
   std::vector<Wide> wide_;
 };
 
+// One pass over a point set: calls `consume` for each batch, in order.
+using PointPass = std::function<void(const std::function<void(const ParticleChunk&)>& consume)>;
+
 class ResidentEpoch {
  public:
+  ResidentEpoch();
+  ~ResidentEpoch();
+  ResidentEpoch(ResidentEpoch&&) noexcept;
+  ResidentEpoch& operator=(ResidentEpoch&&) noexcept;
+
+  // Reads `pass` whole into columns of its own: room for `expected_points`
+  // (more or fewer are fine) reserved up front, their fresh pages faulted in
+  // by a PageWarmer while this thread appends. Every batch must carry
+  // exactly the optional columns `columns` names. Throws
+  // Error::InvalidArgument beyond 2^32 - 1 points.
+  void Read(const PointPass& pass, std::size_t expected_points, const ParticleColumns& columns);
+
   // Room for `points` in the columns `columns` names (position, mass and
   // type always), in their narrow forms, on small pages (filled once and
   // kept: tools/huge_pages.h). Every appended batch must carry exactly these
@@ -59,13 +86,34 @@ class ResidentEpoch {
   // the reserved ones or their lengths disagree.
   void Append(const ParticleChunk& batch);
 
-  std::size_t size() const { return type_.size(); }
+  // Holds the points of `segments` where they lie in the files `files` (a
+  // source's MappableSegments() and header().files), mapped read-only rather
+  // than copied: nothing is zeroed or copied until a chunk is gathered. The
+  // optional columns are those `columns` names, which may be only the ID and
+  // the velocity. Returns false, the epoch left empty, where the segments
+  // cannot be held so (a file that cannot be mapped or is shorter than its
+  // segments, one type's masses differing between files, more than 2^32 - 1
+  // points, other columns asked for); reading through the source then does. The values are not checked: see ValuesAsRead.
+  bool Map(std::span<const MappableSegment> segments, std::span<const std::string> files,
+           const ParticleColumns& columns);
+  // Whether every position and velocity is finite and, in a periodic cube,
+  // every position inside it: what reading through a source checks, and
+  // what ingest's wrap into the box would change. On `threads` threads;
+  // `progress` is told of the points checked, on this thread.
+  bool ValuesAsRead(const Cube& cube, int threads, const std::function<void(std::size_t)>& progress) const;
+  // Calls `visit` with the IDs of consecutive points, in order, until all
+  // are visited. Needs the ID column.
+  void VisitIds(const std::function<void(std::span<const std::uint64_t>)>& visit) const;
+
+  std::size_t size() const { return size_; }
   const ParticleColumns& columns() const { return columns_; }
-  // Bytes the columns take per point as they are kept now.
+  bool mapped() const { return !mappings_.empty(); }
+  // Bytes the columns take per point as they are kept now (mapped: the
+  // mapped bytes of the files, averaged).
   std::size_t BytesPerPoint() const;
-  bool positions_narrow() const { return position_.is_narrow(); }
+  bool positions_narrow() const;
   bool masses_per_type() const { return per_type_mass_; }
-  bool ids_narrow() const { return id_.is_narrow(); }
+  bool ids_narrow() const;
 
   // Point i's position, absolute.
   std::array<double, 3> Position(std::size_t i) const;
@@ -79,9 +127,32 @@ class ResidentEpoch {
                   ParticleChunk& to) const;
 
  private:
+  class Mapping;
+  // Consecutive points whose columns lie in one array each: the epoch's own
+  // columns (one run), or one mapped segment. Columns are read with
+  // unaligned loads: a mapped file's 8-byte IDs start wherever its records put them.
+  struct Run {
+    std::size_t begin = 0, count = 0;  // points [begin, begin + count) of the epoch
+    const void* position = nullptr;    // x,y,z interleaved, float or double
+    bool positions_wide = false;
+    const std::uint8_t* type = nullptr;  // per point, or null: all of type run_type
+    std::uint8_t run_type = 0;
+    const double* mass = nullptr;       // per point, or null: type_mass_ of the type
+    const void* id = nullptr;
+    std::size_t id_bytes = 0;           // 4 or 8
+    std::array<const void*, kVectorColumnCount> vectors{};  // 3 floats a point each
+  };
+  const Run& RunOf(std::size_t i) const;
+  // Describes the own columns as the one run (after they change).
+  void DescribeOwnColumns();
   void WidenMasses();
 
   ParticleColumns columns_;
+  std::size_t size_ = 0;
+  std::vector<Run> runs_;
+  std::vector<std::uint32_t> run_of_block_;   // first run of each block of kRunBlock points
+  std::vector<std::unique_ptr<Mapping>> mappings_;
+
   NarrowableColumn<float, double> position_;  // x,y,z interleaved
   bool per_type_mass_ = true;
   std::array<double, 256> type_mass_{};        // per type, while per_type_mass_
