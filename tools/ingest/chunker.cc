@@ -308,6 +308,10 @@ struct Chunker::ResidentCells {
 };
 
 std::vector<Chunk> Chunker::SplitResident(NodeKey root, const ResidentEpoch& resident) {
+  if (resident.size() > UINT32_MAX) {
+    throw Error::InvalidArgument("chunker: " + std::to_string(resident.size()) +
+                                 " points are more than one resident split takes (2^32 - 1)");
+  }
   ResidentCells cells;
   cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
   cells.cell = std::make_unique_for_overwrite<std::uint32_t[]>(resident.size());

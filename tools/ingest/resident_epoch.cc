@@ -38,8 +38,8 @@ bool FitsNarrow(Wide value) {
   }
 }
 
-// Points a run of the epoch is looked up by: the run holding each block's
-// first point, from which a lookup steps forward.
+// A point's run is found from a table of the run that holds the first point
+// of each block of 2^kRunBlockBits points, stepping forward from there.
 constexpr int kRunBlockBits = 16;
 
 // Value `index` of an array of T at `base`, wherever it is aligned.
