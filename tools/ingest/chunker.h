@@ -24,9 +24,10 @@
 // A point set that fits in memory as a whole is better not copied into
 // growing buffers: it is read once into a ResidentEpoch (its columns as
 // narrow as their values allow, or mapped from the files:
-// tools/ingest/resident_epoch.h) and SplitResident cuts the same chunks as lists of indices into it, and each chunk is copied out
-// only when it is built (tools/ingest/chunk_gatherer.h), into buffers that
-// serve chunk after chunk. That saves the buffers' growth and any spilling.
+// tools/ingest/resident_epoch.h) and SplitResident cuts the same chunks as
+// lists of indices into it; each chunk is copied out only when it is built
+// (tools/ingest/chunk_gatherer.h), into buffers that serve chunk after chunk.
+// That saves the buffers' growth and any spilling.
 // Its split computes each point's cell ten levels down once, on all
 // threads, and every later cut reads a coarser cell as a prefix of that one
 // (only a clump denser than a chunk inside one such cell is placed from its

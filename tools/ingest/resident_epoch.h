@@ -93,7 +93,8 @@ class ResidentEpoch {
   // the velocity. Returns false, the epoch left empty, where the segments
   // cannot be held so (a file that cannot be mapped or is shorter than its
   // segments, one type's masses differing between files, more than 2^32 - 1
-  // points, other columns asked for); reading through the source then does. The values are not checked: see ValuesAsRead.
+  // points, other columns asked for); reading through the source then does.
+  // The values are not checked: see ValuesAsRead.
   bool Map(std::span<const MappableSegment> segments, std::span<const std::string> files,
            const ParticleColumns& columns);
   // Whether every position and velocity is finite and, in a periodic cube,
@@ -130,7 +131,8 @@ class ResidentEpoch {
   class Mapping;
   // Consecutive points whose columns lie in one array each: the epoch's own
   // columns (one run), or one mapped segment. Columns are read with
-  // unaligned loads: a mapped file's 8-byte IDs start wherever its records put them.
+  // unaligned loads: a mapped file's 8-byte IDs start wherever its records
+  // put them.
   struct Run {
     std::size_t begin = 0, count = 0;  // points [begin, begin + count) of the epoch
     const void* position = nullptr;    // x,y,z interleaved, float or double
