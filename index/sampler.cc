@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <numeric>
 #include <string>
 
@@ -34,77 +35,74 @@ double PriorityUniformMixed(std::uint64_t sampling_id, std::uint64_t mixed_seed)
 // each point lies in, and the total.
 struct Density {
   std::vector<std::uint32_t> cell_of;  // per point: index into cell_weight
-  std::vector<double> cell_weight;     // per occupied fine cell, in cell order
+  std::vector<double> cell_weight;     // per occupied fine cell, in the order the points reach them
   double total = 0;
   double cell_edge = 0;
 };
 
-// The indices 0..keys.size()-1 ordered by key, stably: a least-significant-
-// digit radix sort, one pass per byte of the `key_bits` used.
-std::vector<std::uint32_t> StableOrderByKey(const std::vector<std::uint32_t>& keys, int key_bits) {
-  const std::size_t m = keys.size();
-  std::vector<std::uint32_t> order(m), scratch(m);
-  for (std::size_t i = 0; i < m; ++i) order[i] = static_cast<std::uint32_t>(i);
-  for (int shift = 0; shift < key_bits; shift += 8) {
-    std::array<std::uint32_t, 257> start{};
-    for (std::size_t i = 0; i < m; ++i) ++start[((keys[i] >> shift) & 0xFF) + 1];
-    for (int d = 0; d < 256; ++d) start[d + 1] += start[d];
-    for (const std::uint32_t i : order) scratch[start[(keys[i] >> shift) & 0xFF]++] = i;
-    order.swap(scratch);
+// Numbers the fine cells of a node's density grid in the order its points
+// first occupy them. The table from fine cell to number is held per thread
+// across calls and cleared cell by cell when a numbering ends: a leaf of a
+// few thousand points should not pay for filling 2^(3 bits) entries.
+class OccupiedCellNumbering {
+ public:
+  explicit OccupiedCellNumbering(std::size_t fine_cells) : number_of_(TableForThisThread(fine_cells)) {}
+  ~OccupiedCellNumbering() {
+    for (const std::uint32_t fine : occupied_) number_of_[fine] = kUnoccupied;
   }
-  return order;
-}
+  OccupiedCellNumbering(const OccupiedCellNumbering&) = delete;
+  OccupiedCellNumbering& operator=(const OccupiedCellNumbering&) = delete;
 
-Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double> weight,
-                        std::span<const std::uint64_t> tie_break, NodeKey key, const Cube& cube, int bits) {
+  // The number of fine cell `fine`: the next one when it is new.
+  std::uint32_t Number(std::uint32_t fine) {
+    std::uint32_t& number = number_of_[fine];
+    if (number == kUnoccupied) {
+      occupied_.push_back(fine);
+      number = static_cast<std::uint32_t>(occupied_.size() - 1);
+    }
+    return number;
+  }
+ private:
+  static constexpr std::uint32_t kUnoccupied = UINT32_MAX;
+  static std::vector<std::uint32_t>& TableForThisThread(std::size_t fine_cells) {
+    thread_local std::vector<std::uint32_t> table;
+    if (table.size() < fine_cells) table.resize(fine_cells, kUnoccupied);
+    return table;
+  }
+
+  std::vector<std::uint32_t>& number_of_;
+  std::vector<std::uint32_t> occupied_;  // fine cells, by number
+};
+
+Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double> weight, NodeKey key,
+                        const Cube& cube, int bits) {
   const std::size_t m = weight.size();
   const int level = key.level();
   const CellCoord cell = key.cell();
   const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
-  std::vector<std::uint32_t> fine(m);
+  OccupiedCellNumbering numbering(std::size_t{1} << (3 * bits));
+  Density d;
+  d.cell_of.resize(m);
+  d.cell_edge = cube.NodeSize(level + bits);
+  // Each cell's weight is summed in the order of the points. The octree
+  // builder hands over its points in an order fixed by their values (a leaf's
+  // by particle ID, a parent's octant by octant), so its sums do not depend
+  // on how the input was read or chunked; a caller that permutes the points
+  // changes the sums only by rounding.
   for (std::size_t i = 0; i < m; ++i) {
     // Coordinates relative to the node; the mask keeps the index in range
     // even for a point that lies outside the node (a caller's error).
     const std::uint64_t x = (GridAxisAt(grid[i], 0, level + bits) - (std::uint64_t{cell.x} << bits)) & mask;
     const std::uint64_t y = (GridAxisAt(grid[i], 1, level + bits) - (std::uint64_t{cell.y} << bits)) & mask;
     const std::uint64_t z = (GridAxisAt(grid[i], 2, level + bits) - (std::uint64_t{cell.z} << bits)) & mask;
-    fine[i] = static_cast<std::uint32_t>(x | (y << bits) | (z << (2 * bits)));
+    const std::uint32_t number = numbering.Number(static_cast<std::uint32_t>(x | (y << bits) | (z << (2 * bits))));
+    if (number == d.cell_weight.size()) d.cell_weight.push_back(0);
+    d.cell_weight[number] += weight[i];
+    d.cell_of[i] = number;
   }
-  // Summing in an order fixed by the points' values (not their positions in
-  // the input) makes the sums, and so the sample, independent of input order.
-  // A radix sort groups the points by fine cell in O(m), keeping input order
-  // within a cell; only the few points sharing a cell need a comparison sort.
-  std::vector<std::uint32_t> order = StableOrderByKey(fine, 3 * bits);
-  Density d;
-  d.cell_of.resize(m);
-  d.cell_edge = cube.NodeSize(level + bits);
-  for (std::size_t begin = 0; begin < m;) {
-    std::size_t end = begin + 1;
-    while (end < m && fine[order[end]] == fine[order[begin]]) ++end;
-    // Only the order of the additions depends on the sort, and when every
-    // weight in the cell is the same (equal-mass particles) the sum is the
-    // same in any order: the sort is skipped.
-    bool equal_weights = true;
-    for (std::size_t j = begin + 1; j < end && equal_weights; ++j) equal_weights = weight[order[j]] == weight[order[begin]];
-    if (!equal_weights) {
-      std::sort(order.begin() + static_cast<std::ptrdiff_t>(begin), order.begin() + static_cast<std::ptrdiff_t>(end),
-                [&](std::uint32_t a, std::uint32_t b) {
-                  if (tie_break[a] != tie_break[b]) return tie_break[a] < tie_break[b];
-                  return weight[a] < weight[b];
-                });
-    }
-    double sum = 0;
-    for (std::size_t j = begin; j < end; ++j) {
-      sum += weight[order[j]];
-      d.cell_of[order[j]] = static_cast<std::uint32_t>(d.cell_weight.size());
-    }
-    d.cell_weight.push_back(sum);
-    d.total += sum;
-    begin = end;
-  }
+  for (const double w : d.cell_weight) d.total += w;
   return d;
 }
-
 
 // Step 5 for the points of one node. A point's length depends only on its
 // weight and its density cell, and equal-mass particles share a cell's
@@ -201,9 +199,7 @@ double PriorityUniform(std::uint64_t sampling_id, std::uint64_t seed) {
 std::vector<double> LeafSmoothingLengths(std::span<const GridPoint> grid, std::span<const double> weight, NodeKey key,
                                          const Cube& cube, const SamplerOptions& options) {
   CheckInputs(grid.size(), weight, weight.size(), options);
-  // Any fixed order works for the sums here; the weights alone break ties.
-  const std::vector<std::uint64_t> no_ids(weight.size(), 0);
-  const Density d = EstimateDensity(grid, weight, no_ids, key, cube, options.density_grid_bits);
+  const Density d = EstimateDensity(grid, weight, key, cube, options.density_grid_bits);
   const double node_size = cube.NodeSize(key.level());
   SmoothingByCell smoothing(d, node_size);
   std::vector<double> h(weight.size());
@@ -228,7 +224,7 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   CheckInputs(grid.size(), weight, sampling_id.size(), options);
   if (capacity == 0) throw Error::InvalidArgument("sampler: capacity must be at least 1");
   const std::size_t m = weight.size();
-  const Density d = EstimateDensity(grid, weight, sampling_id, key, cube, options.density_grid_bits);
+  const Density d = EstimateDensity(grid, weight, key, cube, options.density_grid_bits);
   const double node_size = cube.NodeSize(key.level());
   Sample sample;
 
@@ -254,24 +250,31 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
     importance[i] = weight[i] * cell_factor[d.cell_of[i]];
     priority[i] = importance[i] / PriorityUniformMixed(sampling_id[i], mixed_seed);
   }
-  // Highest priority first; equal priorities (duplicate IDs) fall back to
-  // the ID and then the input index, so the order is total.
-  std::vector<std::uint32_t> order(m);
-  std::iota(order.begin(), order.end(), 0u);
-  const auto higher = [&](std::uint32_t a, std::uint32_t b) {
-    if (priority[a] != priority[b]) return priority[a] > priority[b];
-    if (sampling_id[a] != sampling_id[b]) return sampling_id[a] < sampling_id[b];
-    return a < b;
-  };
-  std::nth_element(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(capacity), order.end(), higher);
-  sample.threshold = priority[order[capacity]];
-  // The kept indices in ascending order: marked, then collected in one sweep
-  // (cheaper than sorting them).
+  // The `capacity` highest priorities are kept; among equal priorities
+  // (duplicate IDs) the lower ID, then the lower index, so the choice is
+  // total. The threshold is selected among the priorities themselves, not
+  // through an index order, so the selection is a pass over contiguous
+  // doubles; the rare points that tie with it are ordered apart.
+  std::vector<double> highest(priority);
+  std::nth_element(highest.begin(), highest.begin() + static_cast<std::ptrdiff_t>(capacity), highest.end(),
+                   std::greater<>());
+  sample.threshold = highest[capacity];
+  std::size_t above = 0;
+  for (std::size_t i = 0; i < m; ++i) above += priority[i] > sample.threshold ? 1 : 0;
+  std::vector<std::uint32_t> tied;
+  for (std::size_t i = 0; i < m; ++i) {
+    if (priority[i] == sample.threshold) tied.push_back(static_cast<std::uint32_t>(i));
+  }
+  // At least one tied point (the threshold's own) is left out.
+  std::sort(tied.begin(), tied.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return sampling_id[a] != sampling_id[b] ? sampling_id[a] < sampling_id[b] : a < b;
+  });
   std::vector<std::uint8_t> is_kept(m, 0);
-  for (std::size_t j = 0; j < capacity; ++j) is_kept[order[j]] = 1;
+  for (std::size_t j = 0; j < capacity - above; ++j) is_kept[tied[j]] = 1;
+  // The kept indices in ascending order, in one sweep.
   sample.kept.reserve(capacity);
   for (std::size_t i = 0; i < m; ++i) {
-    if (is_kept[i]) sample.kept.push_back(static_cast<std::uint32_t>(i));
+    if (priority[i] > sample.threshold || is_kept[i]) sample.kept.push_back(static_cast<std::uint32_t>(i));
   }
 
   // Unbiased estimates w_i * max(1, tau / s_i), then rescaled to the exact total.

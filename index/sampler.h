@@ -22,7 +22,9 @@
 //    the node's level, so the draw is deterministic: the same particle gets
 //    the same u at a given level in every epoch (no flicker when playing a
 //    time series), and the selection does not depend on the input order (the
-//    weights agree to rounding). The level must enter the hash: a parent's
+//    density sums, and so the weights, agree to rounding; the octree builder
+//    hands each node its points in an order fixed by their values, so its
+//    results agree exactly). The level must enter the hash: a parent's
 //    population is its children's kept points, and a subsampled child kept
 //    its points *because* their u was small; drawing the same u again at the
 //    parent would favour them, and the parent's points in the octant of a

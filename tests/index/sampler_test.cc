@@ -117,6 +117,27 @@ TEST(Sampler, IsDeterministicAndIndependentOfInputOrder) {
   EXPECT_NE(a.kept, d.kept);
 }
 
+// Points with the same ID, weight and density cell draw the same priority:
+// the threshold ties with those kept, and the lower ID, then the lower
+// index, decides, so exactly n points are kept.
+TEST(Sampler, TiedPrioritiesAreSettledByIdThenIndex) {
+  Population p;
+  for (std::size_t i = 0; i < 40; ++i) {
+    const double at[3] = {0.5, 0.5, 0.5};
+    p.position.insert(p.position.end(), at, at + 3);
+    p.weight.push_back(1.0);
+    p.id.push_back(i < 10 ? 7 : 5);
+  }
+  // ID 5 draws the smaller u at the root, so the higher priority: its 30
+  // points tie at the threshold and the 25 with the lowest indices stay.
+  ASSERT_LT(PriorityUniform(5, LevelSeed(0, 0)), PriorityUniform(7, LevelSeed(0, 0)));
+  const Sample s = SampleAll(p, 25, {});
+  std::vector<std::uint32_t> expected(25);
+  std::iota(expected.begin(), expected.end(), 10u);
+  EXPECT_EQ(s.kept, expected);
+  EXPECT_NEAR(Total(s.weight), 40.0, 1e-12);
+}
+
 // The mean over many seeds of the estimated mass in a region is the region's
 // true mass: priority sampling's estimator is unbiased.
 TEST(Sampler, EstimatesRegionMassesWithoutBias) {
