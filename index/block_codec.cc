@@ -210,11 +210,14 @@ double Round(double x) {
   return whole;
 }
 
-// Round(x) for 0 <= x < 2^52 without a branch on the fraction, which is
-// random in quantized data and so mispredicted half the time.
-double RoundNonNegative(double x) {
-  const double whole = static_cast<double>(static_cast<std::int64_t>(x));
-  return whole + static_cast<double>(x - whole >= 0.5);
+// The nearest 16-bit code to x (halves up) for 0 <= x < 65536 and a hair
+// past it, without a branch: the fraction is random in quantized data, so a
+// branch on it was mispredicted half the time, and 32-bit conversions keep
+// the loop free of libm and of 64-bit conversion chains.
+std::uint16_t NearestCode(double x) {
+  const std::int32_t whole = static_cast<std::int32_t>(x);
+  const std::int32_t code = whole + static_cast<std::int32_t>(x - static_cast<double>(whole) >= 0.5);
+  return static_cast<std::uint16_t>(std::min(code, std::int32_t{65535}));
 }
 
 std::uint16_t SmoothingCode(double h, double node_size) {
@@ -283,8 +286,7 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
   for (std::size_t i = 0; i < n; ++i) {
     for (int a = 0; a < 3; ++a) {
       // In [0, 65535] up to rounding: values are finite and lo <= value <= hi.
-      const double code = RoundNonNegative((values[3 * i + a] - static_cast<double>(lo[a])) * scale[a]);
-      PutU16(out + 6 * i + 2 * a, static_cast<std::uint16_t>(std::min(code, 65535.0)));
+      PutU16(out + 6 * i + 2 * a, NearestCode((values[3 * i + a] - static_cast<double>(lo[a])) * scale[a]));
     }
   }
 }
