@@ -4,7 +4,9 @@
 // one chunk after another.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
+#include <memory>
 #include <random>
 
 #include "storage/error.h"
@@ -48,17 +50,29 @@ ResidentEpoch Hold(const ParticleChunk& points) {
   return epoch;
 }
 
-// A chunk for node `key` listing the resident points that lie in it, last
-// one first (any order is allowed).
-Chunk ChunkOf(const ParticleChunk& resident, NodeKey key) {
+// A chunk for node `key` listing `points`.
+Chunk Listing(NodeKey key, const std::vector<std::uint32_t>& points) {
   Chunk chunk;
   chunk.key = key;
-  for (std::size_t i = resident.size(); i-- > 0;) {
-    if (kCube.Holds(key, &resident.position[3 * i])) chunk.resident.push_back(static_cast<std::uint32_t>(i));
-  }
-  chunk.point_count = chunk.resident.size();
+  std::shared_ptr<std::uint32_t[]> list = std::make_shared_for_overwrite<std::uint32_t[]>(points.size());
+  std::copy(points.begin(), points.end(), list.get());
+  chunk.resident = {list.get(), points.size()};
+  chunk.resident_lists = std::move(list);
+  chunk.point_count = points.size();
   return chunk;
 }
+
+// The resident points that lie in node `key`, last one first (any order is
+// allowed).
+std::vector<std::uint32_t> PointsIn(const ParticleChunk& resident, NodeKey key) {
+  std::vector<std::uint32_t> points;
+  for (std::size_t i = resident.size(); i-- > 0;) {
+    if (kCube.Holds(key, &resident.position[3 * i])) points.push_back(static_cast<std::uint32_t>(i));
+  }
+  return points;
+}
+
+Chunk ChunkOf(const ParticleChunk& resident, NodeKey key) { return Listing(key, PointsIn(resident, key)); }
 
 // Checks that `gathered` holds exactly the points `chunk` lists, each with
 // all its columns, grouped by their cell `depth` levels below the chunk
@@ -140,12 +154,12 @@ TEST(ChunkGatherer, RefusesIndicesPastTheSetAndPointsOutsideTheChunk) {
   const ParticleChunk resident = Resident(1000, false);
   const ResidentEpoch held = Hold(resident);
   ChunkGatherer gatherer(kCube, kMaxLevel);
-  Chunk past_the_end = ChunkOf(resident, NodeKey::Root().Child(0));
-  past_the_end.resident.push_back(1000);
-  EXPECT_THROW(gatherer.Gather(held, past_the_end), Error);
-  Chunk outside = ChunkOf(resident, NodeKey::Root().Child(0));
-  outside.resident.push_back(ChunkOf(resident, NodeKey::Root().Child(6)).resident.front());
-  EXPECT_THROW(gatherer.Gather(held, outside), Error);
+  std::vector<std::uint32_t> past_the_end = PointsIn(resident, NodeKey::Root().Child(0));
+  past_the_end.push_back(1000);
+  EXPECT_THROW(gatherer.Gather(held, Listing(NodeKey::Root().Child(0), past_the_end)), Error);
+  std::vector<std::uint32_t> outside = PointsIn(resident, NodeKey::Root().Child(0));
+  outside.push_back(PointsIn(resident, NodeKey::Root().Child(6)).front());
+  EXPECT_THROW(gatherer.Gather(held, Listing(NodeKey::Root().Child(0), outside)), Error);
 }
 
 }  // namespace

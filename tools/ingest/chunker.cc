@@ -8,6 +8,7 @@
 #include <numeric>
 #include <optional>
 #include <span>
+#include <stdexcept>
 #include <unordered_map>
 
 #include "storage/error.h"
@@ -320,14 +321,21 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const ResidentEpoch& res
       cells.cell[i] = CellBelow(cube_, resident.Position(i).data(), root, cells.level);
     }
   }, kPointsPerThread);
-  std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, cells, {});
+  std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, cells, {}, nullptr);
   cells = ResidentCells();
   if (options_.leaf_capacity != 0) chunks = MergeLeafSubtrees(root, std::move(chunks));
   return chunks;
 }
 
+// The points listed in `subset` (all resident points when it is empty) cut
+// into chunks. The top call's order of the points by cell becomes the list
+// the chunks share; a call for a chunk that is split again (subset is that
+// chunk's stretch of `lists`) writes its finer order back over the stretch.
+// So every chunk lists its points as a stretch of one array, in depth-first
+// order, with no copies.
 std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const ResidentEpoch& resident,
-                                            const ResidentCells& cells, std::span<const std::uint32_t> subset) {
+                                            const ResidentCells& cells, std::span<std::uint32_t> subset,
+                                            const std::shared_ptr<std::uint32_t[]>& lists) {
   levels = std::max(std::min(levels, options_.max_level - root.level()), 0);
   const int level = root.level() + levels;
   const std::uint64_t first = root.DescendantRange(level).first;
@@ -356,28 +364,32 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
     }, kPointsPerThread);
     order = OrderByCell(n, cell_count, threads, [&cell_of](std::size_t k) { return cell_of[k]; }, point_of);
   }
+  std::shared_ptr<std::uint32_t[]> own_lists = lists;
+  std::span<std::uint32_t> listed = subset;
+  if (subset.empty()) {
+    own_lists = std::move(order.points);
+    listed = std::span<std::uint32_t>(own_lists.get(), n);
+  } else {
+    std::copy(order.points.get(), order.points.get() + n, subset.begin());
+    order.points.reset();
+  }
   std::vector<Chunk> result;
-  std::vector<std::pair<std::size_t, std::span<const std::uint32_t>>> lists;  // chunk in result, its points
   for (std::size_t c = 0; c < cell_count; ++c) {
-    const std::span<const std::uint32_t> points(order.points.get() + order.begin[c], order.begin[c + 1] - order.begin[c]);
+    const std::span<std::uint32_t> points = listed.subspan(order.begin[c], order.begin[c + 1] - order.begin[c]);
     if (points.empty()) continue;
     Chunk chunk;
     chunk.key = NodeKey::FromValue(first + c);
     chunk.point_count = points.size();
     if (!Oversized(chunk)) {
-      lists.emplace_back(result.size(), points);
+      chunk.resident = points;
+      chunk.resident_lists = own_lists;
       result.push_back(std::move(chunk));
       continue;
     }
-    for (Chunk& part : SplitResidentAt(chunk.key, ResplitLevels(chunk.point_count), resident, cells, points)) {
+    for (Chunk& part : SplitResidentAt(chunk.key, ResplitLevels(chunk.point_count), resident, cells, points, own_lists)) {
       result.push_back(std::move(part));
     }
   }
-  // The lists are copied out on all threads: fresh memory, whose first touch
-  // costs more than the copy.
-  ParallelFor(lists.size(), threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t j = begin; j < end; ++j) result[lists[j].first].resident.assign(lists[j].second.begin(), lists[j].second.end());
-  }, 1);
   return result;
 }
 
@@ -386,6 +398,31 @@ std::vector<Chunk> Chunker::Split(NodeKey root, const PointPass& pass) {
   if (options_.leaf_capacity == 0) return chunks;
   return MergeLeafSubtrees(root, std::move(chunks));
 }
+
+namespace {
+
+// The concatenation of the resident lists of chunks that follow each other
+// (non-empty): SplitResidentAt lays them out one after the other in the
+// array they share, so the join is a longer view of it.
+Chunk JoinResident(const std::vector<const Chunk*>& chunks) {
+  std::size_t total = chunks.front()->resident.size();
+  for (std::size_t j = 1; j < chunks.size(); ++j) {
+    const Chunk& before = *chunks[j - 1];
+    if (before.resident_lists != chunks[j]->resident_lists ||
+        before.resident.data() + before.resident.size() != chunks[j]->resident.data()) {
+      throw std::logic_error("chunker: the lists of resident chunks " + before.key.Path() + " and " +
+                             chunks[j]->key.Path() + " do not follow each other");
+    }
+    total += chunks[j]->resident.size();
+  }
+  Chunk joined;
+  joined.point_count = total;
+  joined.resident = {chunks.front()->resident.data(), total};
+  joined.resident_lists = chunks.front()->resident_lists;
+  return joined;
+}
+
+}  // namespace
 
 std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks) {
   // Points under every node between the region and the chunks.
@@ -414,14 +451,20 @@ std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> c
     Chunk merged;
     merged.key = leaf;
     bool spilled = false;
+    std::vector<const Chunk*> resident;
     for (; i < chunks.size() && leaf.IsAncestorOrSelf(chunks[i].key); ++i) {
       spilled |= !chunks[i].path.empty();
       merged.point_count += chunks[i].point_count;
       if (!chunks[i].resident.empty()) {
-        merged.resident.insert(merged.resident.end(), chunks[i].resident.begin(), chunks[i].resident.end());
+        resident.push_back(&chunks[i]);
       } else {
         AppendWhole(chunks[i].TakePoints(), merged.points);
       }
+    }
+    if (!resident.empty()) {
+      Chunk joined = JoinResident(resident);
+      merged.resident = joined.resident;
+      merged.resident_lists = std::move(joined.resident_lists);
     }
     if (spilled) {  // back to a file: memory was short when its parts spilled
       merged.path = NewChunkPath();

@@ -36,6 +36,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -53,9 +54,12 @@ struct Chunk {
   std::uint64_t point_count = 0;
   std::string path;       // its particle file, when it spilled to disk
   ParticleChunk points;   // its points, when they stayed in memory (path empty)
-  // Its points as indices into the resident point set, in input order, when
-  // it came from Chunker::SplitResident (then path and points are empty).
-  std::vector<std::uint32_t> resident;
+  // Its points as indices into the resident point set, when it came from
+  // Chunker::SplitResident (then path and points are empty): a stretch of one
+  // list that all chunks of a split share, `resident_lists`, which keeps it
+  // alive. Within a cell the points are in input order.
+  std::span<const std::uint32_t> resident;
+  std::shared_ptr<const std::uint32_t[]> resident_lists;
 
   // Moves the chunk's points out (reading and deleting its file if it has
   // one); not for resident chunks, whose points stay where they are.
@@ -89,8 +93,9 @@ class Chunker {
   // not consulted.
   std::vector<Chunk> SplitResident(NodeKey root, const ResidentEpoch& resident);
   // The memory SplitResident takes per point on top of the resident points:
-  // its cell and its place in the split's order while the split runs, and
-  // its index in its chunk's list, kept until the chunk is built.
+  // its cell while the split runs, its index in the chunks' shared list (kept
+  // until the chunks are built), and for a point in a chunk that is split
+  // again, its index in that split's order for a moment.
   static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 4;
 
   std::uint64_t spilled_points() const { return spilled_points_; }
@@ -101,7 +106,8 @@ class Chunker {
   int ResplitLevels(std::uint64_t points) const;
   struct ResidentCells;
   std::vector<Chunk> SplitResidentAt(NodeKey root, int levels, const ResidentEpoch& resident,
-                                     const ResidentCells& cells, std::span<const std::uint32_t> subset);
+                                     const ResidentCells& cells, std::span<std::uint32_t> subset,
+                                     const std::shared_ptr<std::uint32_t[]>& lists);
   std::vector<Chunk> SplitAt(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks);
