@@ -8,6 +8,7 @@
 #include <numeric>
 #include <string>
 
+#include "index/nth_largest.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -255,10 +256,7 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   // total. The threshold is selected among the priorities themselves, not
   // through an index order, so the selection is a pass over contiguous
   // doubles; the rare points that tie with it are ordered apart.
-  std::vector<double> highest(priority);
-  std::nth_element(highest.begin(), highest.begin() + static_cast<std::ptrdiff_t>(capacity), highest.end(),
-                   std::greater<>());
-  sample.threshold = highest[capacity];
+  sample.threshold = NthLargest(priority, capacity);
   std::size_t above = 0;
   for (std::size_t i = 0; i < m; ++i) above += priority[i] > sample.threshold ? 1 : 0;
   std::vector<std::uint32_t> tied;
