@@ -212,8 +212,7 @@ double Round(double x) {
 
 // The nearest 16-bit code to x (halves up) for 0 <= x < 65536 and a hair
 // past it, without a branch: the fraction is random in quantized data, so a
-// branch on it was mispredicted half the time, and 32-bit conversions keep
-// the loop free of libm and of 64-bit conversion chains.
+// branch on it was mispredicted half the time. The clamp is an integer one.
 std::uint16_t NearestCode(double x) {
   const std::int32_t whole = static_cast<std::int32_t>(x);
   const std::int32_t code = whole + static_cast<std::int32_t>(x - static_cast<double>(whole) >= 0.5);

@@ -401,10 +401,10 @@ std::vector<Chunk> Chunker::Split(NodeKey root, const PointPass& pass) {
 
 namespace {
 
-// The concatenation of the resident lists of chunks that follow each other
-// (non-empty): SplitResidentAt lays them out one after the other in the
-// array they share, so the join is a longer view of it.
-Chunk JoinResident(const std::vector<const Chunk*>& chunks) {
+// Makes `merged` list the resident points of `chunks` (non-empty, following
+// each other): SplitResidentAt lays their lists out one after the other in
+// the array they share, so the join is a longer view of it.
+void JoinResident(const std::vector<const Chunk*>& chunks, Chunk& merged) {
   std::size_t total = chunks.front()->resident.size();
   for (std::size_t j = 1; j < chunks.size(); ++j) {
     const Chunk& before = *chunks[j - 1];
@@ -415,11 +415,8 @@ Chunk JoinResident(const std::vector<const Chunk*>& chunks) {
     }
     total += chunks[j]->resident.size();
   }
-  Chunk joined;
-  joined.point_count = total;
-  joined.resident = {chunks.front()->resident.data(), total};
-  joined.resident_lists = chunks.front()->resident_lists;
-  return joined;
+  merged.resident = {chunks.front()->resident.data(), total};
+  merged.resident_lists = chunks.front()->resident_lists;
 }
 
 }  // namespace
@@ -461,11 +458,7 @@ std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> c
         AppendWhole(chunks[i].TakePoints(), merged.points);
       }
     }
-    if (!resident.empty()) {
-      Chunk joined = JoinResident(resident);
-      merged.resident = joined.resident;
-      merged.resident_lists = std::move(joined.resident_lists);
-    }
+    if (!resident.empty()) JoinResident(resident, merged);
     if (spilled) {  // back to a file: memory was short when its parts spilled
       merged.path = NewChunkPath();
       ParticleFileWriter writer(merged.path, options_.columns);

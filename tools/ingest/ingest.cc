@@ -285,6 +285,7 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
           root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink,
                               &workspace);
           chunks[c].resident = {};
+          chunks[c].resident_lists.reset();  // the last chunk built frees the split's list
         } else {
           root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink, &workspace);
         }
