@@ -1,10 +1,8 @@
 #include "index/sampler.h"
 
 #include <algorithm>
-#include <array>
 #include <bit>
 #include <cmath>
-#include <functional>
 #include <numeric>
 #include <string>
 
