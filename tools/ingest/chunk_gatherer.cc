@@ -3,6 +3,7 @@
 #include <cstddef>
 #include <string>
 
+#include "index/cells_below.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -39,9 +40,8 @@ const ParticleChunk& ChunkGatherer::Gather(const ResidentEpoch& resident, const 
          (std::uint64_t{kPointsPerOrderingCell} << (3 * depth)) < n) {
     ++depth;
   }
-  const int level = chunk.key.level() + depth;
-  const std::uint64_t first_cell = chunk.key.DescendantRange(level).first;
-  const std::size_t cells = std::size_t{1} << (3 * depth);
+  const CellsBelow below(cube_, chunk.key, chunk.key.level() + depth);
+  const std::size_t cells = below.count();
 
   // Each point's cell, counted; then, cell by cell in Morton order, its slot.
   target_.resize(n);
@@ -55,8 +55,8 @@ const ParticleChunk& ChunkGatherer::Gather(const ResidentEpoch& resident, const 
       throw Error::InvalidArgument("chunk gatherer: chunk " + chunk.key.Path() + " lists point " +
                                    std::to_string(listed[k]) + " of " + std::to_string(resident_points));
     }
-    const std::uint64_t cell = cube_.LeafKey(resident.Position(listed[k]).data(), level).value() - first_cell;
-    if (cell >= cells) throw Error::InvalidArgument("chunk gatherer: a point lies outside chunk " + chunk.key.Path());
+    const std::uint64_t cell = below.Of(resident.Position(listed[k]).data());
+    if (cell == CellsBelow::kOutside) throw Error::InvalidArgument("chunk gatherer: a point lies outside chunk " + chunk.key.Path());
     target_[k] = static_cast<std::uint32_t>(cell);
     ++cell_begin_[cell + 1];
   }

@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "index/cells_below.h"
 #include "storage/error.h"
 #include "tools/parallel_for.h"
 
@@ -61,15 +62,17 @@ void AppendPoints(const ParticleChunk& from, std::span<const std::uint32_t> indi
   }
 }
 
-// The cell at `level` that holds `position`, as an offset into the cells below
-// `root` at that level (8^(level - root level) of them); throws when it lies outside root.
-std::uint32_t CellBelow(const Cube& cube, const double* position, NodeKey root, int level) {
-  const std::uint64_t first = root.DescendantRange(level).first;
-  const std::uint64_t cell = cube.LeafKey(position, level).value();
-  if (cell < first || cell - first > UINT32_MAX || ((cell - first) >> (3 * (level - root.level()))) != 0) {
-    throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
-  }
-  return static_cast<std::uint32_t>(cell - first);
+[[noreturn, gnu::cold, gnu::noinline]] void ThrowOutsideRegion(NodeKey root) {
+  throw Error::InvalidArgument("chunker: a point lies outside region " + root.Path());
+}
+
+// The cell of `cells` that holds `position`; throws when it lies outside
+// the node they are below. Runs once or more per point: the throw is kept
+// out of line so that this inlines into the loops.
+std::uint32_t CellBelow(const CellsBelow& cells, const double* position, NodeKey root) {
+  const std::uint64_t cell = cells.Of(position);
+  if (cell > UINT32_MAX) ThrowOutsideRegion(root);
+  return static_cast<std::uint32_t>(cell);
 }
 
 // Listed points ordered by cell: points[begin[c], begin[c + 1]) are the
@@ -133,9 +136,10 @@ void BucketByCell(const Cube& cube, const ParticleChunk& batch, NodeKey root, in
   const std::size_t n = batch.size();
   if (n > UINT32_MAX) throw Error::InvalidArgument("chunker: more than 2^32 - 1 points in one pass");
   const std::size_t cells = std::size_t{1} << (3 * (level - root.level()));
+  const CellsBelow below(cube, root, level);
   std::vector<std::uint32_t> cell_of(n);
   ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) cell_of[i] = CellBelow(cube, &batch.position[3 * i], root, level);
+    for (std::size_t i = begin; i < end; ++i) cell_of[i] = CellBelow(below, &batch.position[3 * i], root);
   }, kPointsPerThread);
   const CellOrder order = OrderByCell(n, cells, threads, [&cell_of](std::size_t k) { return cell_of[k]; },
                                       [](std::size_t k) { return static_cast<std::uint32_t>(k); });
@@ -316,10 +320,11 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const ResidentEpoch& res
   ResidentCells cells;
   cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
   cells.cell = std::make_unique_for_overwrite<std::uint32_t[]>(resident.size());
+  const CellsBelow below(cube_, root, cells.level);
   ParallelFor(resident.size(), std::max(options_.threads, 1), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      cells.cell[i] = CellBelow(cube_, resident.Position(i).data(), root, cells.level);
-    }
+    resident.ForEachPosition(begin, end, [&](std::size_t i, const double* position) {
+      cells.cell[i] = CellBelow(below, position, root);
+    });
   }, kPointsPerThread);
   std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, cells, {}, nullptr);
   cells = ResidentCells();
@@ -355,11 +360,12 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
     }, point_of);
   } else {
     // Deeper than the cells computed once (a dense clump): from the positions.
+    const CellsBelow below(cube_, root, level);
     std::vector<std::uint32_t> cell_of(n);
     ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
       for (std::size_t k = begin; k < end; ++k) {
         if (k + kPrefetchDistance < end) __builtin_prefetch(resident.PositionAddress(point_of(k + kPrefetchDistance)));
-        cell_of[k] = CellBelow(cube_, resident.Position(point_of(k)).data(), root, level);
+        cell_of[k] = CellBelow(below, resident.Position(point_of(k)).data(), root);
       }
     }, kPointsPerThread);
     order = OrderByCell(n, cell_count, threads, [&cell_of](std::size_t k) { return cell_of[k]; }, point_of);

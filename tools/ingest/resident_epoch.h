@@ -21,9 +21,11 @@
 // fraction of zeroing fresh ones and copying into them (docs/INGEST.md).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <memory>
 #include <span>
@@ -118,6 +120,11 @@ class ResidentEpoch {
 
   // Point i's position, absolute.
   std::array<double, 3> Position(std::size_t i) const;
+  // Calls visit(i, position) for every point i in [begin, end), in order,
+  // with its position (x, y, z, absolute): run by run, not a look-up of
+  // point i's run as Position(i) makes.
+  template <typename Visit>
+  void ForEachPosition(std::size_t begin, std::size_t end, Visit&& visit) const;
   // Where point i's position lies in memory, to prefetch it.
   const void* PositionAddress(std::size_t i) const;
   // to[target[k]] = point listed[k], for every column, in ParticleChunk's
@@ -164,5 +171,29 @@ class ResidentEpoch {
   NarrowableColumn<std::uint32_t, std::uint64_t> id_;
   std::array<std::vector<float>, kVectorColumnCount> vectors_;  // indexed by VectorColumn
 };
+
+template <typename Visit>
+void ResidentEpoch::ForEachPosition(std::size_t begin, std::size_t end, Visit&& visit) const {
+  for (std::size_t i = begin; i < end;) {
+    const Run& run = RunOf(i);
+    const std::size_t run_end = std::min(end, run.begin + run.count);
+    const auto* bytes = static_cast<const std::byte*>(run.position) + 3 * (i - run.begin) *
+                                                                          (run.positions_wide ? sizeof(double) : sizeof(float));
+    double position[3];
+    if (run.positions_wide) {
+      for (; i < run_end; ++i, bytes += sizeof(position)) {
+        std::memcpy(position, bytes, sizeof(position));  // a mapped file's doubles need not be aligned
+        visit(i, static_cast<const double*>(position));
+      }
+    } else {
+      for (; i < run_end; ++i, bytes += 3 * sizeof(float)) {
+        float narrow[3];
+        std::memcpy(narrow, bytes, sizeof(narrow));
+        for (int a = 0; a < 3; ++a) position[a] = narrow[a];
+        visit(i, static_cast<const double*>(position));
+      }
+    }
+  }
+}
 
 }  // namespace octocosm
