@@ -579,46 +579,60 @@ TEST(BlockCodec, EncodeRejectsPointsThatBreakTheContract) {
   std::mt19937_64 rng(9);
   const NodeKey key = NodeKey::FromPath("r12");
   const NodePoints good = RandomPoints(rng, 40, key, kCube, kVelocityBit);
-  auto expect_invalid = [&](NodePoints p, const char* what) {
-    try {
-      EncodeBlock(p, key, kCube);
-      ADD_FAILURE() << what;
-    } catch (const Error& e) {
-      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument) << what;
-    }
-  };
-  NodePoints p = good;
-  p.position[0] = kCube.origin[0] + kCube.size * 0.99;  // another node
-  expect_invalid(p, "outside");
-  p = good;
-  p.octant_offsets[8] = 39;
-  expect_invalid(p, "offsets");
-  p = good;
-  if (p.octant_offsets[1] > 0 && p.octant_offsets[1] < p.size()) {
-    ++p.octant_offsets[1];
-    expect_invalid(p, "offsets disagree with positions");
+  // With and without kept grid points (the builder's form), the error names
+  // the first offending point and what is wrong with it.
+  for (const bool with_grid : {false, true}) {
+    SCOPED_TRACE(with_grid ? "with grid points" : "positions only");
+    auto expect_invalid = [&](NodePoints p, const char* what, const std::string& message = "") {
+      if (with_grid) {
+        p.grid.clear();
+        for (std::size_t i = 0; i < p.size(); ++i) p.grid.push_back(kCube.FinestGridCoords(&p.position[3 * i]));
+      }
+      try {
+        EncodeBlock(p, key, kCube);
+        ADD_FAILURE() << what;
+      } catch (const Error& e) {
+        EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument) << what;
+        EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << what << ": " << e.what();
+      }
+    };
+    NodePoints p = good;
+    p.position[3 * 17] = kCube.origin[0] + kCube.size * 0.99;  // another node
+    expect_invalid(p, "outside", "point 17 (");
+    p = good;
+    p.octant_offsets[8] = 39;
+    expect_invalid(p, "offsets");
+    p = good;
+    ASSERT_GT(p.octant_offsets[2], p.octant_offsets[1]);
+    ++p.octant_offsets[1];  // the first point of octant 1 listed in octant 0
+    expect_invalid(p, "offsets disagree with positions",
+                   "point " + std::to_string(good.octant_offsets[1]) + " of node r12 lies in child octant 1 but "
+                   "octant_offsets put it in octant 0");
+    p = good;
+    p.weight[3] = std::nan("");
+    expect_invalid(p, "nan weight", "weight 3 ");
+    p = good;
+    p.weight[3] = -1;
+    expect_invalid(p, "negative weight");
+    p = good;
+    p.velocity[5] = INFINITY;
+    expect_invalid(p, "inf velocity", "velocity of point 1 is not finite");
+    p = RandomPoints(rng, 41, key, kCube, kVelocityBit);  // the last point outside the groups of four
+    p.velocity[3 * 40 + 2] = -INFINITY;
+    expect_invalid(p, "inf velocity in the last point", "velocity of point 40 is not finite");
+    p = good;
+    p.smoothing.pop_back();
+    expect_invalid(p, "short column");
+    p = RandomPoints(rng, 40, key, kCube, kAllColumns);
+    p.prev_velocity[7] = std::nanf("");
+    expect_invalid(p, "nan prev_velocity", "prev_velocity of point 2 is not finite");
+    p = RandomPoints(rng, 40, key, kCube, kAllColumns);
+    p.next_velocity.pop_back();
+    expect_invalid(p, "short next_velocity");
+    p = good;
+    p.smoothing[0] = std::nan("");
+    expect_invalid(p, "nan smoothing");
   }
-  p = good;
-  p.weight[3] = std::nan("");
-  expect_invalid(p, "nan weight");
-  p = good;
-  p.weight[3] = -1;
-  expect_invalid(p, "negative weight");
-  p = good;
-  p.velocity[5] = INFINITY;
-  expect_invalid(p, "inf velocity");
-  p = good;
-  p.smoothing.pop_back();
-  expect_invalid(p, "short column");
-  p = RandomPoints(rng, 40, key, kCube, kAllColumns);
-  p.prev_velocity[7] = std::nanf("");
-  expect_invalid(p, "nan prev_velocity");
-  p = RandomPoints(rng, 40, key, kCube, kAllColumns);
-  p.next_velocity.pop_back();
-  expect_invalid(p, "short next_velocity");
-  p = good;
-  p.smoothing[0] = std::nan("");
-  expect_invalid(p, "nan smoothing");
 }
 
 }  // namespace
