@@ -232,6 +232,37 @@ TEST(Sampler, SmoothingLengthFollowsTheVolumePerPoint) {
   EXPECT_NEAR(lh[32000], kSmoothingEta * std::cbrt(1.0 / 64000), 0.15 * lh[32000]);
 }
 
+TEST(Sampler, EachLengthComesFromItsOwnWeightAndCell) {
+  // Step 5 point by point: h = SmoothingLengthFor(W, the weight of the
+  // point's fine cell, ...). Equal and unequal weights, cells of one point
+  // and of many, so that points share a weight but not a cell weight, and a
+  // cell but not a weight.
+  std::mt19937_64 rng(12);
+  for (const bool equal_masses : {true, false}) {
+    SCOPED_TRACE(equal_masses ? "equal masses" : "lognormal masses");
+    Population p = Clustered(rng, 3000, 3000);
+    if (equal_masses) std::fill(p.weight.begin(), p.weight.end(), 2.5);
+    const SamplerOptions options;
+    const NodeKey root = NodeKey::Root();
+    std::map<std::uint32_t, double> cell_weight;  // summed in point order, as the sampler does
+    std::vector<std::uint32_t> cell(p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      cell[i] = DensityCellIndex(&p.position[3 * i], root, kCube, options.density_grid_bits);
+      cell_weight[cell[i]] += p.weight[i];
+    }
+    const double edge = kCube.NodeSize(options.density_grid_bits);
+    const auto expected = [&](std::size_t i, double weight) {
+      return SmoothingLengthFor(weight, cell_weight[cell[i]], edge, kCube.NodeSize(0));
+    };
+    const std::vector<double> leaf = LeafSmoothingLengths(p.position, p.weight, root, kCube, options);
+    for (std::size_t i = 0; i < p.size(); ++i) ASSERT_EQ(leaf[i], expected(i, p.weight[i])) << "leaf point " << i;
+    const Sample s = SampleAll(p, 1000, options);
+    for (std::size_t j = 0; j < s.kept.size(); ++j) {
+      ASSERT_EQ(s.smoothing[j], expected(s.kept[j], s.weight[j])) << "kept point " << j;
+    }
+  }
+}
+
 TEST(Sampler, UniformsAreInTheOpenClosedUnitInterval) {
   double sum = 0;
   for (std::uint64_t id = 0; id < 100000; ++id) {
