@@ -74,32 +74,6 @@ unsigned PresentVectorColumns(const Points& points) {
   return present;
 }
 
-// Reserves room for `n` points in the vector columns of `to` that `like` carries.
-template <typename Like>
-void ReserveVectors(const Like& like, std::size_t n, NodePoints& to) {
-  const auto source = VectorColumns(like);
-  const auto target = VectorColumns(to);
-  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (!source[v]->empty()) target[v]->reserve(3 * n);
-  }
-}
-
-// Appends point `i` of `from`'s vector columns to the same columns of `to`
-// (those `from` carries).
-template <typename From, typename To>
-void AppendVectors(const From& from, std::size_t i, To& to) {
-  const auto source = VectorColumns(from);
-  const auto target = VectorColumns(to);
-  for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-    if (source[v]->empty()) continue;
-    // Three push_backs into reserved room: an insert of three was a call per point.
-    const float* p = &(*source[v])[3 * i];
-    target[v]->push_back(p[0]);
-    target[v]->push_back(p[1]);
-    target[v]->push_back(p[2]);
-  }
-}
-
 // Groups [begin, end) by the child octant at `level` that holds each point,
 // in place (American flag sort: each record is swapped straight into its
 // octant's next free slot). Returns the offsets of the eight groups from
@@ -191,12 +165,31 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   Sample sample = SampleNode(grid, weight, sampling_id, key, cube, options.capacity, options.sampler);
   NodePoints node;
   const std::size_t kept = sample.kept.size();
-  node.position.reserve(3 * kept);
-  node.type.reserve(kept);
-  node.grid.reserve(kept);
-  if (first >= 0) ReserveVectors(children[first], kept, node);
   node.weight = std::move(sample.weight);
   node.smoothing = std::move(sample.smoothing);
+  // Sized first and written through pointers: push_back of a byte (the type)
+  // may alias every vector's pointers, which were then loaded again for
+  // every value.
+  node.position.resize(3 * kept);
+  node.type.resize(kept);
+  node.grid.resize(kept);
+  if (has_id) node.id.resize(kept);
+  std::array<float*, kVectorColumnCount> vectors_to{};
+  std::array<std::array<const float*, kVectorColumnCount>, 8> vectors_from{};
+  if (first >= 0) {
+    const auto like = VectorColumns(children[first]);
+    const auto target = VectorColumns(node);
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (like[v]->empty()) continue;
+      target[v]->resize(3 * kept);
+      vectors_to[v] = target[v]->data();
+      for (int o = 0; o < 8; ++o) vectors_from[o][v] = VectorColumns(children[o])[v]->data();
+    }
+  }
+  double* position = node.position.data();
+  std::uint8_t* type = node.type.data();
+  GridPoint* kept_grid = node.grid.data();
+  std::uint64_t* id = node.id.data();
   int octant = 0;
   for (std::size_t j = 0; j < kept; ++j) {
     // Kept indices ascend and the population is grouped by octant, so the
@@ -205,11 +198,13 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
     while (i >= child_begin[octant + 1]) node.octant_offsets[++octant] = static_cast<std::uint32_t>(j);
     const NodePoints& child = children[octant];
     const std::size_t k = i - child_begin[octant];
-    for (int a = 0; a < 3; ++a) node.position.push_back(child.position[3 * k + a]);
-    node.type.push_back(child.type[k]);
-    node.grid.push_back(grid[i]);
-    if (has_id) node.id.push_back(child.id[k]);
-    AppendVectors(child, k, node);
+    std::copy_n(&child.position[3 * k], 3, position + 3 * j);
+    type[j] = child.type[k];
+    kept_grid[j] = grid[i];
+    if (has_id) id[j] = child.id[k];
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (vectors_to[v] != nullptr) std::copy_n(vectors_from[octant][v] + 3 * k, 3, vectors_to[v] + 3 * j);
+    }
   }
   while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(kept);
   return node;
