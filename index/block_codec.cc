@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "index/extended_sum.h"
 #include "storage/coding.h"
 #include "storage/error.h"
 
@@ -140,15 +141,6 @@ void EncodePositions(const NodePoints& points, NodeKey key, const Cube& cube, st
     });
   }
   if (misplaced != 0) ThrowForMisplacedPoint(points, key, cube);
-}
-
-// The sum of `values` in extended precision, in index order. Not inlined:
-// inside EncodeWeights GCC kept the x87 sum in memory, a store and a reload
-// for every value (a fifth of EncodeBlock's time).
-[[gnu::noinline]] long double ExtendedSum(const std::vector<double>& values) {
-  long double sum = 0;
-  for (const double v : values) sum += v;
-  return sum;
 }
 
 // Largest-remainder apportionment of K units in proportion to the weights:

@@ -7,6 +7,7 @@
 #include <numeric>
 #include <string>
 
+#include "index/extended_sum.h"
 #include "index/nth_largest.h"
 #include "storage/error.h"
 
@@ -46,7 +47,10 @@ struct Density {
 // few thousand points should not pay for filling 2^(3 bits) entries.
 class OccupiedCellNumbering {
  public:
-  explicit OccupiedCellNumbering(std::size_t fine_cells) : number_of_(TableForThisThread(fine_cells)) {}
+  // `most`: how many cells can be occupied (room is reserved for them).
+  OccupiedCellNumbering(std::size_t fine_cells, std::size_t most) : number_of_(TableForThisThread(fine_cells)) {
+    occupied_.reserve(most);
+  }
   ~OccupiedCellNumbering() {
     for (const std::uint32_t fine : occupied_) number_of_[fine] = kUnoccupied;
   }
@@ -80,8 +84,13 @@ Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double>
   const int level = key.level();
   const CellCoord cell = key.cell();
   const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
-  OccupiedCellNumbering numbering(std::size_t{1} << (3 * bits));
+  const std::size_t fine_cells = std::size_t{1} << (3 * bits);
+  // Reserved: most points of a small node occupy a cell of their own, and
+  // growing the vectors there cost a fifth of this function's time.
+  const std::size_t most_cells = std::min(m, fine_cells);
+  OccupiedCellNumbering numbering(fine_cells, most_cells);
   Density d;
+  d.cell_weight.reserve(most_cells);
   d.cell_of.resize(m);
   d.cell_edge = cube.NodeSize(level + bits);
   // Each cell's weight is summed in the order of the points. The octree
@@ -277,21 +286,20 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   std::vector<std::uint8_t> is_kept(m, 0);
   for (std::size_t j = 0; j < capacity - above; ++j) is_kept[tied[j]] = 1;
   // The kept indices in ascending order, in one sweep.
-  sample.kept.reserve(capacity);
+  sample.kept.resize(capacity);
+  std::size_t kept = 0;
   for (std::size_t i = 0; i < m; ++i) {
-    if (priority[i] > sample.threshold || is_kept[i]) sample.kept.push_back(static_cast<std::uint32_t>(i));
+    if (priority[i] > sample.threshold || is_kept[i]) sample.kept[kept++] = static_cast<std::uint32_t>(i);
   }
 
   // Unbiased estimates w_i * max(1, tau / s_i), then rescaled to the exact total.
   sample.weight.resize(capacity);
-  long double estimated = 0;
   for (std::size_t j = 0; j < capacity; ++j) {
     const std::uint32_t i = sample.kept[j];
     sample.weight[j] = weight[i] * std::max(1.0, sample.threshold / importance[i]);
-    estimated += sample.weight[j];
   }
   sample.estimate = sample.weight;
-  const double scale = static_cast<double>(static_cast<long double>(d.total) / estimated);
+  const double scale = static_cast<double>(static_cast<long double>(d.total) / ExtendedSum(sample.weight));
   SmoothingCache smoothing(d, node_size);
   sample.smoothing.resize(capacity);
   for (std::size_t j = 0; j < capacity; ++j) {
