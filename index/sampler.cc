@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <string>
 
@@ -113,39 +114,54 @@ Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double>
   return d;
 }
 
-// Step 5 for the points of one node. A point's length depends only on its
-// weight and its density cell's weight, and few such pairs are distinct:
-// equal-mass particles in cells of one, two, three ... particles share a
-// handful of them, and a parent's points that fell below the threshold share
-// their cell's. So a small direct-mapped cache remembers the lengths of
-// recent pairs: far fewer cbrt calls (each a tenth of a microsecond, with
-// the frexp and ldexp inside it), with the same results.
-class SmoothingCache {
+// A direct-mapped memo of a function of two doubles: the last value computed
+// for each of 1024 slots, a slot chosen by a hash of the pair. The sampler's
+// costly per-point functions (a cbrt, a pow) take few distinct pairs in a
+// node, so this saves most calls with the same results.
+class PairMemo {
  public:
-  SmoothingCache(const Density& density, double node_size) : density_(density), node_size_(node_size) {
-    weight_.fill(-1.0);  // weights are > 0: an empty slot never matches
-  }
+  PairMemo() { first_.fill(std::numeric_limits<double>::quiet_NaN()); }  // NaN matches nothing: all slots empty
 
-  double For(std::size_t point, double weight) {
-    const double cell_weight = density_.cell_weight[density_.cell_of[point]];
-    const std::uint64_t w = std::bit_cast<std::uint64_t>(weight);
-    const std::uint64_t c = std::bit_cast<std::uint64_t>(cell_weight);
-    const std::size_t slot = static_cast<std::size_t>(Mix(w ^ (c * 0x9e3779b97f4a7c15ull)) % kSlots);
-    if (weight_[slot] != weight || cell_weight_[slot] != cell_weight) {
-      weight_[slot] = weight;
-      cell_weight_[slot] = cell_weight;
-      length_[slot] = SmoothingLengthFor(weight, cell_weight, density_.cell_edge, node_size_);
+  template <typename F>
+  double Get(double first, double second, const F& f) {
+    const std::uint64_t a = std::bit_cast<std::uint64_t>(first);
+    const std::uint64_t b = std::bit_cast<std::uint64_t>(second);
+    const std::size_t slot = static_cast<std::size_t>(Mix(a ^ (b * 0x9e3779b97f4a7c15ull)) % kSlots);
+    if (first_[slot] != first || second_[slot] != second) {
+      first_[slot] = first;
+      second_[slot] = second;
+      value_[slot] = f(first, second);
     }
-    return length_[slot];
+    return value_[slot];
   }
 
  private:
   static constexpr std::size_t kSlots = 1024;
+  std::array<double, kSlots> first_;
+  std::array<double, kSlots> second_;
+  std::array<double, kSlots> value_;
+};
+
+// Step 5 for the points of one node. A point's length depends only on its
+// weight and its density cell's weight, and few such pairs are distinct:
+// equal-mass particles in cells of one, two, three ... particles share a
+// handful of them, and a parent's points that fell below the threshold share
+// their cell's. So they are memoised: far fewer cbrt calls (each a tenth of
+// a microsecond, with the frexp and ldexp inside it), with the same results.
+class SmoothingCache {
+ public:
+  SmoothingCache(const Density& density, double node_size) : density_(density), node_size_(node_size) {}
+
+  double For(std::size_t point, double weight) {
+    return memo_.Get(weight, density_.cell_weight[density_.cell_of[point]], [this](double w, double cell_weight) {
+      return SmoothingLengthFor(w, cell_weight, density_.cell_edge, node_size_);
+    });
+  }
+
+ private:
   const Density& density_;
   double node_size_;
-  std::array<double, kSlots> weight_;
-  std::array<double, kSlots> cell_weight_;
-  std::array<double, kSlots> length_;
+  PairMemo memo_;
 };
 
 void CheckInputs(std::size_t points, std::span<const double> weight, std::size_t ids, const SamplerOptions& options) {
@@ -259,8 +275,11 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   // Importance relative to the node's total weight keeps the numbers near 1.
   // The density factor is the same for every point of a fine cell: one pow
   // per occupied cell.
+  // Cells of equal weight (of one, two, three equal-mass points) share it.
   std::vector<double> cell_factor(d.cell_weight.size());
-  for (std::size_t c = 0; c < cell_factor.size(); ++c) cell_factor[c] = std::pow(d.cell_weight[c] / d.total, -options.alpha);
+  PairMemo factor_of;
+  const auto factor = [&options](double cell_weight, double total) { return std::pow(cell_weight / total, -options.alpha); };
+  for (std::size_t c = 0; c < cell_factor.size(); ++c) cell_factor[c] = factor_of.Get(d.cell_weight[c], d.total, factor);
   std::vector<double> importance(m), priority(m);
   const std::uint64_t mixed_seed = MixedPrioritySeed(LevelSeed(options.seed, key.level()));
   for (std::size_t i = 0; i < m; ++i) {
