@@ -8,6 +8,7 @@
 #include <map>
 #include <memory>
 #include <random>
+#include <string>
 
 #include "storage/error.h"
 #include "tools/ingest/chunk_gatherer.h"
@@ -156,10 +157,19 @@ TEST(ChunkGatherer, RefusesIndicesPastTheSetAndPointsOutsideTheChunk) {
   ChunkGatherer gatherer(kCube, kMaxLevel);
   std::vector<std::uint32_t> past_the_end = PointsIn(resident, NodeKey::Root().Child(0));
   past_the_end.push_back(1000);
-  EXPECT_THROW(gatherer.Gather(held, Listing(NodeKey::Root().Child(0), past_the_end)), Error);
+  const auto expect_refused = [&](const std::vector<std::uint32_t>& listed, const std::string& message) {
+    try {
+      gatherer.Gather(held, Listing(NodeKey::Root().Child(0), listed));
+      ADD_FAILURE() << "no error: " << message;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument);
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  };
+  expect_refused(past_the_end, "chunk r0 lists point 1000 of 1000");
   std::vector<std::uint32_t> outside = PointsIn(resident, NodeKey::Root().Child(0));
   outside.push_back(PointsIn(resident, NodeKey::Root().Child(6)).front());
-  EXPECT_THROW(gatherer.Gather(held, Listing(NodeKey::Root().Child(0), outside)), Error);
+  expect_refused(outside, "a point lies outside chunk r0");
 }
 
 }  // namespace

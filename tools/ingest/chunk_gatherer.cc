@@ -13,10 +13,9 @@ namespace {
 // (8^6 cells).
 constexpr std::size_t kPointsPerOrderingCell = 16;
 constexpr int kMaxOrderingDepth = 6;
-// The listed points lie scattered across the resident columns, so each read
-// of one is a cache miss; fetching this many points ahead lets the misses
-// overlap instead of queueing one behind another.
-constexpr std::size_t kPrefetchDistance = 16;
+[[noreturn, gnu::cold, gnu::noinline]] void ThrowOutsideChunk(NodeKey chunk) {
+  throw Error::InvalidArgument("chunk gatherer: a point lies outside chunk " + chunk.Path());
+}
 
 }  // namespace
 
@@ -46,20 +45,18 @@ const ParticleChunk& ChunkGatherer::Gather(const ResidentEpoch& resident, const 
   // Each point's cell, counted; then, cell by cell in Morton order, its slot.
   target_.resize(n);
   cell_begin_.assign(cells + 1, 0);
-  const std::size_t resident_points = resident.size();
-  for (std::size_t k = 0; k < n; ++k) {
-    if (k + kPrefetchDistance < n && listed[k + kPrefetchDistance] < resident_points) {
-      __builtin_prefetch(resident.PositionAddress(listed[k + kPrefetchDistance]));
+  for (const std::uint32_t i : listed) {
+    if (i >= resident.size()) {
+      throw Error::InvalidArgument("chunk gatherer: chunk " + chunk.key.Path() + " lists point " + std::to_string(i) +
+                                   " of " + std::to_string(resident.size()));
     }
-    if (listed[k] >= resident_points) {
-      throw Error::InvalidArgument("chunk gatherer: chunk " + chunk.key.Path() + " lists point " +
-                                   std::to_string(listed[k]) + " of " + std::to_string(resident_points));
-    }
-    const std::uint64_t cell = below.Of(resident.Position(listed[k]).data());
-    if (cell == CellsBelow::kOutside) throw Error::InvalidArgument("chunk gatherer: a point lies outside chunk " + chunk.key.Path());
+  }
+  resident.ForEachListedPosition(listed, [&](std::size_t k, const double* position) {
+    const std::uint64_t cell = below.Of(position);
+    if (cell == CellsBelow::kOutside) ThrowOutsideChunk(chunk.key);
     target_[k] = static_cast<std::uint32_t>(cell);
     ++cell_begin_[cell + 1];
-  }
+  });
   for (std::size_t cell = 0; cell < cells; ++cell) cell_begin_[cell + 1] += cell_begin_[cell];
   for (std::size_t k = 0; k < n; ++k) target_[k] = cell_begin_[target_[k]]++;
 

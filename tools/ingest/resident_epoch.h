@@ -125,6 +125,12 @@ class ResidentEpoch {
   // point i's run as Position(i) makes.
   template <typename Visit>
   void ForEachPosition(std::size_t begin, std::size_t end, Visit&& visit) const;
+  // Calls visit(k, position) for every k in order, with point listed[k]'s
+  // position: stretch by stretch of listed points in one run, each read
+  // where it lies and fetched a few points ahead. Indices must be below
+  // size() (the caller checks).
+  template <typename Visit>
+  void ForEachListedPosition(std::span<const std::uint32_t> listed, Visit&& visit) const;
   // Where point i's position lies in memory, to prefetch it.
   const void* PositionAddress(std::size_t i) const;
   // to[target[k]] = point listed[k], for every column, in ParticleChunk's
@@ -192,6 +198,34 @@ void ResidentEpoch::ForEachPosition(std::size_t begin, std::size_t end, Visit&& 
         for (int a = 0; a < 3; ++a) position[a] = narrow[a];
         visit(i, static_cast<const double*>(position));
       }
+    }
+  }
+}
+
+template <typename Visit>
+void ResidentEpoch::ForEachListedPosition(std::span<const std::uint32_t> listed, Visit&& visit) const {
+  // Listed points lie scattered across the columns, so each read is a cache
+  // miss; fetching this many points ahead lets the misses overlap.
+  constexpr std::size_t kAhead = 16;
+  const std::size_t n = listed.size();
+  for (std::size_t k = 0; k < n;) {
+    const Run& run = RunOf(listed[k]);
+    std::size_t stretch_end = k + 1;
+    while (stretch_end < n && listed[stretch_end] - run.begin < run.count) ++stretch_end;
+    const auto* bytes = static_cast<const std::byte*>(run.position);
+    const std::size_t stride = 3 * (run.positions_wide ? sizeof(double) : sizeof(float));
+    double position[3];
+    for (; k < stretch_end; ++k) {
+      if (k + kAhead < stretch_end) __builtin_prefetch(bytes + stride * (listed[k + kAhead] - run.begin));
+      const std::byte* at = bytes + stride * (listed[k] - run.begin);
+      if (run.positions_wide) {
+        std::memcpy(position, at, sizeof(position));  // a mapped file's doubles need not be aligned
+      } else {
+        float narrow[3];
+        std::memcpy(narrow, at, sizeof(narrow));
+        for (int a = 0; a < 3; ++a) position[a] = narrow[a];
+      }
+      visit(k, static_cast<const double*>(position));
     }
   }
 }
