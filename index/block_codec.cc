@@ -316,20 +316,21 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
     lane_hi[i % 3] = lane_hi[i % 3] < x ? x : lane_hi[i % 3];
     lane_nonfinite[i % 3] += x - x;
   }
-  for (std::size_t j = 0; j < kLanes; ++j) {
-    if (!(lane_nonfinite[j] == 0)) {
-      for (std::size_t i = 0; i < 3 * n; ++i) {
-        if (!std::isfinite(v[i])) {
-          throw Error::InvalidArgument(std::string("EncodeBlock: ") + name + " of point " + std::to_string(i / 3) +
-                                       " is not finite");
-        }
+  bool finite = true;
+  for (std::size_t j = 0; j < kLanes; ++j) finite &= lane_nonfinite[j] == 0;
+  if (!finite) {
+    for (std::size_t i = 0; i < 3 * n; ++i) {
+      if (!std::isfinite(v[i])) {
+        throw Error::InvalidArgument(std::string("EncodeBlock: ") + name + " of point " + std::to_string(i / 3) +
+                                     " is not finite");
       }
     }
   }
-  if (n > 0) {
-    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = values[a];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = lane_lo[a];
+    hi[a] = lane_hi[a];
   }
-  for (std::size_t j = 0; j < kLanes; ++j) {
+  for (std::size_t j = 3; j < kLanes; ++j) {
     lo[j % 3] = std::min(lo[j % 3], lane_lo[j]);
     hi[j % 3] = std::max(hi[j % 3], lane_hi[j]);
   }

@@ -10,8 +10,8 @@ namespace octocosm {
 
 // Not inline on purpose (index/extended_sum.cc): inlined into a loop that
 // also computes the values, GCC kept the x87 sum in memory, a store and a
-// reload for every value (a fifth of EncodeBlock's time, as much in
-// SampleNode).
+// reload for every value (a fifth of EncodeBlock's time, and of
+// SampleNode's).
 long double ExtendedSum(std::span<const double> values);
 
 }  // namespace octocosm

@@ -146,8 +146,8 @@ class PairMemo {
 // weight and its density cell's weight, and few such pairs are distinct:
 // equal-mass particles in cells of one, two, three ... particles share a
 // handful of them, and a parent's points that fell below the threshold share
-// their cell's. So they are memoised: far fewer cbrt calls (each a tenth of
-// a microsecond, with the frexp and ldexp inside it), with the same results.
+// their cell's. So they are memoised: far fewer cbrt calls (glibc's, with a
+// frexp and an ldexp call inside), with the same results.
 class SmoothingCache {
  public:
   SmoothingCache(const Density& density, double node_size) : density_(density), node_size_(node_size) {}
@@ -273,9 +273,9 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   }
 
   // Importance relative to the node's total weight keeps the numbers near 1.
-  // The density factor is the same for every point of a fine cell: one pow
-  // per occupied cell.
-  // Cells of equal weight (of one, two, three equal-mass points) share it.
+  // The density factor is the same for every point of a fine cell, and for
+  // every cell of the same weight (cells of one, two, three equal-mass
+  // points): one pow per distinct cell weight.
   std::vector<double> cell_factor(d.cell_weight.size());
   PairMemo factor_of;
   const auto factor = [&options](double cell_weight, double total) { return std::pow(cell_weight / total, -options.alpha); };

@@ -617,6 +617,12 @@ TEST(BlockCodec, EncodeRejectsPointsThatBreakTheContract) {
     p = good;
     p.velocity[5] = INFINITY;
     expect_invalid(p, "inf velocity", "velocity of point 1 is not finite");
+    p = good;
+    p.velocity[0] = std::nanf("");  // the first of the twelve lanes
+    expect_invalid(p, "nan velocity", "velocity of point 0 is not finite");
+    p = good;
+    p.velocity[3 * 27 + 2] = -INFINITY;  // the last lane
+    expect_invalid(p, "inf velocity in the last lane", "velocity of point 27 is not finite");
     p = RandomPoints(rng, 41, key, kCube, kVelocityBit);  // the last point outside the groups of four
     p.velocity[3 * 40 + 2] = -INFINITY;
     expect_invalid(p, "inf velocity in the last point", "velocity of point 40 is not finite");
