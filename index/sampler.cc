@@ -48,25 +48,29 @@ struct Density {
 // few thousand points should not pay for filling 2^(3 bits) entries.
 class OccupiedCellNumbering {
  public:
-  // `most`: how many cells can be occupied (room is reserved for them).
-  OccupiedCellNumbering(std::size_t fine_cells, std::size_t most) : number_of_(TableForThisThread(fine_cells)) {
-    occupied_.reserve(most);
-  }
+  // `most`: how many cells can be occupied (room is made for them up front).
+  OccupiedCellNumbering(std::size_t fine_cells, std::size_t most)
+      : number_of_(TableForThisThread(fine_cells)), occupied_(most + 1) {}  // + 1: the write past the last
   ~OccupiedCellNumbering() {
-    for (const std::uint32_t fine : occupied_) number_of_[fine] = kUnoccupied;
+    for (std::size_t k = 0; k < count_; ++k) number_of_[occupied_[k]] = kUnoccupied;
   }
   OccupiedCellNumbering(const OccupiedCellNumbering&) = delete;
   OccupiedCellNumbering& operator=(const OccupiedCellNumbering&) = delete;
 
-  // The number of fine cell `fine`: the next one when it is new.
+  // The number of fine cell `fine`: the next one when it is new. Without a
+  // branch: whether a point opens a new cell is a coin toss in a sparse
+  // node, and the branch on it was mispredicted that often.
   std::uint32_t Number(std::uint32_t fine) {
-    std::uint32_t& number = number_of_[fine];
-    if (number == kUnoccupied) {
-      occupied_.push_back(fine);
-      number = static_cast<std::uint32_t>(occupied_.size() - 1);
-    }
+    const std::uint32_t known = number_of_[fine];
+    const bool fresh = known == kUnoccupied;
+    const std::uint32_t number = fresh ? static_cast<std::uint32_t>(count_) : known;
+    number_of_[fine] = number;
+    occupied_[count_] = fine;  // kept only when fresh: count_ moves on past it
+    count_ += fresh ? 1 : 0;
     return number;
   }
+  std::size_t count() const { return count_; }
+
  private:
   static constexpr std::uint32_t kUnoccupied = UINT32_MAX;
   static std::vector<std::uint32_t>& TableForThisThread(std::size_t fine_cells) {
@@ -76,7 +80,8 @@ class OccupiedCellNumbering {
   }
 
   std::vector<std::uint32_t>& number_of_;
-  std::vector<std::uint32_t> occupied_;  // fine cells, by number
+  std::vector<std::uint32_t> occupied_;  // fine cells, by number; the first count_ are occupied
+  std::size_t count_ = 0;
 };
 
 Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double> weight, NodeKey key,
@@ -86,12 +91,12 @@ Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double>
   const CellCoord cell = key.cell();
   const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
   const std::size_t fine_cells = std::size_t{1} << (3 * bits);
-  // Reserved: most points of a small node occupy a cell of their own, and
-  // growing the vectors there cost a fifth of this function's time.
+  // Sized up front: most points of a small node occupy a cell of their own,
+  // and growing the vectors there cost a fifth of this function's time.
   const std::size_t most_cells = std::min(m, fine_cells);
   OccupiedCellNumbering numbering(fine_cells, most_cells);
   Density d;
-  d.cell_weight.reserve(most_cells);
+  d.cell_weight.resize(most_cells, 0.0);  // cut to the occupied cells below
   d.cell_of.resize(m);
   d.cell_edge = cube.NodeSize(level + bits);
   // Each cell's weight is summed in the order of the points. The octree
@@ -106,10 +111,10 @@ Density EstimateDensity(std::span<const GridPoint> grid, std::span<const double>
     const std::uint64_t y = (GridAxisAt(grid[i], 1, level + bits) - (std::uint64_t{cell.y} << bits)) & mask;
     const std::uint64_t z = (GridAxisAt(grid[i], 2, level + bits) - (std::uint64_t{cell.z} << bits)) & mask;
     const std::uint32_t number = numbering.Number(static_cast<std::uint32_t>(x | (y << bits) | (z << (2 * bits))));
-    if (number == d.cell_weight.size()) d.cell_weight.push_back(0);
     d.cell_weight[number] += weight[i];
     d.cell_of[i] = number;
   }
+  d.cell_weight.resize(numbering.count());
   for (const double w : d.cell_weight) d.total += w;
   return d;
 }
