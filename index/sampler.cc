@@ -280,7 +280,7 @@ Sample SampleNode(std::span<const GridPoint> grid, std::span<const double> weigh
   // Importance relative to the node's total weight keeps the numbers near 1.
   // The density factor is the same for every point of a fine cell, and for
   // every cell of the same weight (cells of one, two, three equal-mass
-  // points): one pow per distinct cell weight.
+  // points): about one pow per distinct cell weight.
   std::vector<double> cell_factor(d.cell_weight.size());
   PairMemo factor_of;
   const auto factor = [&options](double cell_weight, double total) { return std::pow(cell_weight / total, -options.alpha); };

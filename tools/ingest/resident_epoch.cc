@@ -373,11 +373,9 @@ const ResidentEpoch::Run& ResidentEpoch::RunOf(std::size_t i) const {
 
 std::array<double, 3> ResidentEpoch::Position(std::size_t i) const {
   const Run& run = RunOf(i);
-  const std::size_t j = 3 * (i - run.begin);
-  if (run.positions_wide) {
-    return {LoadAt<double>(run.position, j), LoadAt<double>(run.position, j + 1), LoadAt<double>(run.position, j + 2)};
-  }
-  return {LoadAt<float>(run.position, j), LoadAt<float>(run.position, j + 1), LoadAt<float>(run.position, j + 2)};
+  std::array<double, 3> position;
+  LoadPosition(run, i - run.begin, position.data());
+  return position;
 }
 
 const void* ResidentEpoch::PositionAddress(std::size_t i) const {

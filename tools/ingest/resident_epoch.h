@@ -158,6 +158,9 @@ class ResidentEpoch {
     std::array<const void*, kVectorColumnCount> vectors{};  // 3 floats a point each
   };
   const Run& RunOf(std::size_t i) const;
+  // Point `offset` of the run's positions, as doubles (unaligned loads: a
+  // mapped file's doubles start wherever its records put them).
+  static void LoadPosition(const Run& run, std::size_t offset, double* position);
   // Describes the own columns as the one run (after they change).
   void DescribeOwnColumns();
   void WidenMasses();
@@ -183,21 +186,10 @@ void ResidentEpoch::ForEachPosition(std::size_t begin, std::size_t end, Visit&& 
   for (std::size_t i = begin; i < end;) {
     const Run& run = RunOf(i);
     const std::size_t run_end = std::min(end, run.begin + run.count);
-    const auto* bytes = static_cast<const std::byte*>(run.position) + 3 * (i - run.begin) *
-                                                                          (run.positions_wide ? sizeof(double) : sizeof(float));
-    double position[3];
-    if (run.positions_wide) {
-      for (; i < run_end; ++i, bytes += sizeof(position)) {
-        std::memcpy(position, bytes, sizeof(position));  // a mapped file's doubles need not be aligned
-        visit(i, static_cast<const double*>(position));
-      }
-    } else {
-      for (; i < run_end; ++i, bytes += 3 * sizeof(float)) {
-        float narrow[3];
-        std::memcpy(narrow, bytes, sizeof(narrow));
-        for (int a = 0; a < 3; ++a) position[a] = narrow[a];
-        visit(i, static_cast<const double*>(position));
-      }
+    for (; i < run_end; ++i) {
+      double position[3];
+      LoadPosition(run, i - run.begin, position);
+      visit(i, static_cast<const double*>(position));
     }
   }
 }
@@ -212,22 +204,27 @@ void ResidentEpoch::ForEachListedPosition(std::span<const std::uint32_t> listed,
     const Run& run = RunOf(listed[k]);
     std::size_t stretch_end = k + 1;
     while (stretch_end < n && listed[stretch_end] - run.begin < run.count) ++stretch_end;
-    const auto* bytes = static_cast<const std::byte*>(run.position);
     const std::size_t stride = 3 * (run.positions_wide ? sizeof(double) : sizeof(float));
-    double position[3];
     for (; k < stretch_end; ++k) {
-      if (k + kAhead < stretch_end) __builtin_prefetch(bytes + stride * (listed[k + kAhead] - run.begin));
-      const std::byte* at = bytes + stride * (listed[k] - run.begin);
-      if (run.positions_wide) {
-        std::memcpy(position, at, sizeof(position));  // a mapped file's doubles need not be aligned
-      } else {
-        float narrow[3];
-        std::memcpy(narrow, at, sizeof(narrow));
-        for (int a = 0; a < 3; ++a) position[a] = narrow[a];
+      if (k + kAhead < stretch_end) {
+        __builtin_prefetch(static_cast<const std::byte*>(run.position) + stride * (listed[k + kAhead] - run.begin));
       }
+      double position[3];
+      LoadPosition(run, listed[k] - run.begin, position);
       visit(k, static_cast<const double*>(position));
     }
   }
+}
+
+inline void ResidentEpoch::LoadPosition(const Run& run, std::size_t offset, double* position) {
+  const auto* bytes = static_cast<const std::byte*>(run.position);
+  if (run.positions_wide) {
+    std::memcpy(position, bytes + 3 * sizeof(double) * offset, 3 * sizeof(double));  // need not be aligned
+    return;
+  }
+  float narrow[3];
+  std::memcpy(narrow, bytes + 3 * sizeof(float) * offset, sizeof(narrow));
+  for (int a = 0; a < 3; ++a) position[a] = narrow[a];
 }
 
 }  // namespace octocosm
