@@ -11,7 +11,11 @@ namespace {
 
 constexpr std::uint32_t kBucketMagic = 0x4249434F;     // "OCIB"
 constexpr std::uint32_t kDirectoryMagic = 0x4449434F;  // "OCID"
-constexpr std::uint32_t kVersion = 1;
+constexpr std::uint32_t kLeafTableMagic = 0x4C49434F;  // "OCIL"
+constexpr std::uint32_t kVersion = 1;                  // of the directory and the leaf table
+constexpr std::uint32_t kPairsVersion = 1;             // bucket forms
+constexpr std::uint32_t kTableVersion = 2;
+constexpr std::size_t kTableHeader = 24;
 
 // Appends a little-endian integer of T's width.
 template <typename T>
@@ -27,11 +31,13 @@ std::uint32_t GetU32(const Bytes& in, std::size_t offset) { return octocosm::Get
 
 IdIndexEpochWriter::IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size)
     : store_(store),
+      page_size_(page_size),
       bucket_pairs_(std::max<std::size_t>((page_size - 16) / 16, 1)),
       bucket_(16 + 16 * bucket_pairs_) {}
 
 void IdIndexEpochWriter::Add(std::uint64_t id, NodeKey leaf) {
   if (finished_) throw Error::InvalidArgument("IdIndexEpochWriter: Add after Finish");
+  if (has_table_) throw Error::InvalidArgument("IdIndexEpochWriter: Add after AddTable");
   if (total_ > 0 && id < last_id_) throw Error::InvalidArgument("IdIndexEpochWriter: IDs must arrive in order");
   if (bucket_fill_ == 0) first_ids_.push_back(id);
   // Straight into the block: a pair costs two stores, no vector growth.
@@ -46,11 +52,63 @@ void IdIndexEpochWriter::Add(std::uint64_t id, NodeKey leaf) {
 void IdIndexEpochWriter::FlushBucket() {
   if (bucket_fill_ == 0) return;
   PutU32(bucket_.data(), kBucketMagic);
-  PutU32(bucket_.data() + 4, kVersion);
+  PutU32(bucket_.data() + 4, kPairsVersion);
   PutU64(bucket_.data() + 8, bucket_fill_);
   store_.AddBlock(first_ids_.size() - 1, std::span<const std::uint8_t>(bucket_.data(), 16 + 16 * bucket_fill_),
                   bucket_fill_);
   bucket_fill_ = 0;
+}
+
+void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots,
+                                  std::span<const std::uint64_t> leaves) {
+  if (finished_) throw Error::InvalidArgument("IdIndexEpochWriter: AddTable after Finish");
+  if (has_table_ || total_ > 0) throw Error::InvalidArgument("IdIndexEpochWriter: AddTable after Add or AddTable");
+  if (!slots.empty() && slots.size() - 1 > ~std::uint64_t{0} - first_id) {
+    throw Error::InvalidArgument("IdIndexEpochWriter: a table of " + std::to_string(slots.size()) +
+                                 " IDs from " + std::to_string(first_id) + " runs past 2^64 - 1");
+  }
+  for (const std::uint64_t leaf : leaves) {
+    if (!NodeKey::FromValue(leaf).IsValid()) {
+      throw Error::InvalidArgument("IdIndexEpochWriter: invalid leaf key " + std::to_string(leaf));
+    }
+  }
+  has_table_ = true;
+  const std::size_t per_bucket = std::max<std::size_t>((page_size_ - kTableHeader) / 4, 1);
+  Bytes block(kTableHeader + 4 * std::min(per_bucket, slots.size()));
+  for (std::size_t begin = 0; begin < slots.size(); begin += per_bucket) {
+    const std::size_t m = std::min(per_bucket, slots.size() - begin);
+    const std::uint32_t* slot = slots.data() + begin;
+    std::uint64_t present = 0;
+    std::uint32_t most = 0;
+    for (std::size_t i = 0; i < m; ++i) {
+      present += slot[i] != 0;
+      most = std::max(most, slot[i]);
+    }
+    if (most > leaves.size()) {
+      throw Error::InvalidArgument("IdIndexEpochWriter: ordinal " + std::to_string(most) + " for ID " +
+                                   std::to_string(first_id + begin) + ".. lies past the " +
+                                   std::to_string(leaves.size()) + " leaves");
+    }
+    if (present == 0) continue;  // a look-up lands on the bucket before, whose slots end short of it
+    PutU32(block.data(), kBucketMagic);
+    PutU32(block.data() + 4, kTableVersion);
+    PutU64(block.data() + 8, first_id + begin);
+    PutU64(block.data() + 16, m);
+    if constexpr (kHostIsLittleEndian) {
+      std::memcpy(block.data() + kTableHeader, slot, 4 * m);
+    } else {
+      for (std::size_t i = 0; i < m; ++i) PutU32(block.data() + kTableHeader + 4 * i, slot[i]);
+    }
+    store_.AddBlock(first_ids_.size(), std::span<const std::uint8_t>(block.data(), kTableHeader + 4 * m), present);
+    first_ids_.push_back(first_id + begin);
+    total_ += present;
+  }
+  Bytes table;
+  Append<std::uint32_t>(table, kLeafTableMagic);
+  Append<std::uint32_t>(table, kVersion);
+  Append<std::uint64_t>(table, leaves.size());
+  for (const std::uint64_t leaf : leaves) Append<std::uint64_t>(table, leaf);
+  store_.AddBlock(kIdIndexLeafTableKey, table, 0);
 }
 
 void IdIndexEpochWriter::Finish() {
@@ -68,7 +126,7 @@ void IdIndexEpochWriter::Finish() {
 
 IdIndexReader::IdIndexReader(const std::string& directory) : store_(StoreReader::Open(directory)) {}
 
-const IdIndexReader::Directory& IdIndexReader::DirectoryOf(std::uint32_t epoch) const {
+IdIndexReader::Directory& IdIndexReader::DirectoryOf(std::uint32_t epoch) const {
   std::lock_guard lock(mutex_);
   auto& slot = directories_[epoch];
   if (slot) return *slot;
@@ -107,6 +165,17 @@ std::optional<NodeKey> IdIndexReader::Find(std::uint32_t epoch, std::uint64_t id
   const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID bucket " + std::to_string(bucket);
   const Bytes block = store_.ReadBlock({epoch, bucket});
   if (block.size() < 16 || GetU32(block, 0) != kBucketMagic) throw Error::Corruption(where, "wrong magic or short block");
+  switch (GetU32(block, 4)) {
+    case kPairsVersion:
+      return FindInPairs(block, id, where);
+    case kTableVersion:
+      return FindInTable(epoch, block, id, where);
+    default:
+      throw Error::NotSupported(where, "version " + std::to_string(GetU32(block, 4)));
+  }
+}
+
+std::optional<NodeKey> IdIndexReader::FindInPairs(const Bytes& block, std::uint64_t id, const std::string& where) const {
   const std::uint64_t n = GetU64(block, 8);
   if (n > (block.size() - 16) / 16 || block.size() != 16 + 16 * n) {
     throw Error::Corruption(where, "pair count " + std::to_string(n) + " disagrees with the block size");
@@ -120,6 +189,50 @@ std::optional<NodeKey> IdIndexReader::Find(std::uint32_t epoch, std::uint64_t id
   const NodeKey leaf = NodeKey::FromValue(GetU64(block, 16 + 16 * lo + 8));
   if (!leaf.IsValid()) throw Error::Corruption(where, "invalid node key for ID " + std::to_string(id));
   return leaf;
+}
+
+std::optional<NodeKey> IdIndexReader::FindInTable(std::uint32_t epoch, const Bytes& block, std::uint64_t id,
+                                                  const std::string& where) const {
+  if (block.size() < kTableHeader) throw Error::Corruption(where, "short block");
+  const std::uint64_t first = GetU64(block, 8);
+  const std::uint64_t m = GetU64(block, 16);
+  if (m > (block.size() - kTableHeader) / 4 || block.size() != kTableHeader + 4 * m) {
+    throw Error::Corruption(where, "slot count " + std::to_string(m) + " disagrees with the block size");
+  }
+  if (id < first || id - first >= m) return std::nullopt;
+  const std::uint32_t ordinal = GetU32(block, kTableHeader + 4 * (id - first));
+  if (ordinal == 0) return std::nullopt;
+  const std::vector<std::uint64_t>& leaves = LeafTableOf(epoch);
+  if (ordinal > leaves.size()) {
+    throw Error::Corruption(where, "ordinal " + std::to_string(ordinal) + " for ID " + std::to_string(id) +
+                                       " lies past the leaf table's " + std::to_string(leaves.size()) + " leaves");
+  }
+  return NodeKey::FromValue(leaves[ordinal - 1]);  // checked valid when the table was read
+}
+
+const std::vector<std::uint64_t>& IdIndexReader::LeafTableOf(std::uint32_t epoch) const {
+  Directory& directory = DirectoryOf(epoch);
+  std::lock_guard lock(mutex_);
+  std::optional<std::vector<std::uint64_t>>& leaves = directory.leaves;
+  if (leaves) return *leaves;
+  const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID leaf table";
+  if (!store_.Lookup({epoch, kIdIndexLeafTableKey})) throw Error::Corruption(where, "missing, but a bucket needs it");
+  const Bytes block = store_.ReadBlock({epoch, kIdIndexLeafTableKey});
+  if (block.size() < 16 || GetU32(block, 0) != kLeafTableMagic) throw Error::Corruption(where, "wrong magic or short block");
+  if (GetU32(block, 4) != kVersion) throw Error::NotSupported(where, "version " + std::to_string(GetU32(block, 4)));
+  const std::uint64_t count = GetU64(block, 8);
+  if (count > (block.size() - 16) / 8 || block.size() != 16 + 8 * count) {
+    throw Error::Corruption(where, "leaf count " + std::to_string(count) + " disagrees with the block size");
+  }
+  std::vector<std::uint64_t> keys(count);
+  for (std::uint64_t i = 0; i < count; ++i) {
+    keys[i] = GetU64(block, 16 + 8 * i);
+    if (!NodeKey::FromValue(keys[i]).IsValid()) {
+      throw Error::Corruption(where, "invalid node key " + std::to_string(keys[i]) + " at " + std::to_string(i));
+    }
+  }
+  leaves = std::move(keys);
+  return *leaves;
 }
 
 }  // namespace octocosm

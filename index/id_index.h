@@ -5,14 +5,26 @@
 // It is kept in its own store (the subdirectory `ids/` of a dataset store),
 // one epoch per epoch of the dataset, so it gets the page file's checksums,
 // crash safety and index for free. Within an epoch:
-//   - bucket blocks, keys 0, 1, 2, ...: the (ID, leaf key) pairs sorted by ID,
-//     as many per bucket as fill one page (the last may hold fewer);
+//   - bucket blocks, keys 0, 1, 2, ..., each filling about one page, in one
+//     of two forms (an epoch uses one):
+//       pairs (version 1): (ID, leaf key) pairs sorted by ID, for IDs in any
+//         range;
+//       a table (version 2): for a run of consecutive IDs, which leaf holds
+//         each, as an ordinal into the epoch's leaf table. Simulation codes
+//         number particles 0..N-1 or so: a quarter of the pairs' bytes, and
+//         written straight from the table ingest fills (DenseIdTable);
 //   - the directory block, key kIdIndexDirectoryKey: the first ID of every
-//     bucket, so a look-up reads the (cached) directory and one bucket.
+//     bucket (for a table, the ID of its first slot), so a look-up reads the
+//     (cached) directory and one bucket;
+//   - with table buckets, the leaf table, key kIdIndexLeafTableKey.
 // Block payloads (little endian):
-//   bucket:    u32 magic "OCIB", u32 version 1, u64 pair count n, then n x (u64 id, u64 leaf key)
-//   directory: u32 magic "OCID", u32 version 1, u64 bucket count b, u64 total pairs, then b x u64 first id
-// Duplicate IDs (a malformed input) are all kept; a look-up returns the first.
+//   bucket, pairs: u32 magic "OCIB", u32 version 1, u64 pair count n, then n x (u64 id, u64 leaf key)
+//   bucket, table: u32 magic "OCIB", u32 version 2, u64 first id f, u64 slot count m, then m x u32
+//                  ordinal (ID f + i: 0 where no particle has it, else 1 + its leaf's index in the leaf table)
+//   leaf table:    u32 magic "OCIL", u32 version 1, u64 leaf count l, then l x u64 leaf key
+//   directory:     u32 magic "OCID", u32 version 1, u64 bucket count b, u64 total IDs, then b x u64 first id
+// Duplicate IDs (a malformed input) are all kept in pairs; a look-up returns
+// the first. Tables cannot hold duplicates.
 #pragma once
 
 #include <algorithm>
@@ -20,6 +32,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -31,6 +44,7 @@
 namespace octocosm {
 
 inline constexpr std::uint64_t kIdIndexDirectoryKey = ~std::uint64_t{0};
+inline constexpr std::uint64_t kIdIndexLeafTableKey = ~std::uint64_t{0} - 1;
 
 // Writes one epoch of the ID index into a StoreWriter whose epoch is open.
 class IdIndexEpochWriter {
@@ -39,6 +53,13 @@ class IdIndexEpochWriter {
   IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size);
   // Pairs must arrive in non-decreasing ID order.
   void Add(std::uint64_t id, NodeKey leaf);
+  // The whole epoch as a table instead of pairs: slot i tells which leaf
+  // holds ID first_id + i, 0 for none, else 1 + the leaf's index in
+  // `leaves`. Written as table buckets of (page_size - 24) / 4 slots, those
+  // with no ID left out. Call it once, instead of Add, then Finish. Throws
+  // Error::InvalidArgument for an ordinal past `leaves`, an invalid leaf key
+  // or IDs past 2^64 - 1.
+  void AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots, std::span<const std::uint64_t> leaves);
   // Writes the last bucket and the directory.
   void Finish();
 
@@ -46,6 +67,7 @@ class IdIndexEpochWriter {
   void FlushBucket();
 
   StoreWriter& store_;
+  std::uint32_t page_size_;
   std::size_t bucket_pairs_;
   Bytes bucket_;                 // the bucket block being filled
   std::size_t bucket_fill_ = 0;  // pairs in it
@@ -53,6 +75,7 @@ class IdIndexEpochWriter {
   std::uint64_t total_ = 0;
   std::uint64_t last_id_ = 0;
   bool finished_ = false;
+  bool has_table_ = false;
 };
 
 // Looks IDs up; thread-safe. Directories are decoded once per epoch and kept.
@@ -69,8 +92,13 @@ class IdIndexReader {
   struct Directory {
     std::vector<std::uint64_t> first_ids;
     std::uint64_t total = 0;
+    std::optional<std::vector<std::uint64_t>> leaves;  // the leaf table, once a table bucket needed it
   };
-  const Directory& DirectoryOf(std::uint32_t epoch) const;
+  Directory& DirectoryOf(std::uint32_t epoch) const;  // loaded once, then kept
+  const std::vector<std::uint64_t>& LeafTableOf(std::uint32_t epoch) const;
+  std::optional<NodeKey> FindInPairs(const Bytes& block, std::uint64_t id, const std::string& where) const;
+  std::optional<NodeKey> FindInTable(std::uint32_t epoch, const Bytes& block, std::uint64_t id,
+                                     const std::string& where) const;
 
   StoreReader store_;
   mutable std::mutex mutex_;

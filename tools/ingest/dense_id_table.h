@@ -1,7 +1,7 @@
 // The (ID, leaf) pairs of an epoch whose particle IDs are unique and lie in a
 // compact range, gathered without a sort: each leaf stores its ordinal at
-// slot `id - first` of one array, and reading the array in order gives the pairs
-// sorted by ID. Simulation codes number particles 0..N-1 or 1..N (per type,
+// slot `id - first` of one array, which, cut into pages, is the ID index
+// (IdIndexEpochWriter::AddTable). Simulation codes number particles 0..N-1 or 1..N (per type,
 // in ranges that follow each other), so this is the usual case; otherwise
 // ingest sorts the pairs (tools/ingest/external_sorter.h).
 //
@@ -69,14 +69,11 @@ class DenseIdTable {
   // more than 2^32 - 2 leaves.
   void Add(std::span<const std::uint64_t> ids, NodeKey leaf);
 
-  // Calls emit(id, leaf key) for every recorded ID, in increasing ID order.
-  // Not while Add runs.
-  template <typename Emit>
-  void ForEach(Emit&& emit) const {
-    for (std::uint64_t i = 0; i < span_; ++i) {
-      if (slots_[i] != 0) emit(first_ + i, leaves_[slots_[i] - 1]);
-    }
-  }
+  // What IdIndexEpochWriter::AddTable writes, once no Add runs: slot i is 0
+  // where no leaf recorded ID first() + i, else 1 + the leaf's index in
+  // leaves() (the order in which leaves were added).
+  std::span<const std::uint32_t> slots() const { return {slots_.get(), static_cast<std::size_t>(span_)}; }
+  std::span<const std::uint64_t> leaves() const { return leaves_; }
 
   std::uint64_t first() const { return first_; }
   std::uint64_t span() const { return span_; }

@@ -574,7 +574,7 @@ IngestReport Ingest(const IngestOptions& options) {
       id_store->BeginEpoch(header.time, header.redshift);
       IdIndexEpochWriter ids(*id_store, options.page_size);
       if (id_table) {
-        id_table->ForEach([&ids](std::uint64_t id, std::uint64_t leaf) { ids.Add(id, NodeKey::FromValue(leaf)); });
+        ids.AddTable(id_table->first(), id_table->slots(), id_table->leaves());
       } else {
         auto reader = id_pairs->Open();
         IdLeafRecord r{};

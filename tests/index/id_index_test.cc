@@ -1,0 +1,243 @@
+// The ID index in both bucket forms: sorted pairs and tables of leaf
+// ordinals (index/id_index.h), written through a real store and read back.
+#include "index/id_index.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "storage/coding.h"
+#include "storage/error.h"
+#include "tests/support/temp_dir.h"
+
+namespace octocosm {
+namespace {
+
+using testing_support::TempDir;
+
+constexpr std::uint32_t kSmallPage = 4096;  // table buckets of 1018 slots, pair buckets of 255 pairs
+constexpr std::size_t kSlotsPerBucket = (kSmallPage - 24) / 4;
+
+// A store with one epoch whose ID index `fill` writes.
+void WriteIndex(const std::string& directory, const std::function<void(StoreWriter&)>& fill) {
+  StoreWriter store(directory, nlohmann::json::object(), nullptr, {.page_size = kSmallPage});
+  store.BeginEpoch(0, 0);
+  fill(store);
+  store.EndEpoch();
+  store.Finish();
+}
+
+NodeKey LeafNumber(int i) { return NodeKey::Root().Child(i % 8).Child(i / 8 % 8); }
+
+ErrorKind KindOf(const std::function<void()>& action) {
+  try {
+    action();
+  } catch (const Error& e) {
+    return e.kind();
+  }
+  ADD_FAILURE() << "no Error thrown";
+  return ErrorKind::kIo;
+}
+
+std::string MessageOf(const std::function<void()>& action) {
+  try {
+    action();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(IdIndex, PairsFindEveryIdAndNothingElse) {
+  TempDir dir("id-index-pairs");
+  WriteIndex(dir.path().string(), [](StoreWriter& store) {
+    IdIndexEpochWriter ids(store, kSmallPage);
+    for (std::uint64_t id = 0; id <= 2000; id += 2) ids.Add(id, LeafNumber(static_cast<int>(id % 37)));
+    ids.Finish();
+  });
+  IdIndexReader reader(dir.path().string());
+  for (std::uint64_t id = 0; id <= 2001; ++id) {
+    const std::optional<NodeKey> leaf = reader.Find(0, id);
+    if (id % 2 == 1) {
+      EXPECT_FALSE(leaf.has_value()) << id;
+    } else {
+      ASSERT_TRUE(leaf.has_value()) << id;
+      EXPECT_EQ(*leaf, LeafNumber(static_cast<int>(id % 37))) << id;
+    }
+  }
+  EXPECT_FALSE(reader.Find(0, 1u << 20).has_value());
+}
+
+TEST(IdIndex, TableFindsEveryIdAndLeavesOutEmptyBuckets) {
+  TempDir dir("id-index-table");
+  const std::uint64_t first = 1000;
+  // Three buckets' worth and a bit; the second bucket's whole range is empty,
+  // and every seventh ID elsewhere is missing.
+  std::vector<std::uint32_t> slots(3 * kSlotsPerBucket + 100);
+  const std::vector<std::uint64_t> leaves = {LeafNumber(3).value(), LeafNumber(17).value(), LeafNumber(40).value()};
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    const bool in_empty_bucket = i >= kSlotsPerBucket && i < 2 * kSlotsPerBucket;
+    slots[i] = in_empty_bucket || i % 7 == 3 ? 0 : static_cast<std::uint32_t>(1 + i % leaves.size());
+  }
+  WriteIndex(dir.path().string(), [&](StoreWriter& store) {
+    IdIndexEpochWriter ids(store, kSmallPage);
+    ids.AddTable(first, slots, leaves);
+    ids.Finish();
+  });
+  // Three table buckets, the leaf table and the directory.
+  EXPECT_EQ(StoreReader::Open(dir.path().string()).block_count(0), 5u);
+  IdIndexReader reader(dir.path().string());
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    const std::optional<NodeKey> leaf = reader.Find(0, first + i);
+    if (slots[i] == 0) {
+      EXPECT_FALSE(leaf.has_value()) << i;
+    } else {
+      ASSERT_TRUE(leaf.has_value()) << i;
+      EXPECT_EQ(leaf->value(), leaves[slots[i] - 1]) << i;
+    }
+  }
+  EXPECT_FALSE(reader.Find(0, 0).has_value());
+  EXPECT_FALSE(reader.Find(0, first - 1).has_value());
+  EXPECT_FALSE(reader.Find(0, first + slots.size()).has_value());
+  EXPECT_FALSE(reader.Find(0, std::numeric_limits<std::uint64_t>::max()).has_value());
+}
+
+TEST(IdIndex, TableReachesTheLargestId) {
+  TempDir dir("id-index-top");
+  const std::uint64_t top = std::numeric_limits<std::uint64_t>::max();
+  const std::vector<std::uint32_t> slots = {1, 0, 1};
+  const std::vector<std::uint64_t> leaves = {LeafNumber(5).value()};
+  WriteIndex(dir.path().string(), [&](StoreWriter& store) {
+    IdIndexEpochWriter ids(store, kSmallPage);
+    ids.AddTable(top - 2, slots, leaves);
+    ids.Finish();
+  });
+  IdIndexReader reader(dir.path().string());
+  EXPECT_EQ(reader.Find(0, top), LeafNumber(5));
+  EXPECT_EQ(reader.Find(0, top - 2), LeafNumber(5));
+  EXPECT_FALSE(reader.Find(0, top - 1).has_value());
+  EXPECT_FALSE(reader.Find(0, top - 3).has_value());
+}
+
+TEST(IdIndex, WriterRefusesMixedFormsAndBadTables) {
+  TempDir dir("id-index-refusals");
+  WriteIndex(dir.path().string(), [](StoreWriter& store) {
+    const std::vector<std::uint32_t> slots = {1, 2};
+    const std::vector<std::uint64_t> one_leaf = {LeafNumber(1).value()};
+    const std::vector<std::uint64_t> two_leaves = {LeafNumber(1).value(), LeafNumber(2).value()};
+    {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      ids.Add(5, LeafNumber(1));
+      EXPECT_EQ(KindOf([&] { ids.AddTable(0, slots, two_leaves); }), ErrorKind::kInvalidArgument);
+    }
+    {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      EXPECT_NE(MessageOf([&] { ids.AddTable(0, slots, one_leaf); }).find("ordinal 2"), std::string::npos);
+    }
+    {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      const std::vector<std::uint64_t> invalid = {LeafNumber(1).value(), 0};
+      EXPECT_NE(MessageOf([&] { ids.AddTable(0, slots, invalid); }).find("invalid leaf key"), std::string::npos);
+    }
+    {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      const std::uint64_t past = std::numeric_limits<std::uint64_t>::max();
+      EXPECT_NE(MessageOf([&] { ids.AddTable(past, slots, two_leaves); }).find("runs past"), std::string::npos);
+    }
+  });
+  TempDir dir2("id-index-refusals-2");
+  WriteIndex(dir2.path().string(), [](StoreWriter& store) {
+    IdIndexEpochWriter ids(store, kSmallPage);
+    const std::vector<std::uint32_t> slots = {1};
+    const std::vector<std::uint64_t> leaves = {LeafNumber(1).value()};
+    ids.AddTable(0, slots, leaves);
+    EXPECT_EQ(KindOf([&] { ids.Add(7, LeafNumber(1)); }), ErrorKind::kInvalidArgument);
+    EXPECT_EQ(KindOf([&] { ids.AddTable(1, slots, leaves); }), ErrorKind::kInvalidArgument);
+    ids.Finish();
+  });
+}
+
+// A table bucket written by hand: u32 magic, u32 version, u64 first ID,
+// u64 slot count, the slots.
+Bytes TableBucket(std::uint32_t version, std::uint64_t first, const std::vector<std::uint32_t>& slots) {
+  Bytes block(24 + 4 * slots.size());
+  PutU32(block.data(), 0x4249434F);
+  PutU32(block.data() + 4, version);
+  PutU64(block.data() + 8, first);
+  PutU64(block.data() + 16, slots.size());
+  for (std::size_t i = 0; i < slots.size(); ++i) PutU32(block.data() + 24 + 4 * i, slots[i]);
+  return block;
+}
+
+Bytes Directory(std::uint64_t first) {
+  Bytes block(32);
+  PutU32(block.data(), 0x4449434F);
+  PutU32(block.data() + 4, 1);
+  PutU64(block.data() + 8, 1);
+  PutU64(block.data() + 16, 2);
+  PutU64(block.data() + 24, first);
+  return block;
+}
+
+Bytes LeafTable(const std::vector<std::uint64_t>& keys) {
+  Bytes block(16 + 8 * keys.size());
+  PutU32(block.data(), 0x4C49434F);
+  PutU32(block.data() + 4, 1);
+  PutU64(block.data() + 8, keys.size());
+  for (std::size_t i = 0; i < keys.size(); ++i) PutU64(block.data() + 16 + 8 * i, keys[i]);
+  return block;
+}
+
+struct Damage {
+  std::string name;
+  Bytes bucket;
+  std::optional<Bytes> leaf_table;
+  ErrorKind kind;
+  std::string says;
+};
+
+TEST(IdIndex, ReaderReportsDamagedTables) {
+  const std::vector<Damage> damages = {
+      {"ordinal-past-table", TableBucket(2, 10, {3, 3}), LeafTable({LeafNumber(1).value(), LeafNumber(2).value()}),
+       ErrorKind::kCorruption, "past the leaf table"},
+      {"no-leaf-table", TableBucket(2, 10, {1, 2}), std::nullopt, ErrorKind::kCorruption, "missing"},
+      {"invalid-leaf", TableBucket(2, 10, {1, 2}), LeafTable({LeafNumber(1).value(), 0}), ErrorKind::kCorruption,
+       "invalid node key"},
+      {"short-leaf-table", TableBucket(2, 10, {1, 2}), Bytes(12, 0), ErrorKind::kCorruption, "wrong magic or short"},
+      {"slot-count", [] {
+         Bytes b = TableBucket(2, 10, {1, 2});
+         PutU64(b.data() + 16, 3);
+         return b;
+       }(), LeafTable({LeafNumber(1).value(), LeafNumber(2).value()}), ErrorKind::kCorruption, "slot count 3"},
+      {"version", TableBucket(3, 10, {1, 2}), LeafTable({LeafNumber(1).value(), LeafNumber(2).value()}),
+       ErrorKind::kNotSupported, "version 3"},
+  };
+  for (const Damage& damage : damages) {
+    TempDir dir("id-index-" + damage.name);
+    WriteIndex(dir.path().string(), [&](StoreWriter& store) {
+      store.AddBlock(0, damage.bucket, 2);
+      store.AddBlock(kIdIndexDirectoryKey, Directory(10), 2);
+      if (damage.leaf_table) store.AddBlock(kIdIndexLeafTableKey, *damage.leaf_table, 0);
+    });
+    IdIndexReader reader(dir.path().string());
+    // Both IDs: the damage shows whichever slot is read.
+    for (const std::uint64_t id : {10, 11}) {
+      try {
+        reader.Find(0, id);
+        ADD_FAILURE() << damage.name << ": ID " << id << " found without an error";
+      } catch (const Error& e) {
+        EXPECT_EQ(e.kind(), damage.kind) << damage.name << ": " << e.what();
+        EXPECT_NE(std::string(e.what()).find(damage.says), std::string::npos) << damage.name << ": " << e.what();
+        EXPECT_NE(std::string(e.what()).find(dir.path().string()), std::string::npos) << e.what();
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace octocosm
