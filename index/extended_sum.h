@@ -1,7 +1,9 @@
 // The sum of doubles in extended precision (long double: the x87 80-bit
-// format on x86-64), in index order, where a total must come out the same
-// whatever the values' magnitudes: the sampler's and the block codec's
-// weight totals.
+// format on x86-64), where a total must come out the same whatever the
+// values' magnitudes: the sampler's and the block codec's weight totals. The
+// order of the additions is fixed (value i goes to running sum i mod 4 while
+// four remain, the rest to the first; then (s0 + s1) + (s2 + s3)), so the
+// same values in the same order always give the same total.
 #pragma once
 
 #include <span>
