@@ -51,9 +51,9 @@ constexpr std::uint64_t kMaxChunkBufferBytes = std::uint64_t{256} << 20;
 // gathered columns and placement records, about 90 bytes a point) are fresh
 // memory, whose first touch is the costliest memory access on the virtual
 // machines this runs on; chunks this small keep them small and near the
-// caches. At 10^7 points, a quarter of the chunks' former size (1.25 million
-// points) cut the ingest from 1.57-1.69 s to 1.35-1.42 s and its peak RSS by
-// 190 MiB; at 10^8 it changed little (docs/BENCHMARKS.md).
+// caches. At 10^7 points (chunks of 1.25 million points before) it cut the
+// ingest from 1.51-1.57 s to 1.23-1.45 s and its peak RSS by about 175 MiB;
+// at 10^8 it changed little (docs/BENCHMARKS.md).
 constexpr std::uint64_t kMaxChunkPoints = std::uint64_t{1} << 18;
 
 struct IdLeafRecord {
