@@ -78,7 +78,8 @@ class IdIndexEpochWriter {
   bool has_table_ = false;
 };
 
-// Looks IDs up; thread-safe. Directories are decoded once per epoch and kept.
+// Looks IDs up; thread-safe. Directories (and leaf tables) are decoded once
+// per epoch and kept.
 class IdIndexReader {
  public:
   // Opens `directory` (the `ids/` store). Throws as StoreReader::Open.
