@@ -15,6 +15,7 @@
 #include <limits>
 #include <random>
 
+#include "index/extended_sum.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -286,6 +287,52 @@ TEST(BlockCodec, LeftoverUnitsGoToTheLargestRemaindersTiesToLowerIndices) {
           ADD_FAILURE() << "trial " << trial << ": weight " << values[a] << " got an extra unit before weight "
                         << values[b] << " with a larger remainder";
         }
+      }
+    }
+  }
+}
+
+// The same rule on weights whose remainders are nearly all distinct and
+// spread over [0, 1), in blocks of up to a parent's 16000 points: the units
+// equal those of a plain reference that orders the points by remainder
+// (largest first, ties to the lower index), computed in the encoder's
+// precision. Some weights repeat, so some remainders tie across the cut.
+TEST(BlockCodec, LeftoverUnitsMatchAReferenceOrderOfTheRemainders) {
+  std::mt19937_64 rng(17);
+  const NodeKey key = NodeKey::FromPath("r7");
+  for (const std::size_t n : {std::size_t{3}, std::size_t{100}, std::size_t{4097}, std::size_t{16000}}) {
+    for (int trial = 0; trial < 4; ++trial) {
+      NodePoints points = RandomPoints(rng, n, key, kCube, 0);
+      std::lognormal_distribution<double> weight_of(0.0, 1.5);
+      for (double& w : points.weight) w = weight_of(rng);
+      for (std::size_t i = 0; i + 1 < n; i += 7) points.weight[i + 1] = points.weight[i];
+      const Bytes block = EncodeBlock(points, key, kCube);
+      const BlockColumn* column = DecodeBlockHeader(block, key, "w").Find(ColumnId::kWeight);
+      ASSERT_NE(column, nullptr);
+      std::vector<std::uint32_t> units(n);
+      std::memcpy(units.data(), block.data() + column->offset, 4 * n);  // test host is little endian
+
+      const double units_per_weight =
+          static_cast<double>(static_cast<long double>(kWeightTotalUnits) / ExtendedSum(points.weight));
+      std::vector<std::uint64_t> expected(n);
+      std::vector<double> remainder(n);
+      std::uint64_t assigned = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const double ideal = points.weight[i] * units_per_weight;
+        expected[i] = static_cast<std::uint64_t>(ideal);
+        remainder[i] = ideal - static_cast<double>(expected[i]);
+        assigned += expected[i];
+      }
+      ASSERT_LT(assigned, kWeightTotalUnits) << "n " << n << ": the floors leave units over";
+      ASSERT_LT(kWeightTotalUnits - assigned, n);
+      std::vector<std::size_t> order(n);
+      for (std::size_t i = 0; i < n; ++i) order[i] = i;
+      std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+        return remainder[a] != remainder[b] ? remainder[a] > remainder[b] : a < b;
+      });
+      for (std::size_t j = 0; j < kWeightTotalUnits - assigned; ++j) ++expected[order[j]];
+      for (std::size_t i = 0; i < n; ++i) {
+        ASSERT_EQ(units[i], expected[i]) << "n " << n << ", trial " << trial << ", point " << i;
       }
     }
   }
