@@ -9,9 +9,16 @@
 // Default cases (issue 3 §7): 10^7 and 10^8 points with the default budget,
 // and 4x10^7 points (1.1 GB of input) under a 256 MiB budget: input > 4x budget.
 //
+// Before each run the snapshot's files are read once, so that the ingest
+// reads them from the page cache as it would right after they were written
+// (a generated snapshot is; one kept from an earlier run with --keep may have
+// left the cache, which made the read phase of equal runs differ by a factor
+// of two). --cold skips that: the input then comes from wherever it is.
+//
 // The reference figure is the issue's: PotreeConverter 2.x `-m random` builds
 // clustered data at about 2.4 M points/s on these 2-core machines. It is not
 // measured here (PotreeConverter is not packaged for Debian).
+#include <fcntl.h>
 #include <spawn.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -67,6 +74,22 @@ ChildUsage RunChild(const std::vector<std::string>& args) {
   return usage;
 }
 
+// Reads every file under `dir` once, into nothing: into the page cache.
+void ReadThroughPageCache(const fs::path& dir) {
+  std::vector<char> buffer(std::size_t{4} << 20);
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (!entry.is_regular_file()) continue;
+    const int fd = ::open(entry.path().c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw IoErrorFromErrno(entry.path().string(), "opening", errno);
+    ssize_t got = 0;
+    while ((got = ::read(fd, buffer.data(), buffer.size())) > 0) {
+    }
+    const int read_errno = errno;
+    ::close(fd);
+    if (got < 0) throw IoErrorFromErrno(entry.path().string(), "reading", read_errno);
+  }
+}
+
 std::uint64_t DirectoryBytes(const fs::path& dir) {
   std::uint64_t total = 0;
   for (const auto& entry : fs::recursive_directory_iterator(dir)) {
@@ -84,11 +107,13 @@ int main(int argc, char** argv) {
   std::string octocosm_path = (fs::path(argv[0]).parent_path() / ".." / "tools" / "octocosm").string();
   std::vector<std::string> case_texts = {"1e7", "1e8", "4e7@256M"};
   bool keep = false;
+  bool cold = false;
   CLI::App app{"octocosm-bench-ingest: ingest throughput, CPU time and peak RSS on generated clustered data"};
   app.add_option("--dir", dir, "scratch directory (removed afterwards)")->default_val(dir);
   app.add_option("--octocosm", octocosm_path, "the octocosm program to measure")->default_val(octocosm_path);
   app.add_option("--case", case_texts, "cases POINTS[@MEMORY], e.g. 1e7 1e8 4e7@256M")->default_val(case_texts);
   app.add_flag("--keep", keep, "keep the generated snapshots and stores");
+  app.add_flag("--cold", cold, "do not read the input into the page cache before each run");
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -101,7 +126,9 @@ int main(int argc, char** argv) {
       cases.push_back(c);
     }
     fs::create_directories(dir);
-    std::printf("octocosm-bench-ingest: %s on %u cores\n", octocosm_path.c_str(), std::thread::hardware_concurrency());
+    std::printf("octocosm-bench-ingest: %s on %u cores; %s\n", octocosm_path.c_str(), std::thread::hardware_concurrency(),
+                cold ? "input read from wherever it is (--cold)" : "input read into the page cache before each run");
+    std::fflush(stdout);  // before the children write theirs
     std::printf("%12s %10s %9s %9s %11s %8s %7s %11s %10s %10s\n", "points", "input MB", "budget", "wall s",
                 "M points/s", "CPU s", "CPU use", "peak RSS", "RSS/budget", "vs 2.4M/s");
     for (const Case& c : cases) {
@@ -121,6 +148,7 @@ int main(int argc, char** argv) {
         args.push_back("--memory");
         args.push_back(c.memory);
       }
+      if (!cold) ReadThroughPageCache(snapshots);
       const ChildUsage u = RunChild(args);
       if (!WIFEXITED(u.status) || WEXITSTATUS(u.status) != 0) {
         std::fprintf(stderr, "octocosm ingest failed for %llu points\n", static_cast<unsigned long long>(c.points));
