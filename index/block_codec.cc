@@ -28,7 +28,6 @@ double GetF64(const std::uint8_t* in) { return std::bit_cast<double>(GetU64(in))
 
 std::uint64_t Checksum(const std::uint8_t* data, std::size_t size) { return XXH3_64bits(data, size); }
 
-constexpr std::uint8_t kEncodingV1 = 1;
 // Column ids run from 1 to the number of columns.
 constexpr std::uint8_t kMaxColumnId = static_cast<std::uint8_t>(kColumnIds.size());
 
@@ -36,13 +35,13 @@ bool IsRequired(ColumnId id) {
   return id == ColumnId::kPosition || id == ColumnId::kWeight || id == ColumnId::kSmoothing || id == ColumnId::kType;
 }
 
-std::uint64_t BytesPerPoint(ColumnId id) {
+std::uint64_t BytesPerPoint(ColumnId id, std::uint8_t encoding) {
   switch (id) {
     case ColumnId::kPosition: return 6;
     case ColumnId::kWeight: return 4;
     case ColumnId::kSmoothing: return 2;
     case ColumnId::kVelocity: return 6;
-    case ColumnId::kId: return 8;
+    case ColumnId::kId: return encoding == kEncodingIdOffsets ? 4 : 8;
     case ColumnId::kType: return 1;
     case ColumnId::kDisplacement:
     case ColumnId::kNextVelocity:
@@ -476,9 +475,21 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
     if (present) ids.push_back(id);
   }
 
+  // IDs that span less than 2^32 are stored as offsets from the smallest.
+  std::uint64_t id_base = 0;
+  std::uint8_t id_encoding = kEncodingV1;
+  if (!points.id.empty()) {
+    const auto [lowest, highest] = std::minmax_element(points.id.begin(), points.id.end());
+    if (*highest - *lowest <= std::numeric_limits<std::uint32_t>::max()) {
+      id_base = *lowest;
+      id_encoding = kEncodingIdOffsets;
+    }
+  }
+  const auto encoding_of = [id_encoding](ColumnId id) { return id == ColumnId::kId ? id_encoding : kEncodingV1; };
+
   const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * ids.size() + 8;
   std::size_t block_size = header_size;
-  for (const ColumnId id : ids) block_size += BytesPerPoint(id) * n;
+  for (const ColumnId id : ids) block_size += BytesPerPoint(id, encoding_of(id)) * n;
   // Every column byte is written below; the header (with its unused
   // parameter bytes) is zeroed first.
   block.resize(block_size);
@@ -501,7 +512,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
     std::uint8_t* entry = b + kBlockFixedHeaderSize + kBlockDirectoryEntrySize * c;
     std::uint8_t* params = entry + 32;
     std::uint8_t* out = b + offset;
-    const std::size_t length = BytesPerPoint(id) * n;
+    const std::size_t length = BytesPerPoint(id, encoding_of(id)) * n;
     switch (id) {
       case ColumnId::kPosition: EncodePositions(points, key, cube, out); break;
       case ColumnId::kWeight:
@@ -515,7 +526,12 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
         break;
       case ColumnId::kId: {
         const std::uint64_t* particle_id = points.id.data();  // not reloaded after every byte store
-        for (std::size_t i = 0; i < n; ++i) PutU64(out + 8 * i, particle_id[i]);
+        if (id_encoding == kEncodingIdOffsets) {
+          PutU64(params, id_base);
+          for (std::size_t i = 0; i < n; ++i) PutU32(out + 4 * i, static_cast<std::uint32_t>(particle_id[i] - id_base));
+        } else {
+          for (std::size_t i = 0; i < n; ++i) PutU64(out + 8 * i, particle_id[i]);
+        }
         break;
       }
       case ColumnId::kType:
@@ -528,7 +544,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
       case ColumnId::kPrevVelocity: EncodeRanged3(ColumnName(id), *VectorColumnOf(points, id), out, params); break;
     }
     entry[0] = static_cast<std::uint8_t>(id);
-    entry[1] = kEncodingV1;
+    entry[1] = encoding_of(id);
     PutU64(entry + 8, offset);
     PutU64(entry + 16, length);
     PutU64(entry + 24, Checksum(out, length));
@@ -609,7 +625,8 @@ BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key,
     column.id = static_cast<ColumnId>(raw_id);
     if (seen & ColumnBit(column.id)) throw Error::Corruption(where, ColumnWhat(column.id, "listed twice"));
     seen |= ColumnBit(column.id);
-    if (entry[1] != kEncodingV1) {
+    column.encoding = entry[1];
+    if (column.encoding != kEncodingV1 && !(column.id == ColumnId::kId && column.encoding == kEncodingIdOffsets)) {
       throw Error::Corruption(where, ColumnWhat(column.id, "unknown encoding " + std::to_string(entry[1])));
     }
     if (GetU16(entry + 2) != 0 || GetU32(entry + 4) != 0) {
@@ -623,7 +640,7 @@ BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key,
       throw Error::Corruption(where, ColumnWhat(column.id, "starts at byte " + std::to_string(column.offset) +
                                                                ", expected " + std::to_string(expected_offset)));
     }
-    const std::uint64_t expected_length = BytesPerPoint(column.id) * header.point_count;
+    const std::uint64_t expected_length = BytesPerPoint(column.id, column.encoding) * header.point_count;
     if (column.length != expected_length) {
       throw Error::Corruption(where, ColumnWhat(column.id, std::to_string(column.length) + " bytes for " +
                                                                std::to_string(header.point_count) + " points, expected " +
@@ -713,7 +730,21 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
     }
     case ColumnId::kId:
       out.id.resize(n);
-      for (std::uint32_t i = 0; i < n; ++i) out.id[i] = GetU64(in + 8 * std::size_t{i});
+      if (column->encoding == kEncodingIdOffsets) {
+        const std::uint64_t base = GetU64(params);
+        std::uint32_t highest = 0;
+        for (std::uint32_t i = 0; i < n; ++i) {
+          const std::uint32_t offset = GetU32(in + 4 * std::size_t{i});
+          highest = std::max(highest, offset);
+          out.id[i] = base + offset;
+        }
+        if (highest > std::numeric_limits<std::uint64_t>::max() - base) {
+          throw Error::Corruption(where, ColumnWhat(id, "base " + std::to_string(base) + " plus offset " +
+                                                            std::to_string(highest) + " passes 2^64 - 1"));
+        }
+      } else {
+        for (std::uint32_t i = 0; i < n; ++i) out.id[i] = GetU64(in + 8 * std::size_t{i});
+      }
       break;
     case ColumnId::kType: out.type.assign(in, in + n); break;
     case ColumnId::kVelocity:
@@ -784,7 +815,7 @@ Bytes AssembleColumnSubset(const BlockHeader& header, ColumnSet keep,
     const BlockColumn& column = header.columns[kept[k]];
     std::uint8_t* entry = b + kBlockFixedHeaderSize + kBlockDirectoryEntrySize * k;
     entry[0] = static_cast<std::uint8_t>(column.id);
-    entry[1] = kEncodingV1;
+    entry[1] = column.encoding;
     PutU64(entry + 8, offset);
     PutU64(entry + 16, column.length);
     PutU64(entry + 24, column.checksum);

@@ -22,7 +22,7 @@
 //    68  u32  reserved = 0
 //   column directory: c entries of 56 bytes, at 72 + 56 * i
 //     0  u8   column id (table below); each id at most once
-//     1  u8   encoding = 1 (the only encoding of each column in version 1)
+//     1  u8   encoding: 1, or for the id column 1 or 2 (table below)
 //     2  u16  reserved = 0
 //     4  u32  reserved = 0
 //     8  u64  offset of the column's bytes from the start of the block
@@ -56,7 +56,10 @@
 //   4  velocity      6n      no        3 x u16 per point; v = min + q * (max - min) / 65535 per
 //                                      component. Params: f32 min[3], f32 max[3] (min <= max,
 //                                      finite). |error| <= (max - min) / 131070.
-//   5  id            8n      no        u64 per point.
+//   5  id            8n/4n   no        encoding 1: u64 per point, 8n bytes. Encoding 2: u32 per
+//                                      point, id = base + value, 4n bytes; params: u64 base. The
+//                                      writer uses encoding 2, with the block's smallest ID as
+//                                      base, whenever the block's IDs span less than 2^32.
 //   6  type          n       yes       u8 per point (GADGET particle type).
 //   7  displacement  6n      no        like velocity: the minimal-image offset to the next epoch.
 //   8  next_velocity 6n      no        like velocity: the particle's velocity at the next epoch.
@@ -65,6 +68,8 @@
 //
 // Columns 8-10 were added to version 1 before any store left this project
 // (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
+// So was the id column's encoding 2: a reader from before reports such a
+// block as corrupt ("unknown encoding"); blocks with encoding 1 read as ever.
 //
 // Decoding is safe for untrusted bytes: every offset, length, count and
 // parameter is checked, and any mismatch throws Error::Corruption naming the
@@ -139,12 +144,17 @@ inline constexpr std::size_t kBlockFixedHeaderSize = 72;
 inline constexpr std::size_t kBlockDirectoryEntrySize = 56;
 inline constexpr std::size_t kBlockMaxColumns = 16;
 inline constexpr std::size_t kBlockMaxHeaderSize = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * kBlockMaxColumns + 8;
+// Column encodings (the directory's byte 1): kEncodingV1 for every column,
+// kEncodingIdOffsets (u32 offsets from a u64 base) for the id column only.
+inline constexpr std::uint8_t kEncodingV1 = 1;
+inline constexpr std::uint8_t kEncodingIdOffsets = 2;
 inline constexpr std::uint64_t kWeightTotalUnits = (std::uint64_t{1} << 32) - (std::uint64_t{1} << 20);
 inline constexpr float kSmoothingLog2Min = -24;
 inline constexpr float kSmoothingPerOctave = 2048;
 
 struct BlockColumn {
   ColumnId id{};
+  std::uint8_t encoding = kEncodingV1;
   std::uint64_t offset = 0;  // from the start of the block
   std::uint64_t length = 0;
   std::uint64_t checksum = 0;

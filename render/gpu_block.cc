@@ -37,14 +37,19 @@ struct AttributeFormat {
   GLsizei stride;
 };
 
-std::optional<AttributeFormat> FormatOf(ColumnId id) {
-  switch (id) {
+// The id column's attribute reads whole u64 IDs (encoding 1: two words, low
+// first) or u32 offsets (encoding 2: the high word reads as 0), which the
+// shader adds to the block's base.
+std::optional<AttributeFormat> FormatOf(const BlockColumn& column) {
+  switch (column.id) {
     case ColumnId::kPosition: return AttributeFormat{kPositionAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
     case ColumnId::kWeight: return AttributeFormat{kWeightAttribute, 1, GL_UNSIGNED_INT, true, 4};
     case ColumnId::kSmoothing: return AttributeFormat{kSmoothingAttribute, 1, GL_UNSIGNED_SHORT, false, 2};
     case ColumnId::kType: return AttributeFormat{kTypeAttribute, 1, GL_UNSIGNED_BYTE, true, 1};
     case ColumnId::kVelocity: return AttributeFormat{kVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
-    case ColumnId::kId: return AttributeFormat{kIdAttribute, 2, GL_UNSIGNED_INT, true, 8};
+    case ColumnId::kId:
+      return column.encoding == kEncodingIdOffsets ? AttributeFormat{kIdAttribute, 1, GL_UNSIGNED_INT, true, 4}
+                                  : AttributeFormat{kIdAttribute, 2, GL_UNSIGNED_INT, true, 8};
     case ColumnId::kDisplacement: return AttributeFormat{kDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
     case ColumnId::kNextVelocity: return AttributeFormat{kNextVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
     case ColumnId::kPrevDisplacement: return AttributeFormat{kPrevDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
@@ -58,8 +63,9 @@ struct BlockUniforms {
   float node[4];
   std::int32_t columns[3][4];
   float ranges[5][2][4];  // velocity, displacement, next_velocity, prev_displacement, prev_velocity: min, step
+  std::uint32_t id_base[4];  // the id column's base (encoding 2), low word first; 0 for u64 IDs
 };
-static_assert(sizeof(BlockUniforms) == 224);
+static_assert(sizeof(BlockUniforms) == 240);
 
 float ParamF32(const BlockColumn& c, int offset) { return std::bit_cast<float>(GetU32(c.params.data() + offset)); }
 double ParamF64(const BlockColumn& c, int offset) { return std::bit_cast<double>(GetU64(c.params.data() + offset)); }
@@ -92,7 +98,7 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
   std::size_t total = 0;
   for (const BlockColumn& c : header.columns) total += (c.length + 15) / 16 * 16;
   std::vector<std::uint8_t> staging(total, 0);
-  std::vector<std::pair<ColumnId, std::size_t>> offsets;  // where each column landed
+  std::vector<std::pair<const BlockColumn*, std::size_t>> offsets;  // where each column landed
   std::size_t at = 0;
   for (const BlockColumn& c : header.columns) {
     if (c.offset > bytes.size() || c.length > bytes.size() - c.offset) {
@@ -103,7 +109,7 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
     // The shader only asks whether a column is present (>= 0).
     constexpr std::int32_t kPresent = 0;
     block.columns_ |= ColumnBit(c.id);
-    offsets.emplace_back(c.id, at);
+    offsets.emplace_back(&c, at);
     switch (c.id) {
       case ColumnId::kPosition: u.columns[0][0] = kPresent; break;
       case ColumnId::kWeight:
@@ -120,7 +126,14 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
         u.columns[1][0] = kPresent;
         SetRange(c, u.ranges[0]);
         break;
-      case ColumnId::kId: u.columns[1][1] = kPresent; break;
+      case ColumnId::kId:
+        u.columns[1][1] = kPresent;
+        if (c.encoding == kEncodingIdOffsets) {
+          const std::uint64_t base = GetU64(c.params.data());
+          u.id_base[0] = static_cast<std::uint32_t>(base);
+          u.id_base[1] = static_cast<std::uint32_t>(base >> 32);
+        }
+        break;
       case ColumnId::kDisplacement:
         u.columns[1][2] = kPresent;
         SetRange(c, u.ranges[1]);
@@ -151,8 +164,8 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
   GLuint vao = 0;
   glCreateVertexArrays(1, &vao);
   block.vertex_array_ = GlVertexArray(vao);
-  for (const auto& [id, offset] : offsets) {
-    const std::optional<AttributeFormat> f = FormatOf(id);
+  for (const auto& [column, offset] : offsets) {
+    const std::optional<AttributeFormat> f = FormatOf(*column);
     if (!f) continue;  // a column the renderer does not draw with
     glVertexArrayVertexBuffer(vao, f->location, block.buffer_.get(), static_cast<GLintptr>(offset), f->stride);
     if (f->integer) {

@@ -24,11 +24,13 @@ layout(std140, binding = 1) uniform Block {
   vec4 b_next_velocity[2];
   vec4 b_prev_displacement[2];
   vec4 b_prev_velocity[2];
+  uvec4 b_id_base;    // added to a_id: the id column's base (u32 offsets), 0 for whole u64 IDs; low word first
 };
 
 // The columns, as stored: u16 x 3 positions and ranged vectors (as floats
 // 0..65535), u32 weight units, u16 smoothing codes, u8 types, u64 IDs (as
-// two words, low first). Absent columns read as zero and are not used.
+// two words, low first) or u32 ID offsets (the high word reads as 0). Absent
+// columns read as zero and are not used.
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in uint a_weight;
 layout(location = 2) in float a_smoothing;
@@ -64,6 +66,14 @@ uint Mix32(uint x) {
   x *= 0x846ca68bu;
   x ^= x >> 16u;
   return x;
+}
+
+// The point's 64-bit ID, low word first: the stored value plus the block's
+// base, with the carry.
+uvec2 ParticleId() {
+  uint low = a_id.x + b_id_base.x;
+  uint carry = low < b_id_base.x ? 1u : 0u;
+  return uvec2(low, a_id.y + b_id_base.y + carry);
 }
 
 bool IsSelected(uvec2 id) {
@@ -139,7 +149,7 @@ void main() {
   else if (mode == 2 || mode == 3) a = dot(velocity, u_forward.xyz);
   else if (mode == 4) a = float(a_type);
   float selected = 0.0;
-  if (u_modes.z != 0 && b_columns1.y >= 0) selected = IsSelected(a_id) ? 1.0 : 0.0;
+  if (u_modes.z != 0 && b_columns1.y >= 0) selected = IsSelected(ParticleId()) ? 1.0 : 0.0;
 
   vec2 framebuffer = image + 2.0 * margin;
   v_center = center + margin;

@@ -548,6 +548,123 @@ TEST(BlockCodec, WrongKeyAndVersionAreReported) {
   }
 }
 
+// A block of some columns of another (what a renderer caches) decodes to
+// those columns of the original, each column's encoding and parameters kept:
+// IDs as u32 offsets and as u64, every subset holding the required columns.
+TEST(BlockCodec, ColumnSubsetsDecodeLikeTheirColumnsOfTheWholeBlock) {
+  std::mt19937_64 rng(23);
+  const NodeKey key = NodeKey::FromPath("r25");
+  for (const bool narrow_ids : {true, false}) {
+    NodePoints points = RandomPoints(rng, 300, key, kCube, kAllColumns);
+    if (narrow_ids) {
+      for (std::size_t i = 0; i < points.size(); ++i) points.id[i] = (std::uint64_t{5} << 40) + 3 * i;
+    }
+    const Bytes block = EncodeBlock(points, key, kCube);
+    const BlockHeader header = DecodeBlockHeader(block, key, "whole");
+    ASSERT_EQ(header.Find(ColumnId::kId)->encoding, narrow_ids ? 2 : 1);
+    std::vector<std::span<const std::uint8_t>> spans;
+    for (const BlockColumn& c : header.columns) spans.push_back(std::span(block).subspan(c.offset, c.length));
+    const ColumnSet required = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                               ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType);
+    for (const ColumnSet extra : {ColumnSet{0}, ColumnBit(ColumnId::kId), ColumnBit(ColumnId::kVelocity) | ColumnBit(ColumnId::kId),
+                                  kAllColumns}) {
+      const ColumnSet keep = required | extra;
+      const Bytes subset = AssembleColumnSubset(header, keep, spans);
+      const DecodedBlock from_subset = DecodeBlock(subset, kAllColumns, key, kCube, "subset");
+      const NodePoints expected = DecodeBlock(block, keep, key, kCube, "whole").points;
+      EXPECT_TRUE(SamePoints(from_subset.points, expected)) << narrow_ids << " " << keep;
+      EXPECT_EQ(from_subset.points.id, expected.id);
+      for (const BlockColumn& c : from_subset.header.columns) {
+        EXPECT_EQ(c.encoding, header.Find(c.id)->encoding) << ColumnName(c.id);
+        EXPECT_EQ(c.params, header.Find(c.id)->params) << ColumnName(c.id);
+      }
+    }
+    try {
+      std::vector<std::span<const std::uint8_t>> short_id = spans;
+      short_id[4] = short_id[4].first(short_id[4].size() - 1);
+      AssembleColumnSubset(header, kAllColumns, short_id);
+      ADD_FAILURE() << "a column of the wrong length was assembled";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument);
+      EXPECT_NE(std::string(e.what()).find("column 'id' has the wrong length"), std::string::npos) << e.what();
+    }
+  }
+}
+
+// The id column's two encodings: IDs spanning less than 2^32 are u32
+// offsets from the smallest (encoding 2, params: u64 base), wider ones u64
+// (encoding 1); both decode to the IDs given, at either end of the u64 range.
+TEST(BlockCodec, IdsOfANarrowRangeAreOffsetsFromTheSmallest) {
+  std::mt19937_64 rng(21);
+  const NodeKey key = NodeKey::FromPath("r4");
+  constexpr std::uint64_t kMax = std::numeric_limits<std::uint64_t>::max();
+  constexpr std::uint64_t kSpan32 = std::numeric_limits<std::uint32_t>::max();
+  struct Case {
+    std::uint64_t lowest, highest;
+    int encoding;
+  };
+  for (const Case& c : {Case{1, 2000, 2}, Case{0, kSpan32, 2}, Case{0, kSpan32 + 1, 1}, Case{kMax - kSpan32, kMax, 2},
+                        Case{kMax - 5, kMax, 2}, Case{0, kMax, 1}, Case{77, 77, 2}}) {
+    NodePoints points = RandomPoints(rng, 50, key, kCube, kAllColumns);
+    for (std::uint64_t& id : points.id) id = c.lowest + rng() % (c.highest - c.lowest + 1 == 0 ? kMax : c.highest - c.lowest + 1);
+    points.id[7] = c.highest;
+    points.id[31] = c.lowest;
+    const Bytes block = EncodeBlock(points, key, kCube);
+    const BlockHeader header = DecodeBlockHeader(block, key, "ids");
+    const BlockColumn* column = header.Find(ColumnId::kId);
+    ASSERT_NE(column, nullptr);
+    EXPECT_EQ(column->encoding, c.encoding) << c.lowest << ".." << c.highest;
+    EXPECT_EQ(block[kBlockFixedHeaderSize + 56 * 4 + 1], c.encoding) << "the directory's encoding byte";
+    EXPECT_EQ(column->length, (c.encoding == 2 ? 4u : 8u) * points.size());
+    if (c.encoding == 2) {
+      std::uint64_t base = 0;
+      std::memcpy(&base, column->params.data(), 8);  // test host is little endian
+      EXPECT_EQ(base, c.lowest);
+      std::uint32_t offset = 0;
+      std::memcpy(&offset, block.data() + column->offset + 4 * 7, 4);
+      EXPECT_EQ(offset, c.highest - c.lowest);
+    }
+    const NodePoints decoded = DecodeBlock(block, kAllColumns, key, kCube, "ids").points;
+    EXPECT_EQ(decoded.id, points.id) << c.lowest << ".." << c.highest;
+  }
+}
+
+// Encoding 2 only for the id column, and offsets that would pass 2^64 - 1
+// from their base, are corruption (the checksums rewritten to match).
+TEST(BlockCodec, BadIdOffsetEncodingsAreCorruption) {
+  std::mt19937_64 rng(22);
+  const NodeKey key = NodeKey::FromPath("r4");
+  NodePoints points = RandomPoints(rng, 20, key, kCube, kAllColumns);
+  for (std::size_t i = 0; i < points.size(); ++i) points.id[i] = 1000 + i;
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const std::size_t id_entry = kBlockFixedHeaderSize + 56 * 4;
+  ASSERT_EQ(block[id_entry], 5) << "the fifth column is the id column";
+  ASSERT_EQ(block[id_entry + 1], 2);
+  const auto expect_corrupt = [&](Bytes bad, const std::string& message, const std::string& what) {
+    FixChecksums(bad);
+    try {
+      DecodeBlock(bad, kAllColumns, key, kCube, "store/epoch-00000.pages block r4");
+      ADD_FAILURE() << what << " decoded";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << what;
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << what << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find("epoch-00000.pages block r4"), std::string::npos) << e.what();
+    }
+  };
+  Bytes velocity_offsets = block;
+  velocity_offsets[kBlockFixedHeaderSize + 56 * 3 + 1] = 2;  // the velocity column
+  expect_corrupt(velocity_offsets, "column 'velocity': unknown encoding 2", "encoding 2 on velocity");
+  Bytes encoding_three = block;
+  encoding_three[id_entry + 1] = 3;
+  expect_corrupt(encoding_three, "column 'id': unknown encoding 3", "encoding 3");
+  Bytes wide_length = block;
+  wide_length[id_entry + 1] = 1;  // 4n bytes where u64 IDs need 8n
+  expect_corrupt(wide_length, "column 'id': 80 bytes for 20 points, expected 160", "encoding 1 with 4n bytes");
+  Bytes overflowing = block;
+  for (int i = 0; i < 8; ++i) overflowing[id_entry + 32 + i] = 0xFF;  // base 2^64 - 1, offsets up to 19
+  expect_corrupt(overflowing, "passes 2^64 - 1", "an overflowing base");
+}
+
 TEST(BlockCodec, ExtremeVelocityRangesStayFinite) {
   std::mt19937_64 rng(10);
   const NodeKey key = NodeKey::FromPath("r6");

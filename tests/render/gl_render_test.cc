@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <limits>
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -12,6 +13,7 @@
 #include "index/particle_lookup.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
+#include "render/selection_set.h"
 #include "render/reference_rasterizer.h"
 #include "tests/support/temp_dir.h"
 #include "tools/camera_flags.h"
@@ -330,6 +332,68 @@ TEST_F(GlRenderTest, TenMillionBlobsInOnePixelSumToTheDoubleReference) {
   RecordProperty("relative_error", std::to_string(image.at(32, 32, 0) / expected - 1));
   std::printf("10^7 blobs in one pixel: float sum %.9g, double sum %.9g, relative error %.3g\n", image.at(32, 32, 0),
               expected, image.at(32, 32, 0) / expected - 1);
+}
+
+// The id column reaches the GPU as stored: u32 offsets from the block's base
+// (the shader adds them, carrying into the high word) or whole u64 IDs.
+// Blocks whose IDs cross 2^32, end at 2^64 - 2, or span more than 2^32 (so
+// stored whole); every other ID selected: the highlighted mass is the mass of
+// exactly those points.
+TEST_F(GlRenderTest, HighlightingReadsIdOffsetsAcross32BitsAndWholeIds) {
+  const Dataset d = Dataset::Open(scene->store);  // any dataset: only its context is used
+  OffscreenRenderer renderer(d, HeadlessBackend::kOsMesa, Full());
+  const Cube cube{{0, 0, 0}, 1, false};
+  const NodeKey key = NodeKey::Root();
+  constexpr std::uint64_t kCarry = std::uint64_t{1} << 32;
+  constexpr std::uint64_t kLast = std::numeric_limits<std::uint64_t>::max() - 1;  // 2^64 - 1 cannot be selected
+  struct Case {
+    std::uint64_t first, step;
+    int encoding;
+  };
+  for (const Case& c : {Case{kCarry - 500, 1, 2}, Case{kLast - 999, 1, 2}, Case{7, kCarry / 100, 1}}) {
+    NodePoints points;
+    std::mt19937_64 rng(c.first);
+    std::uniform_real_distribution<double> w(0.5, 1.5);
+    for (std::uint64_t i = 0; i < 1000; ++i) {
+      for (int a = 0; a < 3; ++a) points.position.push_back(0.5 + 0.25 / 65536);
+      points.weight.push_back(w(rng));
+      points.smoothing.push_back(1e-6);
+      points.type.push_back(1);
+      points.id.push_back(c.first + i * c.step);
+    }
+    OrderByOctant(points, key, cube);
+    const Bytes bytes = EncodeBlock(points, key, cube);
+    const BlockHeader header = DecodeBlockHeader(bytes, key, "test");
+    ASSERT_EQ(header.Find(ColumnId::kId)->encoding, c.encoding) << c.first;
+    const GpuBlock block = GpuBlock::Upload(bytes, header, cube.NodeCubeOf(key), "test");
+    const DecodedBlock decoded = DecodeBlock(bytes, kAllColumns, key, cube, "test");
+    std::vector<std::uint64_t> selected;
+    double all = 0, selected_mass = 0;
+    for (std::size_t i = 0; i < decoded.points.size(); ++i) {
+      all += decoded.points.weight[i];
+      if ((decoded.points.id[i] - c.first) / c.step % 2 == 0) {
+        selected.push_back(decoded.points.id[i]);
+        selected_mass += decoded.points.weight[i];
+      }
+    }
+    SelectionSet selection(selected);
+    selection.Upload();
+
+    Camera camera;
+    camera.position = {0.5, 0.5, 3};
+    camera.look_at = {0.5, 0.5, 0};
+    camera.near = 0.1;
+    camera.far = 10;
+    FrameSettings settings;
+    settings.mass_unit = 1.0;
+    renderer.splat().BeginFrame(RenderView(camera, 64, 64), settings);
+    renderer.splat().SetSelection(&selection);
+    renderer.splat().Draw(block, 0, block.point_count());
+    const HdrImage image = renderer.splat().ReadHdr();
+    renderer.splat().SetSelection(nullptr);
+    EXPECT_NEAR(Total(image, 0) / all, 1, 1e-5) << c.first;
+    EXPECT_NEAR(Total(image, 3) / selected_mass, 1, 1e-5) << c.first << ": the highlighted mass";
+  }
 }
 
 }  // namespace

@@ -132,7 +132,7 @@ nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links) {
   add(ColumnId::kSmoothing, "u16 log2 code relative to the node size", "smoothing length");
   add(ColumnId::kType, "u8", "particle type");
   if (velocity) add(ColumnId::kVelocity, "u16x3 between per-block min and max", "velocity (input units)");
-  if (id) add(ColumnId::kId, "u64", "particle ID");
+  if (id) add(ColumnId::kId, "u32 offsets from a u64 base per block, or u64", "particle ID");
   if (epoch_links) {
     const char* ranged = "u16x3 between per-block min and max";
     add(ColumnId::kDisplacement, ranged, "offset to the next epoch (minimal image); every epoch but the last");
