@@ -4,8 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <limits>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <thread>
@@ -13,8 +13,8 @@
 #include "index/particle_lookup.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
-#include "render/selection_set.h"
 #include "render/reference_rasterizer.h"
+#include "render/selection_set.h"
 #include "tests/support/temp_dir.h"
 #include "tools/camera_flags.h"
 #include "tools/ingest/ingest.h"
