@@ -307,7 +307,8 @@ TEST(BlockCodec, LeftoverUnitsMatchAReferenceOrderOfTheRemainders) {
       for (double& w : points.weight) w = weight_of(rng);
       for (std::size_t i = 0; i + 1 < n; i += 7) points.weight[i + 1] = points.weight[i];
       const Bytes block = EncodeBlock(points, key, kCube);
-      const BlockColumn* column = DecodeBlockHeader(block, key, "w").Find(ColumnId::kWeight);
+      const BlockHeader header = DecodeBlockHeader(block, key, "w");
+      const BlockColumn* column = header.Find(ColumnId::kWeight);
       ASSERT_NE(column, nullptr);
       std::vector<std::uint32_t> units(n);
       std::memcpy(units.data(), block.data() + column->offset, 4 * n);  // test host is little endian
