@@ -14,6 +14,7 @@
 #include <string>
 
 #include "index/extended_sum.h"
+#include "index/nth_largest.h"
 #include "storage/coding.h"
 #include "storage/error.h"
 
@@ -146,30 +147,6 @@ void EncodePositions(const NodePoints& points, NodeKey key, const Cube& cube, st
 // each point gets floor(K * w / W) units, and the units left over go one each
 // to the points with the largest fractional parts, so the units sum to K
 // exactly. Returns the unit (W / K).
-// The value of rank `rank` (0 the largest; rank < fractions.size()) among
-// `fractions`, all in [0, 1): what std::nth_element with std::greater would
-// put there. A histogram of 4096 equal bins finds the bin that holds the
-// rank, and the selection runs among that bin's values only: two passes over
-// the values instead of the several partitions of an nth_element over them
-// all (which was 1.7 % of the ingest's CPU at 10^8 points, for parents' weights).
-double NthLargestFraction(std::span<const double> fractions, std::size_t rank) {
-  constexpr std::size_t kBins = 4096;
-  const auto bin_of = [](double f) { return std::min(static_cast<std::size_t>(f * kBins), kBins - 1); };
-  std::array<std::uint32_t, kBins> count{};
-  for (const double f : fractions) ++count[bin_of(f)];
-  std::size_t bin = kBins - 1;
-  std::size_t above = 0;  // values in bins above `bin`
-  while (above + count[bin] <= rank) above += count[bin--];
-  std::vector<double> in_bin;
-  in_bin.reserve(count[bin]);
-  for (const double f : fractions) {
-    if (bin_of(f) == bin) in_bin.push_back(f);
-  }
-  const auto nth = in_bin.begin() + static_cast<std::ptrdiff_t>(rank - above);
-  std::nth_element(in_bin.begin(), nth, in_bin.end(), std::greater<>());
-  return *nth;
-}
-
 double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
   const std::size_t n = weight.size();
   if (n == 0) return 0;
@@ -222,7 +199,7 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
     // remainders, ties to the lower index. Selecting the threshold among the
     // remainders themselves, not through an index order, keeps the selection
     // a pass over contiguous doubles.
-    const double threshold = NthLargestFraction(remainder, static_cast<std::size_t>(deficit - 1));
+    const double threshold = NthLargest(remainder, static_cast<std::size_t>(deficit - 1));
     std::int64_t above = 0;
     for (std::size_t i = 0; i < n; ++i) above += remainder[i] > threshold ? 1 : 0;
     std::int64_t ties = deficit - above;  // at least 1: the threshold itself
