@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <exception>
 #include <filesystem>
+#include <functional>
 #include <future>
 #include <map>
 #include <memory>
@@ -265,8 +266,11 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
 // waits for its predecessors), so memory holds a few chunk roots plus the
 // merger's open ancestors, never every chunk's sample. Returns the root.
 // Resident chunks (Chunker::SplitResident) are copied out of `resident` one
-// at a time by each worker's gatherer.
-NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident, EpochBuild& build, unsigned threads) {
+// at a time by each worker's gatherer. `chunks_built` is called once every
+// chunk is built, before the merger closes the nodes still open above the
+// last one: every leaf has been emitted by then.
+NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident, EpochBuild& build, unsigned threads,
+                       const std::function<void()>& chunks_built) {
   Bytes merger_block;  // the merger runs under merge_mutex: one buffer serves it
   TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
     build.Emit(key, points, /*is_leaf=*/false, merger_block);
@@ -320,6 +324,7 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
   work();
   for (auto& worker : workers) worker.join();
   if (error) std::rethrow_exception(error);
+  chunks_built();
   return merger.Finish();
 }
 
@@ -566,21 +571,11 @@ IngestReport Ingest(const IngestOptions& options) {
     build.id_table = id_table.get();
     build.id_pairs = id_pairs.get();
     build.report = &epoch_report;
-    {
-      Progress progress(label + ": build", epoch_report.points, "points");
-      build.progress = &progress;
-      const NodePoints root = BuildChunks(std::move(chunks), resident_points, build, threads);
-      resident_points = ResidentEpoch();
-      for (double w : root.weight) epoch_report.mass += w;
-      progress.Finish();
-    }
-    clock.Lap("build");
-    // Finishing the epoch's page file is mostly waiting for the disk (fsync):
-    // the ID index is built meanwhile. The store and the ID store share no state.
-    std::future<void> epoch_written = std::async(std::launch::async, [&store] { store.EndEpoch(); });
-
-    // 5. ID index.
-    if (has_id) {
+    // 5. ID index. It needs only the leaves, so it is written on a thread of
+    // its own from when the last chunk is built, while the merger closes the
+    // nodes above it, and while the epoch's page file is finished (mostly
+    // waiting for fsync). The store and the ID store share no state.
+    auto write_id_index = [&] {
       if (id_pairs) id_pairs->Finish();
       id_store->BeginEpoch(header.time, header.redshift);
       IdIndexEpochWriter ids(*id_store, options.page_size);
@@ -593,6 +588,22 @@ IngestReport Ingest(const IngestOptions& options) {
       }
       ids.Finish();
       id_store->EndEpoch();
+    };
+    std::future<void> id_index_written;
+    {
+      Progress progress(label + ": build", epoch_report.points, "points");
+      build.progress = &progress;
+      const NodePoints root = BuildChunks(std::move(chunks), resident_points, build, threads, [&] {
+        if (has_id) id_index_written = std::async(std::launch::async, write_id_index);
+      });
+      resident_points = ResidentEpoch();
+      for (double w : root.weight) epoch_report.mass += w;
+      progress.Finish();
+    }
+    clock.Lap("build");
+    std::future<void> epoch_written = std::async(std::launch::async, [&store] { store.EndEpoch(); });
+    if (has_id) {
+      id_index_written.get();
       clock.Lap("ids");
     }
     epoch_written.get();
