@@ -1,11 +1,44 @@
 #include "tools/parallel_for.h"
 
 #include <algorithm>
+#include <atomic>
 #include <exception>
 #include <thread>
 #include <vector>
 
 namespace octocosm {
+
+void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
+                        const std::function<void(std::size_t, std::size_t)>& body) {
+  grain = std::max<std::size_t>(grain, 1);
+  const std::size_t pieces = count / grain + (count % grain != 0 ? 1 : 0);
+  const std::size_t parts = std::min<std::size_t>(static_cast<std::size_t>(std::max(threads, 1)), pieces);
+  if (parts <= 1) {
+    if (count > 0) body(0, count);
+    return;
+  }
+  std::atomic<std::size_t> next{0};
+  std::atomic<bool> failed{false};
+  std::vector<std::exception_ptr> errors(parts);
+  auto run = [&](std::size_t part) {
+    try {
+      for (std::size_t piece = next++; piece < pieces && !failed; piece = next++) {
+        body(piece * grain, std::min(count, (piece + 1) * grain));
+      }
+    } catch (...) {
+      errors[part] = std::current_exception();
+      failed = true;
+    }
+  };
+  std::vector<std::thread> workers;
+  workers.reserve(parts - 1);
+  for (std::size_t part = 1; part < parts; ++part) workers.emplace_back(run, part);
+  run(0);
+  for (std::thread& worker : workers) worker.join();
+  for (const std::exception_ptr& error : errors) {
+    if (error) std::rethrow_exception(error);
+  }
+}
 
 int ResolveThreadCount(int requested) {
   if (requested > 0) return requested;

@@ -15,6 +15,15 @@ namespace octocosm {
 void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body,
                  std::size_t min_items_per_thread = 4096);
 
+// Runs body(begin, end) over [0, count) in pieces of `grain` items (the last
+// one shorter) that `threads` threads take in turn as they finish their last,
+// the calling thread among them. For loops whose items are independent but
+// whose threads run unevenly: on a shared machine a thread that is
+// descheduled, or stops to fault in fresh pages, holds up a static split by
+// the whole delay, a dynamic one by at most one piece. Errors as ParallelFor.
+void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
+                        const std::function<void(std::size_t, std::size_t)>& body);
+
 // The thread count to use for `requested` (0 means all hardware threads).
 int ResolveThreadCount(int requested);
 

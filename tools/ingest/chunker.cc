@@ -22,6 +22,10 @@ namespace {
 // Fewer points per batch than this are placed on one thread: starting another
 // would cost more than it saves.
 constexpr std::size_t kPointsPerThread = 16384;
+// Loops over a whole resident epoch hand their points to the threads in
+// pieces of this many (ParallelForDynamic): small enough that a thread held
+// up costs the others little, large enough that taking one costs nothing.
+constexpr std::size_t kPointsPerPiece = std::size_t{1} << 16;
 // Points listed by index lie scattered across a resident epoch's columns, so
 // each read of one is a cache miss; fetching this many points ahead lets the
 // misses overlap instead of queueing one behind another.
@@ -329,11 +333,11 @@ std::vector<Chunk> Chunker::SplitResident(NodeKey root, const ResidentEpoch& res
   cells.level = std::max(std::min(root.level() + ResidentCells::kLevels, options_.max_level), root.level());
   cells.cell = std::make_unique_for_overwrite<std::uint32_t[]>(resident.size());
   const CellsBelow below(cube_, root, cells.level);
-  ParallelFor(resident.size(), std::max(options_.threads, 1), [&](std::size_t begin, std::size_t end) {
+  ParallelForDynamic(resident.size(), std::max(options_.threads, 1), kPointsPerPiece, [&](std::size_t begin, std::size_t end) {
     resident.ForEachPosition(begin, end, [&](std::size_t i, const double* position) {
       cells.cell[i] = CellBelow(below, position, root);
     });
-  }, kPointsPerThread);
+  });
   std::vector<Chunk> chunks = SplitResidentAt(root, options_.split_levels, resident, cells, {}, nullptr);
   cells = ResidentCells();
   if (options_.leaf_capacity != 0) chunks = MergeLeafSubtrees(root, std::move(chunks));
@@ -370,12 +374,12 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
     // Deeper than the cells computed once (a dense clump): from the positions.
     const CellsBelow below(cube_, root, level);
     std::vector<std::uint32_t> cell_of(n);
-    ParallelFor(n, threads, [&](std::size_t begin, std::size_t end) {
+    ParallelForDynamic(n, threads, kPointsPerPiece, [&](std::size_t begin, std::size_t end) {
       for (std::size_t k = begin; k < end; ++k) {
         if (k + kPrefetchDistance < end) __builtin_prefetch(resident.PositionAddress(point_of(k + kPrefetchDistance)));
         cell_of[k] = CellBelow(below, resident.Position(point_of(k)).data(), root);
       }
-    }, kPointsPerThread);
+    });
     order = OrderByCell(n, cell_count, threads, [&cell_of](std::size_t k) { return cell_of[k]; }, point_of,
                         subset.empty());
   }

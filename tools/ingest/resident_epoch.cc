@@ -305,7 +305,7 @@ bool ResidentEpoch::ValuesAsRead(const Cube& cube, int threads, const std::funct
   const std::size_t velocity = static_cast<std::size_t>(VectorColumn::kVelocity);
   std::atomic<bool> usable = true;
   for (const Run& run : runs_) {
-    ParallelFor(run.count, threads, [&](std::size_t begin, std::size_t end) {
+    ParallelForDynamic(run.count, threads, std::size_t{1} << 16, [&](std::size_t begin, std::size_t end) {
       bool ok = true;
       for (std::size_t i = begin; i < end; ++i) {
         for (std::size_t a = 0; a < 3; ++a) {
@@ -320,7 +320,7 @@ bool ResidentEpoch::ValuesAsRead(const Cube& cube, int threads, const std::funct
         }
       }
       if (!ok) usable = false;
-    }, std::size_t{1} << 16);
+    });
     if (!usable) return false;
     progress(run.count);
   }

@@ -1,0 +1,93 @@
+// ParallelFor and ParallelForDynamic (tools/parallel_for.h): every item once,
+// in the documented ranges, and errors back on the calling thread.
+#include "tools/parallel_for.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstddef>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+#include <utility>
+#include <vector>
+
+namespace octocosm {
+namespace {
+
+// The ranges a loop's body was called with, from any thread.
+struct Ranges {
+  void Add(std::size_t begin, std::size_t end) {
+    std::lock_guard lock(mutex);
+    seen.emplace_back(begin, end);
+  }
+  std::mutex mutex;
+  std::vector<std::pair<std::size_t, std::size_t>> seen;
+};
+
+TEST(ParallelForDynamic, CoversEveryItemOnceInPiecesOfTheGrain) {
+  for (const std::size_t count : {0u, 1u, 99u, 100u, 101u, 1000u, 12345u}) {
+    for (const int threads : {1, 2, 3, 8}) {
+      for (const std::size_t grain : {1u, 7u, 100u, 5000u}) {
+        std::vector<std::atomic<int>> hits(count);
+        Ranges ranges;
+        ParallelForDynamic(count, threads, grain, [&](std::size_t begin, std::size_t end) {
+          ranges.Add(begin, end);
+          for (std::size_t i = begin; i < end; ++i) ++hits[i];
+        });
+        for (std::size_t i = 0; i < count; ++i) ASSERT_EQ(hits[i], 1) << count << " " << threads << " " << grain << " " << i;
+        const std::size_t pieces = (count + grain - 1) / grain;
+        EXPECT_EQ(ranges.seen.size(), count == 0 ? 0 : (threads == 1 ? 1 : pieces)) << count << " " << threads << " " << grain;
+        if (threads == 1) continue;
+        for (const auto& [begin, end] : ranges.seen) {
+          EXPECT_EQ(begin % grain, 0u);
+          EXPECT_EQ(end, std::min(count, begin + grain));
+        }
+      }
+    }
+  }
+}
+
+TEST(ParallelForDynamic, AThreadHeldUpLeavesTheRestToTheOthers) {
+  // The calling thread sleeps in its first piece; a static split would still
+  // give it half the items.
+  const std::thread::id caller = std::this_thread::get_id();
+  std::atomic<std::size_t> by_caller{0};
+  std::atomic<std::size_t> total{0};
+  std::atomic<bool> slept{false};
+  ParallelForDynamic(1000, 2, 10, [&](std::size_t begin, std::size_t end) {
+    if (std::this_thread::get_id() == caller) {
+      if (!slept.exchange(true)) std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      by_caller += end - begin;
+    }
+    total += end - begin;
+  });
+  EXPECT_EQ(total, 1000u);
+  EXPECT_LT(by_caller, 500u);
+}
+
+TEST(ParallelForDynamic, AnErrorIsRethrownOnTheCallingThreadAndStopsTheRest) {
+  std::atomic<std::size_t> ran{0};
+  EXPECT_THROW(ParallelForDynamic(100000, 2, 10, [&](std::size_t begin, std::size_t) {
+                 ++ran;
+                 if (begin == 500) throw std::runtime_error("piece 50");
+               }),
+               std::runtime_error);
+  EXPECT_LT(ran, 10000u);  // the pieces after the error are not taken
+}
+
+TEST(ParallelFor, OneContiguousRangePerThread) {
+  Ranges ranges;
+  ParallelFor(10000, 3, [&](std::size_t begin, std::size_t end) { ranges.Add(begin, end); }, 1);
+  std::sort(ranges.seen.begin(), ranges.seen.end());
+  ASSERT_EQ(ranges.seen.size(), 3u);
+  EXPECT_EQ(ranges.seen[0].first, 0u);
+  EXPECT_EQ(ranges.seen[0].second, ranges.seen[1].first);
+  EXPECT_EQ(ranges.seen[1].second, ranges.seen[2].first);
+  EXPECT_EQ(ranges.seen[2].second, 10000u);
+}
+
+}  // namespace
+}  // namespace octocosm
