@@ -26,6 +26,7 @@
 #include "storage/error.h"
 #include "storage/store_writer.h"
 #include "tools/ingest/chunk_gatherer.h"
+#include "tools/ingest/chunk_queue.h"
 #include "tools/ingest/chunker.h"
 #include "tools/ingest/dense_id_table.h"
 #include "tools/ingest/epoch_join.h"
@@ -260,40 +261,6 @@ NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has
   };
 }
 
-// Hands out chunks to the build threads: the largest of the next few not yet
-// taken in depth-first order. Taken strictly in order, the last chunk was
-// any size, and the other threads idled while one built it: from the first
-// thread's end to the last's, 34 ms on average at 10^7 points in 64 chunks
-// (eight runs), 23 ms with a window of 8 chunks, 28 ms with 4. The window
-// keeps the roots that complete ahead of their turn to merge to a few.
-class ChunkQueue {
- public:
-  ChunkQueue(const std::vector<Chunk>& chunks, std::size_t window)
-      : chunks_(chunks), window_(std::max<std::size_t>(window, 1)), taken_(chunks.size(), false) {}
-
-  // The chunk to build next, or chunks.size() when all are taken.
-  std::size_t Take() {
-    std::lock_guard lock(mutex_);
-    while (first_open_ < chunks_.size() && taken_[first_open_]) ++first_open_;
-    std::size_t best = chunks_.size();
-    std::size_t seen = 0;
-    for (std::size_t c = first_open_; c < chunks_.size() && seen < window_; ++c) {
-      if (taken_[c]) continue;
-      ++seen;
-      if (best == chunks_.size() || chunks_[c].point_count > chunks_[best].point_count) best = c;
-    }
-    if (best < chunks_.size()) taken_[best] = true;
-    return best;
-  }
-
- private:
-  const std::vector<Chunk>& chunks_;
-  const std::size_t window_;
-  std::mutex mutex_;
-  std::vector<bool> taken_;
-  std::size_t first_open_ = 0;
-};
-
 // Builds the chunks' subtrees on `threads` threads and merges the levels
 // above them as they complete. Chunks are taken nearly in depth-first order
 // (ChunkQueue) and their roots handed to the merger in that order (a root
@@ -313,7 +280,9 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
   std::mutex merge_mutex;  // guards merger, ready, next_to_merge
   std::map<std::size_t, NodePoints> ready;
   std::size_t next_to_merge = 0;
-  ChunkQueue queue(chunks, 4 * std::size_t{threads});
+  std::vector<std::uint64_t> point_counts;
+  for (const Chunk& chunk : chunks) point_counts.push_back(chunk.point_count);
+  ChunkQueue queue(std::move(point_counts), 4 * std::size_t{threads});
   std::atomic<bool> failed{false};
   std::exception_ptr error;
   std::mutex error_mutex;
