@@ -1,8 +1,6 @@
-// Splits [0, count) into one contiguous range per thread and runs
-// body(begin, end) on each, the calling thread taking the first range. The
-// split depends only on count and threads, so a body whose ranges do not
-// interact gives the same result for any thread count. An exception thrown
-// by a body is rethrown on the calling thread after all ranges finish.
+// Loops over [0, count) on several threads, the calling thread among them.
+// An exception thrown by a body is rethrown on the calling thread after the
+// other threads finish.
 #pragma once
 
 #include <cstddef>
@@ -10,17 +8,22 @@
 
 namespace octocosm {
 
-// min_items_per_thread keeps light loops on fewer threads, where starting a
-// thread would cost more than it saves.
+// Splits [0, count) into one contiguous range per thread and runs
+// body(begin, end) on each, the calling thread taking the first range. The
+// split depends only on count and threads, so a body whose ranges do not
+// interact gives the same result for any thread count, and a body may keep
+// state per range (the counting sort's tables). min_items_per_thread keeps
+// light loops on fewer threads, where starting a thread would cost more than
+// it saves.
 void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body,
                  std::size_t min_items_per_thread = 4096);
 
 // Runs body(begin, end) over [0, count) in pieces of `grain` items (the last
-// one shorter) that `threads` threads take in turn as they finish their last,
-// the calling thread among them. For loops whose items are independent but
-// whose threads run unevenly: on a shared machine a thread that is
-// descheduled, or stops to fault in fresh pages, holds up a static split by
-// the whole delay, a dynamic one by at most one piece. Errors as ParallelFor.
+// one shorter) that `threads` threads take in turn as they finish their last.
+// For loops whose items are independent but whose threads run unevenly: on a
+// shared machine a thread that is descheduled, or stops to fault in fresh
+// pages, holds up a static split by the whole delay, a dynamic one by at most
+// one piece. After an error no further pieces are taken.
 void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
                         const std::function<void(std::size_t, std::size_t)>& body);
 
