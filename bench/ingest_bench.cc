@@ -16,8 +16,12 @@
 // of two). --cold skips that: the input then comes from wherever it is.
 //
 // The reference figure is the issue's: PotreeConverter 2.x `-m random` builds
-// clustered data at about 2.4 M points/s on these 2-core machines. It is not
-// measured here (PotreeConverter is not packaged for Debian).
+// clustered data at about 2.4 M points/s on these 2-core machines. Given the
+// path of a PotreeConverter program (--potree-converter; it is not packaged
+// for Debian), the bench also measures it on the same points, written once
+// as an uncompressed LAS file (bench/las_export.h), straight after octocosm
+// in each case without a budget (PotreeConverter takes none), and prints the
+// ratio of the two.
 #include <fcntl.h>
 #include <spawn.h>
 #include <sys/resource.h>
@@ -33,6 +37,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "bench/las_export.h"
 #include "storage/error.h"
 #include "tools/cli_util.h"
 #include "tools/synth/scale_generator.h"
@@ -55,15 +60,19 @@ struct ChildUsage {
   int status = 0;
 };
 
-ChildUsage RunChild(const std::vector<std::string>& args) {
+// Runs the program args[0]; with `quiet`, its standard output goes to /dev/null.
+ChildUsage RunChild(const std::vector<std::string>& args, bool quiet = false) {
   std::vector<char*> argv;
   for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
   const auto start = std::chrono::steady_clock::now();
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  if (quiet) posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
   pid_t pid = 0;
-  if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) != 0) {
-    throw IoErrorFromErrno(args[0], "starting", errno);
-  }
+  const int spawned = posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawned != 0) throw IoErrorFromErrno(args[0], "starting", spawned);
   ChildUsage usage;
   struct rusage ru {};
   if (wait4(pid, &usage.status, 0, &ru) < 0) throw IoErrorFromErrno(args[0], "waiting for", errno);
@@ -108,12 +117,16 @@ int main(int argc, char** argv) {
   std::vector<std::string> case_texts = {"1e7", "1e8", "4e7@256M"};
   bool keep = false;
   bool cold = false;
+  std::string potree_converter;
   CLI::App app{"octocosm-bench-ingest: ingest throughput, CPU time and peak RSS on generated clustered data"};
   app.add_option("--dir", dir, "scratch directory (removed afterwards)")->default_val(dir);
   app.add_option("--octocosm", octocosm_path, "the octocosm program to measure")->default_val(octocosm_path);
   app.add_option("--case", case_texts, "cases POINTS[@MEMORY], e.g. 1e7 1e8 4e7@256M")->default_val(case_texts);
   app.add_flag("--keep", keep, "keep the generated snapshots and stores");
   app.add_flag("--cold", cold, "do not read the input into the page cache before each run");
+  app.add_option("--potree-converter", potree_converter,
+                 "also run this PotreeConverter 2.x program (-m random) on the same points, written as LAS, in each "
+                 "case without a budget, and print octocosm's throughput against it");
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -163,6 +176,31 @@ int main(int argc, char** argv) {
                   budget > 0 ? (std::to_string(u.peak_rss_bytes / budget).substr(0, 4)).c_str() : "-", rate / 2.4);
       std::fflush(stdout);
       fs::remove_all(store);
+      if (!potree_converter.empty() && c.memory.empty()) {
+        const fs::path las_dir = fs::path(dir) / ("las-" + std::to_string(c.points));
+        const fs::path las = las_dir / "snap.las";
+        if (!fs::exists(las)) {
+          fs::create_directories(las_dir);
+          ExportLas((snapshots / "snap").string(), las.string());
+        }
+        const fs::path potree_out = fs::path(dir) / "potree";
+        fs::remove_all(potree_out);
+        if (!cold) ReadThroughPageCache(las_dir);
+        const ChildUsage p =
+            RunChild({potree_converter, las.string(), "-o", potree_out.string(), "-m", "random"}, /*quiet=*/true);
+        if (!WIFEXITED(p.status) || WEXITSTATUS(p.status) != 0) {
+          std::fprintf(stderr, "%s failed for %llu points\n", potree_converter.c_str(),
+                       static_cast<unsigned long long>(c.points));
+          return 1;
+        }
+        const double potree_rate = static_cast<double>(c.points) / p.wall / 1e6;
+        std::printf("%12s PotreeConverter -m random on the same points: %.2f s, %.2f M points/s, CPU %.2f s, "
+                    "peak RSS %s; octocosm %.2fx\n",
+                    "", p.wall, potree_rate, p.cpu, HumanBytes(p.peak_rss_bytes).c_str(), rate / potree_rate);
+        std::fflush(stdout);
+        fs::remove_all(potree_out);
+        if (!keep) fs::remove_all(las_dir);
+      }
       if (!keep) fs::remove_all(snapshots);
     }
     if (!keep) fs::remove_all(dir);
