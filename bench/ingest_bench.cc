@@ -126,7 +126,8 @@ int main(int argc, char** argv) {
   app.add_flag("--cold", cold, "do not read the input into the page cache before each run");
   app.add_option("--potree-converter", potree_converter,
                  "also run this PotreeConverter 2.x program (-m random) on the same points, written as LAS, in each "
-                 "case without a budget, and print octocosm's throughput against it");
+                 "case without a budget, and print octocosm's throughput against it")
+      ->check(CLI::ExistingFile);
   CLI11_PARSE(app, argc, argv);
 
   try {
