@@ -12,6 +12,7 @@
 #include "storage/coding.h"
 #include "storage/error.h"
 #include "storage/file.h"
+#include "tools/ingest/epoch_join.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -59,20 +60,11 @@ LasExportReport ExportLas(const std::string& snapshot, const std::string& las_pa
   std::unique_ptr<ParticleSource> source = OpenSnapshot(snapshot, read);
   ParticleChunk chunk;
 
-  std::array<double, 3> lo;
-  std::array<double, 3> hi;
-  lo.fill(std::numeric_limits<double>::infinity());
-  hi.fill(-std::numeric_limits<double>::infinity());
-  std::uint64_t points = 0;
-  while (source->Next(chunk)) {
-    for (std::size_t i = 0; i < chunk.size(); ++i) {
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], chunk.position[3 * i + a]);
-        hi[a] = std::max(hi[a], chunk.position[3 * i + a]);
-      }
-    }
-    points += chunk.size();
-  }
+  Bounds bounds;
+  while (source->Next(chunk)) bounds.Add(chunk);
+  const std::uint64_t points = bounds.count;
+  const std::array<double, 3>& lo = bounds.lo;
+  const std::array<double, 3>& hi = bounds.hi;
   if (points == 0) throw Error::InvalidArgument("LAS export: snapshot " + snapshot + " holds no particles");
   if (points > std::numeric_limits<std::uint32_t>::max()) {
     throw Error::InvalidArgument("LAS export: snapshot " + snapshot + " holds " + std::to_string(points) +
