@@ -79,7 +79,10 @@ DirectWriter::Buffered DirectWriter::Acquire(std::size_t capacity, std::unique_l
       free_.pop_back();
       continue;
     }
+    ++waiting_;  // the queue goes out now instead of waiting for a whole batch
+    work_.notify_one();
     progress_.wait(lock);
+    --waiting_;
   }
 }
 
@@ -103,6 +106,7 @@ void DirectWriter::Write(std::uint64_t offset, std::span<const std::uint8_t> byt
   {
     std::lock_guard lock(mutex_);
     ThrowIfFailed();
+    queued_bytes_ += job.length;
     queue_.push_back(std::move(job));
     ++jobs_unfinished_;
   }
@@ -111,8 +115,30 @@ void DirectWriter::Write(std::uint64_t offset, std::span<const std::uint8_t> byt
 
 void DirectWriter::Drain() {
   std::unique_lock lock(mutex_);
+  ++waiting_;
+  work_.notify_one();
   progress_.wait(lock, [&] { return jobs_unfinished_ == 0 || failure_; });
+  --waiting_;
   ThrowIfFailed();
+}
+
+bool DirectWriter::BatchDue() const {
+  return !queue_.empty() && (queued_bytes_ >= kMaxBatchBytes || queue_.size() >= kMaxBatchJobs || waiting_ > 0);
+}
+
+void DirectWriter::TakeBatch(std::vector<Job>& batch) {
+  // Several threads queue jobs a little out of order; in offset order they
+  // mostly continue each other.
+  std::sort(queue_.begin(), queue_.end(), [](const Job& a, const Job& b) { return a.offset < b.offset; });
+  batch.clear();
+  std::size_t batch_bytes = 0;
+  do {
+    batch_bytes += queue_.front().length;
+    batch.push_back(std::move(queue_.front()));
+    queue_.pop_front();
+  } while (!queue_.empty() && batch.size() < kMaxBatchJobs && batch_bytes < kMaxBatchBytes &&
+           queue_.front().offset == batch.back().offset + batch.back().length);
+  queued_bytes_ -= batch_bytes;
 }
 
 void DirectWriter::WriteFully(const std::vector<Job>& batch) {
@@ -136,20 +162,12 @@ void DirectWriter::Run() {
   std::unique_lock lock(mutex_);
   std::vector<Job> batch;
   for (;;) {
-    work_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+    work_.wait(lock, [&] { return stopping_ || BatchDue(); });
     if (stopping_) return;
-    // The front job, and the queued jobs that continue it on disk, in one
-    // call: small blocks written one by one (an ID index's 64 KiB buckets)
-    // would each wait for the disk (64 KiB direct writes one at a time ran at
-    // a quarter of the disk's speed here).
-    batch.clear();
-    std::size_t batch_bytes = 0;
-    do {
-      batch_bytes += queue_.front().length;
-      batch.push_back(std::move(queue_.front()));
-      queue_.pop_front();
-    } while (!queue_.empty() && batch.size() < kMaxBatchJobs && batch_bytes < kMaxBatchBytes &&
-             queue_.front().offset == batch.back().offset + batch.back().length);
+    // Small writes one by one would each wait for the disk (64 KiB direct
+    // writes one at a time ran at a quarter of the disk's speed here) and
+    // each cost a request to the host.
+    TakeBatch(batch);
     lock.unlock();
     std::exception_ptr failed;
     try {
@@ -165,6 +183,7 @@ void DirectWriter::Run() {
       jobs_unfinished_ -= queue_.size();  // dropped: the file is lost anyway
       for (Job& dropped : queue_) free_.push_back(std::move(dropped.memory));
       queue_.clear();
+      queued_bytes_ = 0;
     }
     progress_.notify_all();
   }
