@@ -15,7 +15,7 @@ inline constexpr std::uint32_t kPageFileFormatVersion = 1;
 inline constexpr std::uint32_t kPageFileHeaderSize = 128;
 inline constexpr std::uint32_t kMinPageSize = 4 * 1024;
 inline constexpr std::uint32_t kMaxPageSize = 16 * 1024 * 1024;
-inline constexpr std::uint32_t kDefaultPageSize = 64 * 1024;
+inline constexpr std::uint32_t kDefaultPageSize = 4 * 1024;
 
 // Field offsets within the header record.
 namespace header_offset {

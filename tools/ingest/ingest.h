@@ -32,6 +32,7 @@
 #include "index/cube.h"
 #include "index/dataset.h"
 #include "index/subtree_builder.h"
+#include "storage/page_file_format.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -45,7 +46,7 @@ struct IngestOptions {
   std::string temp_dir;             // parent of the temporary directory; "" = beside the output
   std::optional<Cube> cube;         // overrides the periodic box / bounding cube
   unsigned threads = 0;             // 0 = all cores
-  std::uint32_t page_size = 65536;
+  std::uint32_t page_size = kDefaultPageSize;
   std::uint64_t max_chunk_points = 0;  // 0 = derived from the memory budget; tests set it to force chunking
   std::uint64_t sort_run_points = 0;   // 0 = derived from the memory budget; tests set it to force merge sorts
   bool stream_chunks = false;          // chunk through buffers and files even when the epoch fits in memory whole (tests)
