@@ -9,11 +9,13 @@
 // Default cases (issue 3 §7): 10^7 and 10^8 points with the default budget,
 // and 4x10^7 points (1.1 GB of input) under a 256 MiB budget: input > 4x budget.
 //
-// Before each run the snapshot's files are read once, so that the ingest
-// reads them from the page cache as it would right after they were written
-// (a generated snapshot is; one kept from an earlier run with --keep may have
-// left the cache, which made the read phase of equal runs differ by a factor
-// of two). --cold skips that: the input then comes from wherever it is.
+// Before each run the snapshot's files are dropped from the page cache and
+// read once, so that the ingest reads them from the page cache as a snapshot
+// just read from disk (one kept from an earlier run with --keep may have left
+// the cache, which made the read phase of equal runs differ by a factor of
+// two; and how the cache holds a file depends on how it got there, see
+// ReadThroughPageCache). --cold skips that: the input then comes from
+// wherever it is.
 //
 // The reference figure is the issue's: PotreeConverter 2.x `-m random` builds
 // clustered data at about 2.4 M points/s on these 2-core machines. Given the
@@ -83,13 +85,22 @@ ChildUsage RunChild(const std::vector<std::string>& args, bool quiet = false) {
   return usage;
 }
 
-// Reads every file under `dir` once, into nothing: into the page cache.
+// Reads every file under `dir` once, into nothing: into the page cache. Each
+// file is first written back and dropped from the cache, so that the cache
+// holds it as the kernel lays out a file read from disk, not as the
+// generator happened to write it: on Linux 6.18 a file read from disk is
+// cached in 2 MiB folios that a mapping maps whole, while synth's writes of a
+// few hundred KiB leave 4 KiB ones, and a 10^8-point ingest read its mapped
+// snapshot from those about 8 % slower (its scattered reads missing the TLB;
+// docs/BENCHMARKS.md).
 void ReadThroughPageCache(const fs::path& dir) {
   std::vector<char> buffer(std::size_t{4} << 20);
   for (const auto& entry : fs::recursive_directory_iterator(dir)) {
     if (!entry.is_regular_file()) continue;
     const int fd = ::open(entry.path().c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) throw IoErrorFromErrno(entry.path().string(), "opening", errno);
+    // Best effort: where the cache cannot be dropped the read still fills it.
+    if (::fdatasync(fd) == 0) ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
     ssize_t got = 0;
     while ((got = ::read(fd, buffer.data(), buffer.size())) > 0) {
     }
@@ -141,7 +152,8 @@ int main(int argc, char** argv) {
     }
     fs::create_directories(dir);
     std::printf("octocosm-bench-ingest: %s on %u cores; %s\n", octocosm_path.c_str(), std::thread::hardware_concurrency(),
-                cold ? "input read from wherever it is (--cold)" : "input read into the page cache before each run");
+                cold ? "input read from wherever it is (--cold)"
+                     : "input dropped from the page cache and read once before each run");
     std::fflush(stdout);  // before the children write theirs
     std::printf("%12s %10s %9s %9s %11s %8s %7s %11s %10s %10s\n", "points", "input MB", "budget", "wall s",
                 "M points/s", "CPU s", "CPU use", "peak RSS", "RSS/budget", "vs 2.4M/s");
