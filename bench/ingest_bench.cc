@@ -91,7 +91,7 @@ ChildUsage RunChild(const std::vector<std::string>& args, bool quiet = false) {
 // generator happened to write it: on Linux 6.18 a file read from disk is
 // cached in 2 MiB folios that a mapping maps whole, while synth's writes of a
 // few hundred KiB leave 4 KiB ones, and a 10^8-point ingest read its mapped
-// snapshot from those about 8 % slower (its scattered reads missing the TLB;
+// snapshot from those about 10 % slower (its scattered reads missing the TLB;
 // docs/BENCHMARKS.md).
 void ReadThroughPageCache(const fs::path& dir) {
   std::vector<char> buffer(std::size_t{4} << 20);
