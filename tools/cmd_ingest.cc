@@ -41,7 +41,7 @@ void AddIngestCommand(CLI::App& app) {
   cmd->add_option("--memory", flags->memory, "memory budget, e.g. 2G (default: half the physical memory)");
   cmd->add_option("--temp-dir", o.temp_dir, "where temporary files go (default: beside the output)");
   cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);
-  cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M")->default_val("4K");
+  cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M (its ID index: at least 64K)")->default_val("4K");
   cmd->add_option("--cube", flags->cube, "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube)");
   AddReadFlags(*cmd, flags->read);
   // What ingest does with what it does not read.

@@ -19,6 +19,7 @@
 #include "index/id_index.h"
 #include "index/subtree_builder.h"
 #include "storage/error.h"
+#include "storage/store_reader.h"
 #include "tools/snapshot/snapshot_source.h"
 #include "tools/store_verify.h"
 #include "tests/tools/gadget_test_file.h"
@@ -446,6 +447,23 @@ TEST_F(IngestTest, IdIndexFindsEveryParticleWhetherItsPairsWerePlacedOrSorted) {
     EXPECT_FALSE(ids.Find(0, ~std::uint64_t{0}).has_value());
   }
   EXPECT_TRUE(TempIsEmpty());
+}
+
+TEST_F(IngestTest, TheIdIndexKeepsPagesOfAtLeast64KiB) {
+  // The store takes the page size asked for; the ID index's buckets fill a
+  // page each, so its store keeps 64 KiB pages unless larger ones are asked.
+  const auto particles = Clustered(3000, 3, 20.0);
+  const std::string input = WriteRaw(dir_ / "in.raw", particles);
+  for (const std::uint32_t page_size : {4096u, 65536u, 262144u}) {
+    SCOPED_TRACE(page_size);
+    IngestOptions o = RawOptions({input}, "pages-" + std::to_string(page_size));
+    o.page_size = page_size;
+    Ingest(o);
+    EXPECT_EQ(StoreReader::Open(o.output).page_size(), page_size);
+    EXPECT_EQ(StoreReader::Open((fs::path(o.output) / "ids").string()).page_size(), std::max(page_size, 65536u));
+    IdIndexReader ids(Dataset::Open(o.output).id_index_directory());
+    for (const Particle& p : particles) ASSERT_TRUE(ids.Find(0, p.id).has_value()) << p.id;
+  }
 }
 
 TEST_F(IngestTest, OutOfCoreSortRunsGiveTheSameSeries) {

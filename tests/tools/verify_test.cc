@@ -166,7 +166,13 @@ TEST_F(VerifyTest, BlocksWithoutAColumnTheManifestDeclaresAreAFault) {
 TEST_F(VerifyTest, ADamagedIdIndexIsAFault) {
   const std::string store = IngestedStore();
   const fs::path ids = fs::path(store) / "ids" / "epoch-00000.pages";
-  FlipByte(ids, 4096 + 100);  // inside the first bucket block
+  std::uint64_t offset = 0;
+  {
+    const StoreReader id_store = StoreReader::Open((fs::path(store) / "ids").string());
+    const IndexEntry bucket = id_store.Lookup({0, 0}).value();  // the first bucket block
+    offset = bucket.first_page * id_store.page_size() + 100;
+  }
+  FlipByte(ids, offset);
   const VerifyReport report = VerifyStore(store);
   EXPECT_FALSE(report.faults.empty());
   EXPECT_TRUE(AnyFaultMentions(report, "ids")) << AllFaults(report);

@@ -398,10 +398,13 @@ IngestReport Ingest(const IngestOptions& options) {
   store_options.page_size = options.page_size;
   StoreWriter store(options.output, dataset, AttributeSchema(has_velocity, has_id, join_epochs), store_options);
   std::unique_ptr<StoreWriter> id_store;
+  const std::uint32_t id_index_page_size = std::max(options.page_size, kIdIndexMinPageSize);
   if (has_id) {
+    StoreWriterOptions id_store_options = store_options;
+    id_store_options.page_size = id_index_page_size;
     id_store = std::make_unique<StoreWriter>((fs::path(options.output) / "ids").string(),
                                              nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
-                                             nlohmann::json::object(), store_options);
+                                             nlohmann::json::object(), id_store_options);
   }
 
   std::unique_ptr<SortedEpoch> sorted_current, sorted_next;
@@ -582,7 +585,7 @@ IngestReport Ingest(const IngestOptions& options) {
     auto write_id_index = [&] {
       if (id_pairs) id_pairs->Finish();
       id_store->BeginEpoch(header.time, header.redshift);
-      IdIndexEpochWriter ids(*id_store, options.page_size);
+      IdIndexEpochWriter ids(*id_store, id_index_page_size);
       if (id_table) {
         ids.AddTable(id_table->first(), id_table->slots(), id_table->leaves());
       } else {
