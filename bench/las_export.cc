@@ -22,12 +22,6 @@ constexpr std::size_t kHeaderBytes = 227;  // LAS 1.2's public header block
 constexpr std::size_t kRecordBytes = 20;   // point data record format 0
 constexpr double kLargestCoordinate = 2147483646.0;  // 2^31 - 2
 
-void PutF64(std::uint8_t* out, double value) {
-  std::uint64_t bits = 0;
-  std::memcpy(&bits, &value, sizeof bits);
-  PutU64(out, bits);
-}
-
 std::array<std::uint8_t, kHeaderBytes> Header(std::uint64_t points, double scale, const std::array<double, 3>& lo,
                                               const std::array<double, 3>& hi) {
   std::array<std::uint8_t, kHeaderBytes> h{};

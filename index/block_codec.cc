@@ -21,12 +21,6 @@
 namespace octocosm {
 namespace {
 
-// Floating-point fields as the little-endian bit patterns of storage/coding.h.
-void PutF32(std::uint8_t* out, float v) { PutU32(out, std::bit_cast<std::uint32_t>(v)); }
-void PutF64(std::uint8_t* out, double v) { PutU64(out, std::bit_cast<std::uint64_t>(v)); }
-float GetF32(const std::uint8_t* in) { return std::bit_cast<float>(GetU32(in)); }
-double GetF64(const std::uint8_t* in) { return std::bit_cast<double>(GetU64(in)); }
-
 std::uint64_t Checksum(const std::uint8_t* data, std::size_t size) { return XXH3_64bits(data, size); }
 
 // Column ids run from 1 to the number of columns.

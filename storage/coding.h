@@ -1,4 +1,5 @@
-// Little-endian fixed-width encoding of integers into byte buffers.
+// Little-endian fixed-width encoding of integers and floating-point values
+// into byte buffers.
 //
 // Every integer on disk is little endian (docs/FORMAT.md). On a
 // little-endian host the helpers copy the native integer; elsewhere they go
@@ -69,5 +70,12 @@ inline std::uint64_t GetU64(const std::uint8_t* in) {
   for (int i = 7; i >= 0; --i) value = (value << 8) | in[i];
   return value;
 }
+
+// Floating-point values as the little-endian bit patterns of their IEEE-754
+// encodings (f32/f64 in docs/FORMAT.md).
+inline void PutF32(std::uint8_t* out, float value) { PutU32(out, std::bit_cast<std::uint32_t>(value)); }
+inline void PutF64(std::uint8_t* out, double value) { PutU64(out, std::bit_cast<std::uint64_t>(value)); }
+inline float GetF32(const std::uint8_t* in) { return std::bit_cast<float>(GetU32(in)); }
+inline double GetF64(const std::uint8_t* in) { return std::bit_cast<double>(GetU64(in)); }
 
 }  // namespace octocosm

@@ -19,13 +19,6 @@ namespace {
 using testing_support::ReadFileBytes;
 using testing_support::TempDir;
 
-double GetF64(const std::uint8_t* in) {
-  const std::uint64_t bits = GetU64(in);
-  double value = 0;
-  std::memcpy(&value, &bits, sizeof value);
-  return value;
-}
-
 void WriteCsv(const std::filesystem::path& path, const std::vector<std::array<double, 3>>& points) {
   std::ofstream out(path);
   out.precision(17);

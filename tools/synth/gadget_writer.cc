@@ -10,20 +10,13 @@
 #include <cstring>
 #include <limits>
 
+#include "storage/coding.h"
 #include "storage/error.h"
 
 namespace octocosm::synth {
 namespace {
 
-// Little-endian encoding independent of the host's byte order.
-void PutU32(std::uint8_t* out, std::uint32_t value) {
-  for (int b = 0; b < 4; ++b) out[b] = static_cast<std::uint8_t>(value >> (8 * b));
-}
-void PutU64(std::uint8_t* out, std::uint64_t value) {
-  for (int b = 0; b < 8; ++b) out[b] = static_cast<std::uint8_t>(value >> (8 * b));
-}
 void PutI32(std::uint8_t* out, std::int32_t value) { PutU32(out, static_cast<std::uint32_t>(value)); }
-void PutF64(std::uint8_t* out, double value) { PutU64(out, std::bit_cast<std::uint64_t>(value)); }
 
 // A payload of floats or integers encoded little endian into `out`.
 void EncodeFloats(std::span<const float> values, std::vector<std::uint8_t>& out) {
