@@ -1,7 +1,5 @@
 #include "index/block_codec.h"
 
-#include <xxhash.h>
-
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -15,13 +13,14 @@
 
 #include "index/extended_sum.h"
 #include "index/nth_largest.h"
+#include "storage/checksum.h"
 #include "storage/coding.h"
 #include "storage/error.h"
 
 namespace octocosm {
 namespace {
 
-std::uint64_t Checksum(const std::uint8_t* data, std::size_t size) { return XXH3_64bits(data, size); }
+std::uint64_t Checksum(const std::uint8_t* data, std::size_t size) { return Checksum64({data, size}); }
 
 // Column ids run from 1 to the number of columns.
 constexpr std::uint8_t kMaxColumnId = static_cast<std::uint8_t>(kColumnIds.size());

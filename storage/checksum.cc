@@ -8,9 +8,30 @@
 
 namespace octocosm {
 
+#if OCTOCOSM_CHECKSUM_AVX2
+// Debian builds libxxhash for baseline x86-64, so its XXH3_64bits runs SSE2
+// code: about 19 GB/s on a 160 KiB block here, against 60 GB/s built for
+// AVX2. The library's own run-time dispatch (XXH3_64bits_dispatch) is faster
+// still, but it returns from AVX-512 code without clearing the registers'
+// upper halves (no vzeroupper), and every SSE instruction after it then ran
+// at half speed: a 10^7-point ingest took 1.24 s instead of 0.96.
+namespace checksum_internal {
+std::uint64_t Xxh3WithAvx2(const void* bytes, std::size_t size);
+}  // namespace checksum_internal
+
+namespace {
+const bool kCpuHasAvx2 = __builtin_cpu_supports("avx2");
+}  // namespace
+
+std::uint64_t Checksum64(std::span<const std::uint8_t> bytes) {
+  if (kCpuHasAvx2) return checksum_internal::Xxh3WithAvx2(bytes.data(), bytes.size());
+  return XXH3_64bits(bytes.data(), bytes.size());
+}
+#else
 std::uint64_t Checksum64(std::span<const std::uint8_t> bytes) {
   return XXH3_64bits(bytes.data(), bytes.size());
 }
+#endif
 
 std::uint64_t Checksum64(std::span<const std::uint8_t> first, std::span<const std::uint8_t> second) {
   struct StateDeleter {
