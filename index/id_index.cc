@@ -14,7 +14,9 @@ constexpr std::uint32_t kDirectoryMagic = 0x4449434F;  // "OCID"
 constexpr std::uint32_t kLeafTableMagic = 0x4C49434F;  // "OCIL"
 constexpr std::uint32_t kVersion = 1;                  // of the directory and the leaf table
 constexpr std::uint32_t kPairsVersion = 1;             // bucket forms
-constexpr std::uint32_t kTableVersion = 2;
+constexpr std::uint32_t kTableVersion = 2;             // 32-bit ordinals
+constexpr std::uint32_t kNarrowTableVersion = 3;       // 16-bit ordinals
+constexpr std::uint64_t kMostNarrowOrdinal = 0xFFFF;
 constexpr std::size_t kTableHeader = 24;
 
 // Appends a little-endian integer of T's width.
@@ -26,6 +28,7 @@ void Append(Bytes& out, T value) {
 }
 std::uint64_t GetU64(const Bytes& in, std::size_t offset) { return octocosm::GetU64(in.data() + offset); }
 std::uint32_t GetU32(const Bytes& in, std::size_t offset) { return octocosm::GetU32(in.data() + offset); }
+std::uint16_t GetU16(const Bytes& in, std::size_t offset) { return octocosm::GetU16(in.data() + offset); }
 
 }  // namespace
 
@@ -73,8 +76,10 @@ void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::u
     }
   }
   has_table_ = true;
-  const std::size_t per_bucket = std::max<std::size_t>((page_size_ - kTableHeader) / 4, 1);
-  Bytes block(kTableHeader + 4 * std::min(per_bucket, slots.size()));
+  const bool narrow = leaves.size() <= kMostNarrowOrdinal;
+  const std::size_t slot_bytes = narrow ? 2 : 4;
+  const std::size_t per_bucket = std::max<std::size_t>((page_size_ - kTableHeader) / slot_bytes, 1);
+  Bytes block(kTableHeader + slot_bytes * std::min(per_bucket, slots.size()));
   for (std::size_t begin = 0; begin < slots.size(); begin += per_bucket) {
     const std::size_t m = std::min(per_bucket, slots.size() - begin);
     const std::uint32_t* slot = slots.data() + begin;
@@ -91,15 +96,19 @@ void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::u
     }
     if (present == 0) continue;  // a look-up lands on the bucket before, whose slots end short of it
     PutU32(block.data(), kBucketMagic);
-    PutU32(block.data() + 4, kTableVersion);
+    PutU32(block.data() + 4, narrow ? kNarrowTableVersion : kTableVersion);
     PutU64(block.data() + 8, first_id + begin);
     PutU64(block.data() + 16, m);
-    if constexpr (kHostIsLittleEndian) {
-      std::memcpy(block.data() + kTableHeader, slot, 4 * m);
+    std::uint8_t* out = block.data() + kTableHeader;
+    if (narrow) {
+      for (std::size_t i = 0; i < m; ++i) PutU16(out + 2 * i, static_cast<std::uint16_t>(slot[i]));
+    } else if constexpr (kHostIsLittleEndian) {
+      std::memcpy(out, slot, 4 * m);
     } else {
-      for (std::size_t i = 0; i < m; ++i) PutU32(block.data() + kTableHeader + 4 * i, slot[i]);
+      for (std::size_t i = 0; i < m; ++i) PutU32(out + 4 * i, slot[i]);
     }
-    store_.AddBlock(first_ids_.size(), std::span<const std::uint8_t>(block.data(), kTableHeader + 4 * m), present);
+    store_.AddBlock(first_ids_.size(), std::span<const std::uint8_t>(block.data(), kTableHeader + slot_bytes * m),
+                    present);
     first_ids_.push_back(first_id + begin);
     total_ += present;
   }
@@ -169,7 +178,9 @@ std::optional<NodeKey> IdIndexReader::Find(std::uint32_t epoch, std::uint64_t id
     case kPairsVersion:
       return FindInPairs(block, id, where);
     case kTableVersion:
-      return FindInTable(epoch, block, id, where);
+      return FindInTable(epoch, block, id, 4, where);
+    case kNarrowTableVersion:
+      return FindInTable(epoch, block, id, 2, where);
     default:
       throw Error::NotSupported(where, "version " + std::to_string(GetU32(block, 4)));
   }
@@ -192,15 +203,16 @@ std::optional<NodeKey> IdIndexReader::FindInPairs(const Bytes& block, std::uint6
 }
 
 std::optional<NodeKey> IdIndexReader::FindInTable(std::uint32_t epoch, const Bytes& block, std::uint64_t id,
-                                                  const std::string& where) const {
+                                                  std::size_t slot_bytes, const std::string& where) const {
   if (block.size() < kTableHeader) throw Error::Corruption(where, "short block");
   const std::uint64_t first = GetU64(block, 8);
   const std::uint64_t m = GetU64(block, 16);
-  if (m > (block.size() - kTableHeader) / 4 || block.size() != kTableHeader + 4 * m) {
+  if (m > (block.size() - kTableHeader) / slot_bytes || block.size() != kTableHeader + slot_bytes * m) {
     throw Error::Corruption(where, "slot count " + std::to_string(m) + " disagrees with the block size");
   }
   if (id < first || id - first >= m) return std::nullopt;
-  const std::uint32_t ordinal = GetU32(block, kTableHeader + 4 * (id - first));
+  const std::size_t at = kTableHeader + slot_bytes * (id - first);
+  const std::uint32_t ordinal = slot_bytes == 2 ? GetU16(block, at) : GetU32(block, at);
   if (ordinal == 0) return std::nullopt;
   const std::vector<std::uint64_t>& leaves = LeafTableOf(epoch);
   if (ordinal > leaves.size()) {

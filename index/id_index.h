@@ -6,13 +6,15 @@
 // one epoch per epoch of the dataset, so it gets the page file's checksums,
 // crash safety and index for free. Within an epoch:
 //   - bucket blocks, keys 0, 1, 2, ..., each filling about one page, in one
-//     of two forms (an epoch uses one):
+//     of three forms (an epoch uses one):
 //       pairs (version 1): (ID, leaf key) pairs sorted by ID, for IDs in any
 //         range;
-//       a table (version 2): for a run of consecutive IDs, which leaf holds
-//         each, as an ordinal into the epoch's leaf table. Simulation codes
-//         number particles 0..N-1 or so: a quarter of the pairs' bytes, and
-//         written straight from the table ingest fills (DenseIdTable);
+//       a table (version 2, or 3 while the epoch has at most 65535 leaves):
+//         for a run of consecutive IDs, which leaf holds each, as an ordinal
+//         into the epoch's leaf table. Simulation codes number particles
+//         0..N-1 or so: a quarter of the pairs' bytes (an eighth as 16-bit
+//         ordinals), and written straight from the table ingest fills
+//         (DenseIdTable);
 //   - the directory block, key kIdIndexDirectoryKey: the first ID of every
 //     bucket (for a table, the ID of its first slot), so a look-up reads the
 //     (cached) directory and one bucket;
@@ -20,7 +22,8 @@
 // Block payloads (little endian):
 //   bucket, pairs: u32 magic "OCIB", u32 version 1, u64 pair count n, then n x (u64 id, u64 leaf key)
 //   bucket, table: u32 magic "OCIB", u32 version 2, u64 first id f, u64 slot count m, then m x u32
-//                  ordinal (ID f + i: 0 where no particle has it, else 1 + its leaf's index in the leaf table)
+//                  ordinal (ID f + i: 0 where no particle has it, else 1 + its leaf's index in the leaf table);
+//                  version 3: the same with m x u16 ordinal
 //   leaf table:    u32 magic "OCIL", u32 version 1, u64 leaf count l, then l x u64 leaf key
 //   directory:     u32 magic "OCID", u32 version 1, u64 bucket count b, u64 total IDs, then b x u64 first id
 // Duplicate IDs (a malformed input) are all kept in pairs; a look-up returns
@@ -62,8 +65,12 @@ class IdIndexEpochWriter {
   void Add(std::uint64_t id, NodeKey leaf);
   // The whole epoch as a table instead of pairs: slot i tells which leaf
   // holds ID first_id + i, 0 for none, else 1 + the leaf's index in
-  // `leaves`. Written as table buckets of (page_size - 24) / 4 slots, those
-  // with no ID left out. Call it once, instead of Add, then Finish. Throws
+  // `leaves`. Written as table buckets of (page_size - 24) / 2 slots of 16
+  // bits when `leaves` holds at most 65535 leaves, else (page_size - 24) / 4
+  // slots of 32 bits, those with no ID left out: the ordinals go to disk at
+  // the end of an ingest, after the last leaf, so half the bytes is half
+  // that wait (at 10^8 points, 200 MB instead of 400). Call it once,
+  // instead of Add, then Finish. Throws
   // Error::InvalidArgument for an ordinal past `leaves`, an invalid leaf key
   // or IDs past 2^64 - 1.
   void AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots, std::span<const std::uint64_t> leaves);
@@ -105,7 +112,8 @@ class IdIndexReader {
   Directory& DirectoryOf(std::uint32_t epoch) const;  // loaded once, then kept
   const std::vector<std::uint64_t>& LeafTableOf(std::uint32_t epoch) const;
   std::optional<NodeKey> FindInPairs(const Bytes& block, std::uint64_t id, const std::string& where) const;
-  std::optional<NodeKey> FindInTable(std::uint32_t epoch, const Bytes& block, std::uint64_t id,
+  // `slot_bytes`: 4 for a version-2 table bucket, 2 for version 3.
+  std::optional<NodeKey> FindInTable(std::uint32_t epoch, const Bytes& block, std::uint64_t id, std::size_t slot_bytes,
                                      const std::string& where) const;
 
   StoreReader store_;

@@ -1,5 +1,6 @@
-// The ID index in both bucket forms: sorted pairs and tables of leaf
-// ordinals (index/id_index.h), written through a real store and read back.
+// The ID index in every bucket form: sorted pairs and tables of 16- or
+// 32-bit leaf ordinals (index/id_index.h), written through a real store and
+// read back.
 #include "index/id_index.h"
 
 #include <gtest/gtest.h>
@@ -20,8 +21,9 @@ namespace {
 
 using testing_support::TempDir;
 
-constexpr std::uint32_t kSmallPage = 4096;  // table buckets of 1018 slots, pair buckets of 255 pairs
-constexpr std::size_t kSlotsPerBucket = (kSmallPage - 24) / 4;
+constexpr std::uint32_t kSmallPage = 4096;  // pair buckets of 255 pairs
+// Table buckets: 2036 slots of 16 bits (at most 65535 leaves), else 1018 of 32.
+constexpr std::size_t SlotsPerBucket(std::size_t leaves) { return (kSmallPage - 24) / (leaves <= 65535 ? 2 : 4); }
 
 // A store with one epoch whose ID index `fill` writes.
 void WriteIndex(const std::string& directory, const std::function<void(StoreWriter&)>& fill) {
@@ -73,38 +75,82 @@ TEST(IdIndex, PairsFindEveryIdAndNothingElse) {
   EXPECT_FALSE(reader.Find(0, 1u << 20).has_value());
 }
 
+// `count` leaf keys (repeating: the writer does not ask for distinct ones).
+std::vector<std::uint64_t> Leaves(std::size_t count) {
+  std::vector<std::uint64_t> leaves(count);
+  for (std::size_t i = 0; i < count; ++i) leaves[i] = LeafNumber(static_cast<int>(i % 64)).value();
+  return leaves;
+}
+
+// The version field of bucket 0 of epoch 0.
+std::uint32_t FirstBucketVersion(const std::string& directory) {
+  return GetU32(StoreReader::Open(directory).ReadBlock({0, 0}).data() + 4);
+}
+
+// With 3 leaves the ordinals are 16-bit (bucket version 3); with 65536 they
+// are 32-bit (version 2), and the ordinals reach past 2^16.
 TEST(IdIndex, TableFindsEveryIdAndLeavesOutEmptyBuckets) {
-  TempDir dir("id-index-table");
-  const std::uint64_t first = 1000;
-  // Three buckets' worth and a bit; the second bucket's whole range is empty,
-  // and every seventh ID elsewhere is missing.
-  std::vector<std::uint32_t> slots(3 * kSlotsPerBucket + 100);
-  const std::vector<std::uint64_t> leaves = {LeafNumber(3).value(), LeafNumber(17).value(), LeafNumber(40).value()};
-  for (std::size_t i = 0; i < slots.size(); ++i) {
-    const bool in_empty_bucket = i >= kSlotsPerBucket && i < 2 * kSlotsPerBucket;
-    slots[i] = in_empty_bucket || i % 7 == 3 ? 0 : static_cast<std::uint32_t>(1 + i % leaves.size());
-  }
-  WriteIndex(dir.path().string(), [&](StoreWriter& store) {
-    IdIndexEpochWriter ids(store, kSmallPage);
-    ids.AddTable(first, slots, leaves);
-    ids.Finish();
-  });
-  // Three table buckets, the leaf table and the directory.
-  EXPECT_EQ(StoreReader::Open(dir.path().string()).block_count(0), 5u);
-  IdIndexReader reader(dir.path().string());
-  for (std::size_t i = 0; i < slots.size(); ++i) {
-    const std::optional<NodeKey> leaf = reader.Find(0, first + i);
-    if (slots[i] == 0) {
-      EXPECT_FALSE(leaf.has_value()) << i;
-    } else {
-      ASSERT_TRUE(leaf.has_value()) << i;
-      EXPECT_EQ(leaf->value(), leaves[slots[i] - 1]) << i;
+  for (const std::size_t leaf_count : {std::size_t{3}, std::size_t{65536}}) {
+    SCOPED_TRACE(leaf_count);
+    TempDir dir("id-index-table");
+    const std::uint64_t first = 1000;
+    const std::size_t per_bucket = SlotsPerBucket(leaf_count);
+    // Three buckets' worth and a bit; the second bucket's whole range is
+    // empty, and every seventh ID elsewhere is missing.
+    std::vector<std::uint32_t> slots(3 * per_bucket + 100);
+    std::vector<std::uint64_t> leaves = Leaves(leaf_count);
+    leaves[leaf_count - 1] = LeafNumber(63).Child(5).value();  // the last ordinal leads to a leaf of its own
+    for (std::size_t i = 0; i < slots.size(); ++i) {
+      const bool in_empty_bucket = i >= per_bucket && i < 2 * per_bucket;
+      slots[i] = in_empty_bucket || i % 7 == 3 ? 0 : static_cast<std::uint32_t>(1 + (i * 7919) % leaves.size());
     }
+    slots.back() = static_cast<std::uint32_t>(leaf_count);
+    WriteIndex(dir.path().string(), [&](StoreWriter& store) {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      ids.AddTable(first, slots, leaves);
+      ids.Finish();
+    });
+    // Three table buckets, the leaf table and the directory.
+    EXPECT_EQ(StoreReader::Open(dir.path().string()).block_count(0), 5u);
+    EXPECT_EQ(FirstBucketVersion(dir.path().string()), leaf_count <= 65535 ? 3u : 2u);
+    IdIndexReader reader(dir.path().string());
+    for (std::size_t i = 0; i < slots.size(); ++i) {
+      const std::optional<NodeKey> leaf = reader.Find(0, first + i);
+      if (slots[i] == 0) {
+        EXPECT_FALSE(leaf.has_value()) << i;
+      } else {
+        ASSERT_TRUE(leaf.has_value()) << i;
+        EXPECT_EQ(leaf->value(), leaves[slots[i] - 1]) << i;
+      }
+    }
+    EXPECT_EQ(reader.Find(0, first + slots.size() - 1), LeafNumber(63).Child(5));
+    EXPECT_FALSE(reader.Find(0, 0).has_value());
+    EXPECT_FALSE(reader.Find(0, first - 1).has_value());
+    EXPECT_FALSE(reader.Find(0, first + slots.size()).has_value());
+    EXPECT_FALSE(reader.Find(0, std::numeric_limits<std::uint64_t>::max()).has_value());
   }
-  EXPECT_FALSE(reader.Find(0, 0).has_value());
-  EXPECT_FALSE(reader.Find(0, first - 1).has_value());
-  EXPECT_FALSE(reader.Find(0, first + slots.size()).has_value());
-  EXPECT_FALSE(reader.Find(0, std::numeric_limits<std::uint64_t>::max()).has_value());
+}
+
+// 65535 leaves still fit 16-bit ordinals; one more does not.
+TEST(IdIndex, TableOrdinalsNarrowUpTo65535Leaves) {
+  for (const std::size_t leaf_count : {std::size_t{65535}, std::size_t{65536}}) {
+    SCOPED_TRACE(leaf_count);
+    TempDir dir("id-index-narrow");
+    std::vector<std::uint64_t> leaves = Leaves(leaf_count);
+    leaves[leaf_count - 1] = LeafNumber(63).Child(2).value();
+    const std::vector<std::uint32_t> slots = {1, static_cast<std::uint32_t>(leaf_count), 0, 2};
+    WriteIndex(dir.path().string(), [&](StoreWriter& store) {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      ids.AddTable(50, slots, leaves);
+      ids.Finish();
+    });
+    EXPECT_EQ(FirstBucketVersion(dir.path().string()), leaf_count <= 65535 ? 3u : 2u);
+    IdIndexReader reader(dir.path().string());
+    EXPECT_EQ(reader.Find(0, 50), NodeKey::FromValue(leaves[0]));
+    EXPECT_EQ(reader.Find(0, 51), LeafNumber(63).Child(2));
+    EXPECT_FALSE(reader.Find(0, 52).has_value());
+    EXPECT_EQ(reader.Find(0, 53), NodeKey::FromValue(leaves[1]));
+  }
 }
 
 TEST(IdIndex, TableReachesTheLargestId) {
@@ -163,14 +209,21 @@ TEST(IdIndex, WriterRefusesMixedFormsAndBadTables) {
 }
 
 // A table bucket written by hand: u32 magic, u32 version, u64 first ID,
-// u64 slot count, the slots.
+// u64 slot count, the slots (u16 for version 3, else u32).
 Bytes TableBucket(std::uint32_t version, std::uint64_t first, const std::vector<std::uint32_t>& slots) {
-  Bytes block(24 + 4 * slots.size());
+  const std::size_t width = version == 3 ? 2 : 4;
+  Bytes block(24 + width * slots.size());
   PutU32(block.data(), 0x4249434F);
   PutU32(block.data() + 4, version);
   PutU64(block.data() + 8, first);
   PutU64(block.data() + 16, slots.size());
-  for (std::size_t i = 0; i < slots.size(); ++i) PutU32(block.data() + 24 + 4 * i, slots[i]);
+  for (std::size_t i = 0; i < slots.size(); ++i) {
+    if (width == 2) {
+      PutU16(block.data() + 24 + 2 * i, static_cast<std::uint16_t>(slots[i]));
+    } else {
+      PutU32(block.data() + 24 + 4 * i, slots[i]);
+    }
+  }
   return block;
 }
 
@@ -202,21 +255,30 @@ struct Damage {
 };
 
 TEST(IdIndex, ReaderReportsDamagedTables) {
-  const std::vector<Damage> damages = {
-      {"ordinal-past-table", TableBucket(2, 10, {3, 3}), LeafTable({LeafNumber(1).value(), LeafNumber(2).value()}),
-       ErrorKind::kCorruption, "past the leaf table"},
-      {"no-leaf-table", TableBucket(2, 10, {1, 2}), std::nullopt, ErrorKind::kCorruption, "missing"},
-      {"invalid-leaf", TableBucket(2, 10, {1, 2}), LeafTable({LeafNumber(1).value(), 0}), ErrorKind::kCorruption,
-       "invalid node key"},
-      {"short-leaf-table", TableBucket(2, 10, {1, 2}), Bytes(12, 0), ErrorKind::kCorruption, "wrong magic or short"},
-      {"slot-count", [] {
-         Bytes b = TableBucket(2, 10, {1, 2});
-         PutU64(b.data() + 16, 3);
-         return b;
-       }(), LeafTable({LeafNumber(1).value(), LeafNumber(2).value()}), ErrorKind::kCorruption, "slot count 3"},
-      {"version", TableBucket(3, 10, {1, 2}), LeafTable({LeafNumber(1).value(), LeafNumber(2).value()}),
-       ErrorKind::kNotSupported, "version 3"},
-  };
+  const Bytes two_leaves = LeafTable({LeafNumber(1).value(), LeafNumber(2).value()});
+  std::vector<Damage> damages;
+  for (const std::uint32_t version : {2u, 3u}) {
+    const std::string v = "-v" + std::to_string(version);
+    damages.push_back({"ordinal-past-table" + v, TableBucket(version, 10, {3, 3}), two_leaves, ErrorKind::kCorruption,
+                       "past the leaf table"});
+    damages.push_back({"no-leaf-table" + v, TableBucket(version, 10, {1, 2}), std::nullopt, ErrorKind::kCorruption,
+                       "missing"});
+    damages.push_back({"invalid-leaf" + v, TableBucket(version, 10, {1, 2}), LeafTable({LeafNumber(1).value(), 0}),
+                       ErrorKind::kCorruption, "invalid node key"});
+    damages.push_back({"short-leaf-table" + v, TableBucket(version, 10, {1, 2}), Bytes(12, 0), ErrorKind::kCorruption,
+                       "wrong magic or short"});
+    Bytes miscounted = TableBucket(version, 10, {1, 2});
+    PutU64(miscounted.data() + 16, 3);
+    damages.push_back({"slot-count" + v, miscounted, two_leaves, ErrorKind::kCorruption, "slot count 3"});
+  }
+  // A version-2 bucket read as 16-bit slots, or the reverse, has the wrong size.
+  Bytes wide_as_narrow = TableBucket(2, 10, {1, 2});
+  PutU32(wide_as_narrow.data() + 4, 3);
+  damages.push_back({"wide-as-narrow", wide_as_narrow, two_leaves, ErrorKind::kCorruption, "slot count 2"});
+  Bytes narrow_as_wide = TableBucket(3, 10, {1, 2});
+  PutU32(narrow_as_wide.data() + 4, 2);
+  damages.push_back({"narrow-as-wide", narrow_as_wide, two_leaves, ErrorKind::kCorruption, "slot count 2"});
+  damages.push_back({"version", TableBucket(4, 10, {1, 2}), two_leaves, ErrorKind::kNotSupported, "version 4"});
   for (const Damage& damage : damages) {
     TempDir dir("id-index-" + damage.name);
     WriteIndex(dir.path().string(), [&](StoreWriter& store) {
