@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <csignal>
 #include <filesystem>
 #include <thread>
@@ -134,6 +135,27 @@ TEST(DirectWriter, WritesQueuedOutOfOrderLandWhole) {
     std::copy(piece.begin(), piece.end(), expected.begin() + static_cast<std::ptrdiff_t>(offset_of(n)));
   }
   EXPECT_TRUE(file == expected);
+}
+
+TEST(DirectWriter, ABatchsWorthGoesOutWithoutDrain) {
+  // Writes are held back until a batch's worth is queued; then the writer
+  // thread must be woken to write them, with no Drain to ask it.
+  ScratchDirectory dir;
+  const std::string path = dir.File("direct");
+  auto writer = OpenOrSkip(path, 16 << 20);
+  if (!writer) GTEST_SKIP() << "no direct I/O on " << dir.path();
+  for (std::size_t n = 0; n < DirectWriter::kMaxBatchJobs; ++n) writer->Write(n * kAlign, Pattern(n, kAlign));
+  const std::vector<std::uint8_t> first = Pattern(0, kAlign);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  std::vector<std::uint8_t> file;
+  while (std::chrono::steady_clock::now() < deadline) {
+    file = testing_support::ReadFileBytes(path);
+    if (file.size() >= kAlign && std::equal(first.begin(), first.end(), file.begin())) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_GE(file.size(), kAlign) << "the batch was not written within 20 s";
+  EXPECT_TRUE(std::equal(first.begin(), first.end(), file.begin()));
+  writer->Drain();
 }
 
 TEST(DirectWriter, RefusesAnOffsetOffTheAlignment) {
