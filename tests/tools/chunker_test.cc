@@ -270,5 +270,77 @@ TEST(Chunker, ResidentSplitGoesBelowItsPrecomputedCells) {
   }
 }
 
+// The end of the list cut finer: the last `window` chunks are each at most
+// `most` points, or a leaf, while the chunks before them stay as they were;
+// every point is still listed once, in a chunk that holds it, and the
+// chunks still follow each other in depth-first order without overlapping.
+TEST(Chunker, TailSplitLeavesOnlySmallChunksAtTheEnd) {
+  testing_support::TempDir dir("chunker-tail-test");
+  const ParticleChunk points = Points(60000);
+  ChunkerOptions options = ResidentTestOptions(dir.path());
+  options.leaf_capacity = 100;
+  Chunker chunker(kCube, options);
+  ResidentEpoch held;
+  held.Read(PassOver(points, 7000), 0, options.columns);
+  const std::vector<Chunk> whole = chunker.SplitResident(NodeKey::Root(), held);
+  std::vector<std::pair<NodeKey, std::vector<std::uint32_t>>> before;
+  for (const Chunk& chunk : whole) before.push_back({chunk.key, {chunk.resident.begin(), chunk.resident.end()}});
+  constexpr std::size_t kWindow = 6;
+  constexpr std::uint64_t kMost = 400;
+  std::uint64_t largest_at_end = 0;
+  for (std::size_t c = whole.size() - kWindow; c < whole.size(); ++c) {
+    largest_at_end = std::max(largest_at_end, whole[c].point_count);
+  }
+  ASSERT_GT(largest_at_end, kMost) << "the test needs a large chunk at the end";
+
+  const std::vector<Chunk> chunks = chunker.SplitTail(whole, held, kWindow, kMost);
+  ASSERT_GT(chunks.size(), whole.size());
+  for (std::size_t c = chunks.size() - kWindow; c < chunks.size(); ++c) {
+    EXPECT_TRUE(chunks[c].point_count <= kMost || chunks[c].point_count <= options.leaf_capacity)
+        << chunks[c].key.Path() << " holds " << chunks[c].point_count;
+  }
+  std::size_t unchanged = 0;
+  while (unchanged < before.size() && chunks[unchanged].key == before[unchanged].first &&
+         std::equal(chunks[unchanged].resident.begin(), chunks[unchanged].resident.end(),
+                    before[unchanged].second.begin(), before[unchanged].second.end())) {
+    ++unchanged;
+  }
+  EXPECT_GE(unchanged + kWindow, before.size()) << "only chunks in the tail are cut";
+  std::vector<int> listed(points.size(), 0);
+  for (std::size_t c = 0; c < chunks.size(); ++c) {
+    if (c > 0) {
+      EXPECT_TRUE(PreorderLess{}(chunks[c - 1].key, chunks[c].key)) << c;
+      EXPECT_FALSE(chunks[c - 1].key.IsAncestorOrSelf(chunks[c].key)) << c;
+    }
+    ASSERT_EQ(chunks[c].resident.size(), chunks[c].point_count);
+    for (const std::uint32_t i : chunks[c].resident) {
+      ASSERT_LT(i, points.size());
+      ++listed[i];
+      EXPECT_TRUE(kCube.Holds(chunks[c].key, &points.position[3 * std::size_t{i}])) << chunks[c].key.Path();
+    }
+  }
+  EXPECT_EQ(std::count(listed.begin(), listed.end(), 1), static_cast<std::ptrdiff_t>(points.size()))
+      << "every point listed once";
+
+  // Asked for chunks smaller than a leaf, it cuts only chunks the tree makes
+  // inner nodes (more than leaf_capacity points): cutting a leaf's chunk
+  // would make the merger sample it from children, another tree.
+  std::map<std::uint64_t, std::uint64_t> whole_counts;
+  for (const Chunk& chunk : whole) whole_counts[chunk.key.value()] = chunk.point_count;
+  const std::vector<Chunk> fine = chunker.SplitTail(whole, held, kWindow, options.leaf_capacity / 4);
+  for (const Chunk& chunk : fine) {
+    if (whole_counts.count(chunk.key.value()) != 0) continue;
+    // A new chunk's parent was a chunk once, cut: it must have held more
+    // than a leaf does.
+    const NodeKey cut = chunk.key.AncestorAt(chunk.key.level() - 1);
+    std::uint64_t under_cut = 0;
+    for (const Chunk& other : fine) under_cut += cut.IsAncestorOrSelf(other.key) ? other.point_count : 0;
+    EXPECT_GT(under_cut, options.leaf_capacity) << "the leaf-sized chunk " << cut.Path() << " was cut";
+  }
+  for (std::size_t c = fine.size() - kWindow; c < fine.size(); ++c) {
+    EXPECT_LE(fine[c].point_count, options.leaf_capacity) << fine[c].key.Path();
+  }
+}
+
 }  // namespace
 }  // namespace octocosm

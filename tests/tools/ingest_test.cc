@@ -129,7 +129,9 @@ TEST_F(IngestTest, ChunkingDoesNotChangeTheTree) {
   EXPECT_TRUE(report.epochs[0].resident);
   const IngestReport streamed_report = Ingest(streamed);
   EXPECT_FALSE(streamed_report.epochs[0].resident);
-  EXPECT_EQ(streamed_report.epochs[0].chunks, report.epochs[0].chunks);
+  // The same chunks, but for the end of the resident list, which is cut finer
+  // (Chunker::SplitTail).
+  EXPECT_GE(report.epochs[0].chunks, streamed_report.epochs[0].chunks);
   const TreeCheck a = CheckTree(Dataset::Open(whole.output), 0);
   const TreeCheck b = CheckTree(Dataset::Open(chunked.output), 0);
   const TreeCheck c = CheckTree(Dataset::Open(streamed.output), 0);

@@ -1,6 +1,7 @@
 #include "tools/ingest/chunker.h"
 
 #include <algorithm>
+#include <iterator>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -410,6 +411,31 @@ std::vector<Chunk> Chunker::SplitResidentAt(NodeKey root, int levels, const Resi
     }
   }
   return result;
+}
+
+std::vector<Chunk> Chunker::SplitTail(std::vector<Chunk> chunks, const ResidentEpoch& resident, std::size_t window,
+                                     std::uint64_t most_points) {
+  const ResidentCells none;  // level 0: every cut below it is made from the positions
+  for (;;) {
+    std::size_t largest = chunks.size();
+    for (std::size_t c = chunks.size() - std::min(window, chunks.size()); c < chunks.size(); ++c) {
+      const Chunk& chunk = chunks[c];
+      const bool inner = chunk.point_count > options_.leaf_capacity && chunk.key.level() < options_.max_level;
+      if (chunk.resident.empty() || !inner || chunk.point_count <= most_points) continue;
+      if (largest == chunks.size() || chunk.point_count > chunks[largest].point_count) largest = c;
+    }
+    if (largest == chunks.size()) return chunks;
+    const Chunk& split = chunks[largest];
+    // The chunk's stretch of the shared list, which the cut reorders in
+    // place: SplitResidentAt made that list, writable, and hands it out as
+    // const only to the chunks' users.
+    const auto lists = std::const_pointer_cast<std::uint32_t[]>(split.resident_lists);
+    const std::span<std::uint32_t> stretch(lists.get() + (split.resident.data() - lists.get()), split.resident.size());
+    std::vector<Chunk> parts = SplitResidentAt(split.key, 1, resident, none, stretch, lists);
+    chunks.erase(chunks.begin() + static_cast<std::ptrdiff_t>(largest));
+    chunks.insert(chunks.begin() + static_cast<std::ptrdiff_t>(largest), std::make_move_iterator(parts.begin()),
+                  std::make_move_iterator(parts.end()));
+  }
 }
 
 std::vector<Chunk> Chunker::Split(NodeKey root, const PointPass& pass) {

@@ -57,6 +57,12 @@ constexpr std::uint64_t kMaxChunkBufferBytes = std::uint64_t{256} << 20;
 // ingest from 1.51-1.57 s to 1.23-1.45 s and its peak RSS by about 175 MiB;
 // at 10^8 it changed little (docs/BENCHMARKS.md).
 constexpr std::uint64_t kMaxChunkPoints = std::uint64_t{1} << 18;
+// The build threads take chunks from a window of this many per thread
+// (tools/ingest/chunk_queue.h), so the last ones built are among the last
+// that many; those are cut to at most an eighth of the largest chunk
+// (Chunker::SplitTail), a few milliseconds' work each.
+constexpr std::size_t kQueueWindowPerThread = 4;
+constexpr std::uint64_t kTailChunkFraction = 8;
 
 struct IdLeafRecord {
   std::uint64_t key;  // particle ID
@@ -282,7 +288,7 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
   std::size_t next_to_merge = 0;
   std::vector<std::uint64_t> point_counts;
   for (const Chunk& chunk : chunks) point_counts.push_back(chunk.point_count);
-  ChunkQueue queue(std::move(point_counts), 4 * std::size_t{threads});
+  ChunkQueue queue(std::move(point_counts), kQueueWindowPerThread * std::size_t{threads});
   std::atomic<bool> failed{false};
   std::exception_ptr error;
   std::mutex error_mutex;
@@ -535,7 +541,8 @@ IngestReport Ingest(const IngestOptions& options) {
         const bool mapped = !join_epochs && MapResident(*source, cube, chunker_options.columns, threads, resident_points,
                                                         id_census, progress);
         if (!mapped) resident_points.Read(counted, expected, chunker_options.columns);
-        chunks = chunker.SplitResident(NodeKey::Root(), resident_points);
+        chunks = chunker.SplitTail(chunker.SplitResident(NodeKey::Root(), resident_points), resident_points,
+                                   kQueueWindowPerThread * threads, max_chunk / kTailChunkFraction);
       } else {
         chunks = chunker.Split(NodeKey::Root(), counted);
       }
