@@ -20,7 +20,13 @@ std::uint64_t Xxh3WithAvx2(const void* bytes, std::size_t size);
 }  // namespace checksum_internal
 
 namespace {
-const bool kCpuHasAvx2 = __builtin_cpu_supports("avx2");
+// Initialised before main, so the CPU's features are read first explicitly
+// (GCC: __builtin_cpu_init before __builtin_cpu_supports in code that may
+// run before constructors).
+const bool kCpuHasAvx2 = [] {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") != 0;
+}();
 }  // namespace
 
 std::uint64_t Checksum64(std::span<const std::uint8_t> bytes) {

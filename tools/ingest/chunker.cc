@@ -1,10 +1,10 @@
 #include "tools/ingest/chunker.h"
 
 #include <algorithm>
-#include <iterator>
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 #include <memory>
 #include <numeric>
 #include <optional>
