@@ -28,16 +28,14 @@ const bool kCpuHasAvx2 = [] {
   return __builtin_cpu_supports("avx2") != 0;
 }();
 }  // namespace
+#endif
 
 std::uint64_t Checksum64(std::span<const std::uint8_t> bytes) {
+#if OCTOCOSM_CHECKSUM_AVX2
   if (kCpuHasAvx2) return checksum_internal::Xxh3WithAvx2(bytes.data(), bytes.size());
-  return XXH3_64bits(bytes.data(), bytes.size());
-}
-#else
-std::uint64_t Checksum64(std::span<const std::uint8_t> bytes) {
-  return XXH3_64bits(bytes.data(), bytes.size());
-}
 #endif
+  return XXH3_64bits(bytes.data(), bytes.size());
+}
 
 std::uint64_t Checksum64(std::span<const std::uint8_t> first, std::span<const std::uint8_t> second) {
   struct StateDeleter {
