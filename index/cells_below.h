@@ -41,9 +41,11 @@ class CellsBelow {
     return code;
   }
 
+  // v's bits spread three apart (SpreadBits3), from a table below 2^10.
+  static std::uint64_t Spread(std::uint64_t v);
+
  private:
   static constexpr int kTableBits = 10;
-  static std::uint64_t Spread(std::uint64_t v);
 
   Cube cube_;
   int level_ = 0;

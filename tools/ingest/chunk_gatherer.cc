@@ -1,5 +1,6 @@
 #include "tools/ingest/chunk_gatherer.h"
 
+#include <algorithm>
 #include <cstddef>
 #include <string>
 
@@ -13,9 +14,37 @@ namespace {
 // (8^6 cells).
 constexpr std::size_t kPointsPerOrderingCell = 16;
 constexpr int kMaxOrderingDepth = 6;
-[[noreturn, gnu::cold, gnu::noinline]] void ThrowOutsideChunk(NodeKey chunk) {
-  throw Error::InvalidArgument("chunk gatherer: a point lies outside chunk " + chunk.Path());
-}
+
+// The Morton number of the cell `depth` levels below a node that holds a
+// position (depth <= kMaxOrderingDepth), from a product with the cells per
+// unit length rather than a division (CellsBelow's exact placement): a
+// point within rounding of a cell face may land in the cell beside it, which
+// changes nothing but where it sits in the chunk, and the three divisions a
+// point made a 10^8-point ingest 3 % slower. Positions outside the node (or
+// NaN) are clamped into its border cells: the builder refuses them
+// (BuildSubtree checks every point against its region, exactly).
+class OrderingCells {
+ public:
+  OrderingCells(const Cube& cube, NodeKey node, int depth)
+      : node_(cube.NodeCubeOf(node)),
+        cells_per_unit_(static_cast<double>(std::uint64_t{1} << depth) / node_.size),
+        last_(static_cast<double>((std::uint64_t{1} << depth) - 1)) {}
+
+  std::uint32_t Of(const double* position) const {
+    std::uint32_t code = 0;
+    for (int a = 0; a < 3; ++a) {
+      // max(0, NaN) is 0: the comparison fails.
+      const double scaled = std::min(std::max(0.0, (position[a] - node_.origin[a]) * cells_per_unit_), last_);
+      code |= static_cast<std::uint32_t>(CellsBelow::Spread(static_cast<std::uint32_t>(scaled))) << a;
+    }
+    return code;
+  }
+
+ private:
+  NodeCube node_;
+  double cells_per_unit_;
+  double last_;
+};
 
 }  // namespace
 
@@ -39,8 +68,8 @@ const ParticleChunk& ChunkGatherer::Gather(const ResidentEpoch& resident, const 
          (std::uint64_t{kPointsPerOrderingCell} << (3 * depth)) < n) {
     ++depth;
   }
-  const CellsBelow below(cube_, chunk.key, chunk.key.level() + depth);
-  const std::size_t cells = below.count();
+  const OrderingCells ordering(cube_, chunk.key, depth);
+  const std::size_t cells = std::size_t{1} << (3 * depth);
 
   // Each point's cell, counted; then, cell by cell in Morton order, its slot.
   target_.resize(n);
@@ -52,9 +81,8 @@ const ParticleChunk& ChunkGatherer::Gather(const ResidentEpoch& resident, const 
     }
   }
   resident.ForEachListedPosition(listed, [&](std::size_t k, const double* position) {
-    const std::uint64_t cell = below.Of(position);
-    if (cell == CellsBelow::kOutside) ThrowOutsideChunk(chunk.key);
-    target_[k] = static_cast<std::uint32_t>(cell);
+    const std::uint32_t cell = ordering.Of(position);
+    target_[k] = cell;
     ++cell_begin_[cell + 1];
   });
   for (std::size_t cell = 0; cell < cells; ++cell) cell_begin_[cell + 1] += cell_begin_[cell];

@@ -2,7 +2,9 @@
 // indices into the epoch held in memory whole) into one contiguous
 // ParticleChunk for the tree builder, ordered so that each leaf's points lie
 // together: in the Morton order of cells a few levels below the chunk, about
-// 16 points to a cell and at most 6 levels down. The tree does not depend on
+// 16 points to a cell and at most 6 levels down (cells found with a product,
+// not a division: a point within rounding of a cell face may sit with the
+// cell beside it). The tree does not depend on
 // the order of a chunk's points, but the build's speed does: a leaf copies
 // its points' columns, and when they lie in one stretch that fits the cache,
 // nearly every read hits it.
@@ -35,7 +37,9 @@ class ChunkGatherer {
 
   // The points `chunk.resident` lists, every column `resident` carries, in
   // the order above; valid until the next call. Throws Error::InvalidArgument
-  // when an index lies past the resident set or a point outside the chunk.
+  // when an index lies past the resident set. A point outside the chunk is
+  // copied like the others: the builder refuses it (BuildSubtree checks
+  // every point against its region).
   const ParticleChunk& Gather(const ResidentEpoch& resident, const Chunk& chunk);
 
   // Sizes the buffers once for chunks of up to `points` points of
