@@ -4,10 +4,10 @@
 // together: in the Morton order of cells a few levels below the chunk, about
 // 16 points to a cell and at most 6 levels down (cells found with a product,
 // not a division: a point within rounding of a cell face may sit with the
-// cell beside it). The tree does not depend on
-// the order of a chunk's points, but the build's speed does: a leaf copies
-// its points' columns, and when they lie in one stretch that fits the cache,
-// nearly every read hits it.
+// cell beside it). The tree does not depend on the order of a chunk's
+// points, but the build's speed does: a leaf copies its points' columns, and
+// when they lie in one stretch that fits the cache, nearly every read hits
+// it.
 //
 // Why a copy per chunk instead of reordering the resident epoch once, chunk
 // by chunk: that reordering needed a scratch buffer as large as the widest
