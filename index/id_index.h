@@ -52,9 +52,8 @@ inline constexpr std::uint64_t kIdIndexLeafTableKey = ~std::uint64_t{0} - 1;
 // The smallest page an ID index store should use (ingest takes the store's
 // page size when larger): a bucket fills about one page, and with 4 KiB
 // pages 10^8 IDs in 32-bit tables made 98,000 blocks instead of 6,100,
-// which took twice as
-// long to write (0.39 s against 0.20 s), while a look-up reads one bucket
-// either way.
+// which took twice as long to write (0.39 s against 0.20 s), while a look-up
+// reads one bucket either way.
 inline constexpr std::uint32_t kIdIndexMinPageSize = 64 * 1024;
 
 // Writes one epoch of the ID index into a StoreWriter whose epoch is open.
