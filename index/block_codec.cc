@@ -195,11 +195,12 @@ double EncodeWeights(const std::vector<double>& weight, std::uint8_t* out) {
     const double threshold = NthLargest(remainder, static_cast<std::size_t>(deficit - 1));
     std::int64_t above = 0;
     for (std::size_t i = 0; i < n; ++i) above += remainder[i] > threshold ? 1 : 0;
+    // Without a branch on the remainder, which is random: the branch was
+    // mispredicted that often. The ties, rare, get their units after.
+    for (std::size_t i = 0; i < n; ++i) units[i] += remainder[i] > threshold ? 1 : 0;
     std::int64_t ties = deficit - above;  // at least 1: the threshold itself
-    for (std::size_t i = 0; i < n; ++i) {
-      if (remainder[i] > threshold) {
-        ++units[i];
-      } else if (remainder[i] == threshold && ties > 0) {
+    for (std::size_t i = 0; i < n && ties > 0; ++i) {
+      if (remainder[i] == threshold) {
         ++units[i];
         --ties;
       }
