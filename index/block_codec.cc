@@ -11,6 +11,10 @@
 #include <stdexcept>
 #include <string>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "index/extended_sum.h"
 #include "index/nth_largest.h"
 #include "storage/checksum.h"
@@ -254,6 +258,54 @@ std::uint16_t SmoothingCode(double h, double node_size) {
   return 0;
 }
 
+#if defined(__SSE2__)
+// NearestCode((v[i] - offset[i % 12]) * scale[i % 12]) for the first `whole`
+// values (a multiple of 12), written as little-endian 16-bit codes: the same
+// truncation, comparison with a half and clamp, two values to an
+// instruction. GCC 12 leaves the scalar loop unvectorized, and it was a
+// quarter of EncodeBlock's time.
+void EncodeRangedLanes(const float* v, std::size_t whole, const std::array<double, 12>& offset,
+                       const std::array<double, 12>& scale, std::uint8_t* out) {
+  __m128d offset2[6], scale2[6];
+  for (std::size_t p = 0; p < 6; ++p) {
+    offset2[p] = _mm_loadu_pd(&offset[2 * p]);
+    scale2[p] = _mm_loadu_pd(&scale[2 * p]);
+  }
+  const __m128d half = _mm_set1_pd(0.5);
+  const __m128i last_code = _mm_set1_epi32(65535);
+  const __m128i bias32 = _mm_set1_epi32(32768);
+  const __m128i bias16 = _mm_set1_epi16(static_cast<short>(0x8000));
+  // Two doubles' codes, as int32 in the low half.
+  const auto codes2 = [&](__m128 floats, bool upper, std::size_t p) {
+    const __m128d x = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(upper ? _mm_movehl_ps(floats, floats) : floats), offset2[p]),
+                                 scale2[p]);
+    const __m128i truncated = _mm_cvttpd_epi32(x);
+    const __m128d up = _mm_cmpge_pd(_mm_sub_pd(x, _mm_cvtepi32_pd(truncated)), half);
+    // The comparison's 64-bit masks to the low two 32-bit lanes; a mask is -1.
+    const __m128i up32 = _mm_shuffle_epi32(_mm_castpd_si128(up), _MM_SHUFFLE(3, 3, 2, 0));
+    return _mm_sub_epi32(truncated, up32);
+  };
+  // Four codes as int32, clamped to 65535.
+  const auto codes4 = [&](__m128 floats, std::size_t p) {
+    const __m128i code = _mm_unpacklo_epi64(codes2(floats, false, p), codes2(floats, true, p + 1));
+    const __m128i over = _mm_cmpgt_epi32(code, last_code);
+    return _mm_or_si128(_mm_andnot_si128(over, code), _mm_and_si128(over, last_code));
+  };
+  // int32 codes in [0, 65535] to uint16: shifted into int16's range, packed
+  // with signed saturation (which never bites), shifted back.
+  const auto pack = [&](__m128i a, __m128i b) {
+    return _mm_xor_si128(_mm_packs_epi32(_mm_sub_epi32(a, bias32), _mm_sub_epi32(b, bias32)), bias16);
+  };
+  for (std::size_t i = 0; i < whole; i += 12) {
+    const __m128i c0 = codes4(_mm_loadu_ps(v + i), 0);
+    const __m128i c1 = codes4(_mm_loadu_ps(v + i + 4), 2);
+    const __m128i c2 = codes4(_mm_loadu_ps(v + i + 8), 4);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + 2 * i), pack(c0, c1));
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(out + 2 * i + 16), pack(c2, c2));
+  }
+}
+#endif
+
 void EncodeSmoothing(const std::vector<double>& smoothing, double node_size, std::uint8_t* out) {
   // A node's lengths repeat (one per density cell and weight,
   // index/sampler.h), so a small direct-mapped cache of (length, code) saves
@@ -294,6 +346,31 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
   }
   const float* v = values.data();
   const std::size_t whole = 3 * n / kLanes * kLanes;
+#if defined(__SSE2__)
+  // GCC 12 leaves this loop scalar; minps and maxps are the ternaries below
+  // exactly (the second operand when either is NaN or both are equal).
+  {
+    __m128 lo4[3], hi4[3], nonfinite4[3];
+    for (std::size_t r = 0; r < 3; ++r) {
+      lo4[r] = _mm_loadu_ps(&lane_lo[4 * r]);
+      hi4[r] = _mm_loadu_ps(&lane_hi[4 * r]);
+      nonfinite4[r] = _mm_setzero_ps();
+    }
+    for (std::size_t i = 0; i < whole; i += kLanes) {
+      for (std::size_t r = 0; r < 3; ++r) {
+        const __m128 x = _mm_loadu_ps(v + i + 4 * r);
+        lo4[r] = _mm_min_ps(x, lo4[r]);
+        hi4[r] = _mm_max_ps(x, hi4[r]);
+        nonfinite4[r] = _mm_add_ps(nonfinite4[r], _mm_sub_ps(x, x));
+      }
+    }
+    for (std::size_t r = 0; r < 3; ++r) {
+      _mm_storeu_ps(&lane_lo[4 * r], lo4[r]);
+      _mm_storeu_ps(&lane_hi[4 * r], hi4[r]);
+      _mm_storeu_ps(&lane_nonfinite[4 * r], nonfinite4[r]);
+    }
+  }
+#else
   for (std::size_t i = 0; i < whole; i += kLanes) {
     for (std::size_t j = 0; j < kLanes; ++j) {
       const float x = v[i + j];
@@ -302,6 +379,7 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
       lane_nonfinite[j] += x - x;
     }
   }
+#endif
   for (std::size_t i = whole; i < 3 * n; ++i) {
     const float x = v[i];
     lane_lo[i % 3] = x < lane_lo[i % 3] ? x : lane_lo[i % 3];
@@ -346,10 +424,17 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
     lane_offset[j] = lo[j % 3];
     lane_scale[j] = scale[j % 3];
   }
-  for (std::size_t i = 0; i < whole; i += kLanes) {
-    std::array<std::uint16_t, kLanes> codes;
-    for (std::size_t j = 0; j < kLanes; ++j) codes[j] = NearestCode((v[i + j] - lane_offset[j]) * lane_scale[j]);
-    for (std::size_t j = 0; j < kLanes; ++j) PutU16(out + 2 * (i + j), codes[j]);
+#if defined(__SSE2__)
+  if constexpr (kHostIsLittleEndian) {
+    EncodeRangedLanes(v, whole, lane_offset, lane_scale, out);
+  } else
+#endif
+  {
+    for (std::size_t i = 0; i < whole; i += kLanes) {
+      std::array<std::uint16_t, kLanes> codes;
+      for (std::size_t j = 0; j < kLanes; ++j) codes[j] = NearestCode((v[i + j] - lane_offset[j]) * lane_scale[j]);
+      for (std::size_t j = 0; j < kLanes; ++j) PutU16(out + 2 * (i + j), codes[j]);
+    }
   }
   for (std::size_t i = whole; i < 3 * n; ++i) PutU16(out + 2 * i, NearestCode((v[i] - lane_offset[i % 3]) * lane_scale[i % 3]));
 }

@@ -666,6 +666,40 @@ TEST(BlockCodec, BadIdOffsetEncodingsAreCorruption) {
   expect_corrupt(overflowing, "passes 2^64 - 1", "an overflowing base");
 }
 
+// The encoder codes four points (twelve values) at a time and the rest one
+// by one: every length around those groups gets each value's nearest code.
+TEST(BlockCodec, VelocityCodesAreTheNearestOfTheRange) {
+  std::mt19937_64 rng(12);
+  const NodeKey key = NodeKey::FromPath("r3");
+  for (const std::size_t n : {std::size_t{1}, std::size_t{3}, std::size_t{4}, std::size_t{5}, std::size_t{8},
+                              std::size_t{37}, std::size_t{1000}}) {
+    SCOPED_TRACE("n " + std::to_string(n));
+    const NodePoints p = RandomPoints(rng, n, key, kCube, kVelocityBit);
+    const NodePoints d = DecodeBlock(EncodeBlock(p, key, kCube), kAllColumns, key, kCube, "codes").points;
+    ASSERT_EQ(d.velocity.size(), p.velocity.size());
+    std::size_t checked = 0;
+    for (int a = 0; a < 3; ++a) {
+      double lo = p.velocity[a], hi = p.velocity[a];
+      for (std::size_t i = a; i < p.velocity.size(); i += 3) {
+        lo = std::min<double>(lo, p.velocity[i]);
+        hi = std::max<double>(hi, p.velocity[i]);
+      }
+      if (hi == lo) continue;
+      const double quantum = (hi - lo) / 65535.0;
+      for (std::size_t i = a; i < p.velocity.size(); i += 3) {
+        const double exact = (p.velocity[i] - lo) / quantum;
+        if (std::fabs(exact - std::floor(exact) - 0.5) < 1e-3) continue;  // too near a half to call
+        const double code = std::floor(exact + 0.5);
+        ASSERT_NEAR((d.velocity[i] - lo) / quantum, code, 0.01) << "value " << i;
+        ++checked;
+      }
+    }
+    if (n > 1) {
+      EXPECT_GT(checked, 0u);
+    }
+  }
+}
+
 TEST(BlockCodec, ExtremeVelocityRangesStayFinite) {
   std::mt19937_64 rng(10);
   const NodeKey key = NodeKey::FromPath("r6");
