@@ -64,6 +64,17 @@ void IdIndexEpochWriter::FlushBucket() {
 
 void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots,
                                   std::span<const std::uint64_t> leaves) {
+  AddTableOf(first_id, slots, leaves);
+}
+
+void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::uint16_t> slots,
+                                  std::span<const std::uint64_t> leaves) {
+  AddTableOf(first_id, slots, leaves);
+}
+
+template <typename Slot>
+void IdIndexEpochWriter::AddTableOf(std::uint64_t first_id, std::span<const Slot> slots,
+                                    std::span<const std::uint64_t> leaves) {
   if (finished_) throw Error::InvalidArgument("IdIndexEpochWriter: AddTable after Finish");
   if (has_table_ || total_ > 0) throw Error::InvalidArgument("IdIndexEpochWriter: AddTable after Add or AddTable");
   if (!slots.empty() && slots.size() - 1 > ~std::uint64_t{0} - first_id) {
@@ -82,12 +93,12 @@ void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::u
   Bytes block(kTableHeader + slot_bytes * std::min(per_bucket, slots.size()));
   for (std::size_t begin = 0; begin < slots.size(); begin += per_bucket) {
     const std::size_t m = std::min(per_bucket, slots.size() - begin);
-    const std::uint32_t* slot = slots.data() + begin;
+    const Slot* slot = slots.data() + begin;
     std::uint64_t present = 0;
     std::uint32_t most = 0;
     for (std::size_t i = 0; i < m; ++i) {
       present += slot[i] != 0;
-      most = std::max(most, slot[i]);
+      most = std::max<std::uint32_t>(most, slot[i]);
     }
     if (most > leaves.size()) {
       throw Error::InvalidArgument("IdIndexEpochWriter: ordinal " + std::to_string(most) + " for ID " +
@@ -101,8 +112,12 @@ void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::u
     PutU64(block.data() + 16, m);
     std::uint8_t* out = block.data() + kTableHeader;
     if (narrow) {
-      for (std::size_t i = 0; i < m; ++i) PutU16(out + 2 * i, static_cast<std::uint16_t>(slot[i]));
-    } else if constexpr (kHostIsLittleEndian) {
+      if constexpr (kHostIsLittleEndian && sizeof(Slot) == 2) {
+        std::memcpy(out, slot, 2 * m);
+      } else {
+        for (std::size_t i = 0; i < m; ++i) PutU16(out + 2 * i, static_cast<std::uint16_t>(slot[i]));
+      }
+    } else if constexpr (kHostIsLittleEndian && sizeof(Slot) == 4) {
       std::memcpy(out, slot, 4 * m);
     } else {
       for (std::size_t i = 0; i < m; ++i) PutU32(out + 4 * i, slot[i]);

@@ -72,12 +72,16 @@ class IdIndexEpochWriter {
   // that wait (at 10^8 points, 200 MB instead of 400). Call it once,
   // instead of Add, then Finish. Throws
   // Error::InvalidArgument for an ordinal past `leaves`, an invalid leaf key
-  // or IDs past 2^64 - 1.
+  // or IDs past 2^64 - 1. The slots may come 16 or 32 bits wide; the
+  // buckets' width depends only on the count of leaves.
   void AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots, std::span<const std::uint64_t> leaves);
+  void AddTable(std::uint64_t first_id, std::span<const std::uint16_t> slots, std::span<const std::uint64_t> leaves);
   // Writes the last bucket and the directory.
   void Finish();
 
  private:
+  template <typename Slot>
+  void AddTableOf(std::uint64_t first_id, std::span<const Slot> slots, std::span<const std::uint64_t> leaves);
   void FlushBucket();
 
   StoreWriter& store_;

@@ -131,6 +131,38 @@ TEST(IdIndex, TableFindsEveryIdAndLeavesOutEmptyBuckets) {
   }
 }
 
+// A table handed over in 16-bit slots (DenseIdTable's while it is narrow)
+// writes the same blocks as the same table in 32-bit slots; with more than
+// 65535 leaves too, where the ordinals are widened on the way.
+TEST(IdIndex, TableOfSixteenBitSlotsWritesTheSameBlocks) {
+  for (const std::size_t leaf_count : {std::size_t{5}, std::size_t{65536}}) {
+    SCOPED_TRACE(leaf_count);
+    const std::vector<std::uint64_t> leaves = Leaves(leaf_count);
+    std::vector<std::uint32_t> wide(2 * SlotsPerBucket(3) + 10);
+    for (std::size_t i = 0; i < wide.size(); ++i) wide[i] = i % 5 == 1 ? 0 : static_cast<std::uint32_t>(1 + (i * 7919) % std::min<std::size_t>(leaf_count, 65535));
+    const std::vector<std::uint16_t> narrow(wide.begin(), wide.end());
+    TempDir wide_dir("id-index-wide"), narrow_dir("id-index-narrow-slots");
+    WriteIndex(wide_dir.path().string(), [&](StoreWriter& store) {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      ids.AddTable(40, std::span<const std::uint32_t>(wide), leaves);
+      ids.Finish();
+    });
+    WriteIndex(narrow_dir.path().string(), [&](StoreWriter& store) {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      ids.AddTable(40, std::span<const std::uint16_t>(narrow), leaves);
+      ids.Finish();
+    });
+    const StoreReader from_wide = StoreReader::Open(wide_dir.path().string());
+    const StoreReader from_narrow = StoreReader::Open(narrow_dir.path().string());
+    ASSERT_EQ(from_wide.block_count(0), from_narrow.block_count(0));
+    ASSERT_GE(from_wide.block_count(0), 4u);  // two buckets or more, the leaf table, the directory
+    for (std::uint64_t b = 0; b + 2 < from_wide.block_count(0); ++b) {
+      EXPECT_EQ(from_wide.ReadBlock({0, b}), from_narrow.ReadBlock({0, b})) << b;
+    }
+    EXPECT_EQ(FirstBucketVersion(narrow_dir.path().string()), leaf_count <= 65535 ? 3u : 2u);
+  }
+}
+
 // 65535 leaves still fit 16-bit ordinals; one more does not.
 TEST(IdIndex, TableOrdinalsNarrowUpTo65535Leaves) {
   for (const std::size_t leaf_count : {std::size_t{65535}, std::size_t{65536}}) {

@@ -116,11 +116,13 @@ TEST(DenseIdTable, GivesEveryIdItsLeaf) {
   std::thread other([&] { table.Add(b, leaf_b); });
   table.Add(a, leaf_a);
   other.join();
-  ASSERT_EQ(table.slots().size(), 3000u);
+  ASSERT_TRUE(table.narrow());
+  ASSERT_EQ(table.narrow_slots().size(), 3000u);
+  EXPECT_TRUE(table.wide_slots().empty());
   ASSERT_EQ(table.leaves().size(), 2u);
   for (std::uint64_t i = 0; i < 3000; ++i) {
     const std::uint64_t id = first + i;
-    const std::uint32_t slot = table.slots()[i];
+    const std::uint32_t slot = table.narrow_slots()[i];
     if (i % 3 != 0) {
       ASSERT_EQ(slot, 0u) << id;
       continue;
@@ -129,6 +131,52 @@ TEST(DenseIdTable, GivesEveryIdItsLeaf) {
     ASSERT_LE(slot, 2u) << id;
     ASSERT_EQ(table.leaves()[slot - 1], (id % 2 == 0 ? leaf_a : leaf_b).value()) << id;
   }
+}
+
+// Past 65535 leaves the slots turn 32 bits wide, keeping what the narrow
+// ones held, while other threads keep adding leaves.
+TEST(DenseIdTable, WidensItsSlotsPastTheMostNarrowLeaves) {
+  const std::uint64_t first = 7;
+  const std::uint64_t leaves = DenseIdTable::kMostNarrowLeaves + 40;
+  const std::uint64_t span = 2 * leaves + 5;  // two IDs a leaf, and a few absent at the end
+  DenseIdTable table(first, span);
+  // Leaf j holds IDs first + 2j and first + 2j + 1; even leaves from one
+  // thread, odd from another, so both are adding when the table widens.
+  const auto add_leaves = [&](std::uint64_t parity) {
+    for (std::uint64_t j = parity; j < leaves; j += 2) {
+      const std::vector<std::uint64_t> ids = {first + 2 * j, first + 2 * j + 1};
+      table.Add(ids, NodeKey::FromValue(NodeKey::Root().DescendantRange(8).first + j));
+    }
+  };
+  std::thread other(add_leaves, 1);
+  add_leaves(0);
+  other.join();
+  ASSERT_FALSE(table.narrow());
+  EXPECT_TRUE(table.narrow_slots().empty());
+  ASSERT_EQ(table.wide_slots().size(), span);
+  ASSERT_EQ(table.leaves().size(), leaves);
+  for (std::uint64_t i = 0; i < span; ++i) {
+    const std::uint32_t slot = table.wide_slots()[i];
+    if (i >= 2 * leaves) {
+      ASSERT_EQ(slot, 0u) << i;
+      continue;
+    }
+    ASSERT_GE(slot, 1u) << i;
+    ASSERT_LE(slot, leaves) << i;
+    ASSERT_EQ(table.leaves()[slot - 1], NodeKey::Root().DescendantRange(8).first + i / 2) << i;
+  }
+}
+
+// Exactly 65535 leaves still fit 16-bit slots.
+TEST(DenseIdTable, StaysNarrowUpToTheMostNarrowLeaves) {
+  const std::uint64_t leaves = DenseIdTable::kMostNarrowLeaves;
+  DenseIdTable table(0, leaves);
+  for (std::uint64_t j = 0; j < leaves; ++j) {
+    const std::vector<std::uint64_t> ids = {j};
+    table.Add(ids, NodeKey::Root());
+  }
+  ASSERT_TRUE(table.narrow());
+  for (std::uint64_t i = 0; i < leaves; ++i) ASSERT_EQ(table.narrow_slots()[i], i + 1) << i;
 }
 
 TEST(DenseIdTable, RefusesIdsOutsideItsRangeAndIdsRecordedTwice) {

@@ -1,6 +1,7 @@
 #include "tools/ingest/dense_id_table.h"
 
 #include <algorithm>
+#include <cstring>
 #include <new>
 #include <string>
 
@@ -73,36 +74,76 @@ DenseIdTable::DenseIdTable(std::uint64_t first, std::uint64_t span) : first_(fir
   // calloc, not a value-initialized array: fresh memory from the kernel is
   // zero already, and writing the zeros would fault in every page on this
   // thread instead of where the leaves write.
-  slots_.reset(static_cast<std::uint32_t*>(std::calloc(std::max<std::uint64_t>(span, 1), sizeof(std::uint32_t))));
+  slots_.reset(std::calloc(std::max<std::uint64_t>(span, 1), sizeof(std::uint32_t)));
   if (!slots_) throw std::bad_alloc();
 }
 
-void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
-  std::uint32_t slot_value = 0;
-  {
-    std::lock_guard lock(mutex_);
-    if (leaves_.size() >= UINT32_MAX - 1) {
-      throw Error::InvalidArgument("DenseIdTable: more than " + std::to_string(UINT32_MAX - 1) + " leaves");
-    }
-    leaves_.push_back(leaf.value());
-    slot_value = static_cast<std::uint32_t>(leaves_.size());
+std::span<const std::uint16_t> DenseIdTable::narrow_slots() const {
+  if (!narrow_) return {};
+  return {static_cast<const std::uint16_t*>(slots_.get()), static_cast<std::size_t>(span_)};
+}
+
+std::span<const std::uint32_t> DenseIdTable::wide_slots() const {
+  if (narrow_) return {};
+  return {static_cast<const std::uint32_t*>(slots_.get()), static_cast<std::size_t>(span_)};
+}
+
+void DenseIdTable::Widen() {
+  // Through memcpy: the same bytes are read as 16-bit and written as 32-bit
+  // values. Slot i's wide bytes [4i, 4i + 4) hold narrow slots 2i and 2i + 1,
+  // both read already when going down from the last.
+  auto* bytes = static_cast<std::uint8_t*>(slots_.get());
+  for (std::uint64_t i = span_; i-- > 0;) {
+    std::uint16_t narrow;
+    std::memcpy(&narrow, bytes + 2 * i, sizeof(narrow));
+    const std::uint32_t wide = narrow;
+    std::memcpy(bytes + 4 * i, &wide, sizeof(wide));
   }
+  narrow_ = false;
+}
+
+namespace {
+
+template <typename Slot>
+void RecordLeaf(Slot* slots, std::uint64_t first, std::uint64_t span, std::span<const std::uint64_t> ids,
+                Slot slot_value) {
   // A leaf's IDs lie scattered over the table, so each slot is a cache miss;
   // asking for the slots this many IDs ahead lets the misses overlap.
   constexpr std::size_t kAhead = 16;
   for (std::size_t k = 0; k < ids.size(); ++k) {
     if (k + kAhead < ids.size()) {
-      const std::uint64_t ahead = ids[k + kAhead] - first_;
-      if (ahead < span_) __builtin_prefetch(slots_.get() + ahead, 1);
+      const std::uint64_t ahead = ids[k + kAhead] - first;
+      if (ahead < span) __builtin_prefetch(slots + ahead, 1);
     }
     const std::uint64_t id = ids[k];
-    const std::uint64_t slot = id - first_;
-    if (slot >= span_) {
+    const std::uint64_t slot = id - first;
+    if (slot >= span) {
       throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " lies outside the table's " +
-                                   std::to_string(first_) + " .. " + std::to_string(first_ + span_ - 1));
+                                   std::to_string(first) + " .. " + std::to_string(first + span - 1));
     }
-    if (slots_[slot] != 0) throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " recorded twice");
-    slots_[slot] = slot_value;
+    if (slots[slot] != 0) throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " recorded twice");
+    slots[slot] = slot_value;
+  }
+}
+
+}  // namespace
+
+void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
+  std::uint32_t slot_value = 0;
+  {
+    std::unique_lock lock(mutex_);
+    if (leaves_.size() >= UINT32_MAX - 1) {
+      throw Error::InvalidArgument("DenseIdTable: more than " + std::to_string(UINT32_MAX - 1) + " leaves");
+    }
+    leaves_.push_back(leaf.value());
+    slot_value = static_cast<std::uint32_t>(leaves_.size());
+    if (narrow_ && slot_value > kMostNarrowLeaves) Widen();
+  }
+  std::shared_lock lock(mutex_);
+  if (narrow_) {
+    RecordLeaf(static_cast<std::uint16_t*>(slots_.get()), first_, span_, ids, static_cast<std::uint16_t>(slot_value));
+  } else {
+    RecordLeaf(static_cast<std::uint32_t*>(slots_.get()), first_, span_, ids, slot_value);
   }
 }
 

@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <memory>
 #include <mutex>
+#include <shared_mutex>
 #include <span>
 #include <vector>
 
@@ -54,13 +55,18 @@ class IdCensus {
 };
 
 // Slot i holds which leaf has ID first + i: 0 where no particle has that ID,
-// else one more than the leaf's ordinal in the order leaves were added (4
-// bytes a slot where the key itself would take 8: a table twice as long fits
-// the same budget, and fresh memory is much of an ingest's cost).
+// else one more than the leaf's ordinal in the order leaves were added.
+// Slots are 16 bits while at most 65535 leaves have been added (10^8
+// clustered points make about 34,000) and are widened to 32 bits in place
+// when the 65536th arrives: the key itself would take 8 bytes, and the
+// table is fresh memory, much of an ingest's cost (docs/INGEST.md).
 class DenseIdTable {
  public:
+  // The most leaves 16-bit slots number.
+  static constexpr std::uint64_t kMostNarrowLeaves = 0xFFFF;
+
   // Allocates span slots, zero (the kernel's zero pages: untouched slots
-  // cost no memory until a leaf writes them).
+  // cost no memory until a leaf writes them), with room to widen them.
   DenseIdTable(std::uint64_t first, std::uint64_t span);
 
   // Records that `leaf` holds the particles `ids`. Several threads may call
@@ -71,8 +77,11 @@ class DenseIdTable {
 
   // What IdIndexEpochWriter::AddTable writes, once no Add runs: slot i is 0
   // where no leaf recorded ID first() + i, else 1 + the leaf's index in
-  // leaves() (the order in which leaves were added).
-  std::span<const std::uint32_t> slots() const { return {slots_.get(), static_cast<std::size_t>(span_)}; }
+  // leaves() (the order in which leaves were added). The slots are
+  // narrow_slots() while narrow(), else wide_slots(); the other is empty.
+  bool narrow() const { return narrow_; }
+  std::span<const std::uint16_t> narrow_slots() const;
+  std::span<const std::uint32_t> wide_slots() const;
   std::span<const std::uint64_t> leaves() const { return leaves_; }
 
   std::uint64_t first() const { return first_; }
@@ -80,13 +89,19 @@ class DenseIdTable {
 
  private:
   struct Free {
-    void operator()(std::uint32_t* p) const { std::free(p); }
+    void operator()(void* p) const { std::free(p); }
   };
+  // Rewrites the 16-bit slots as 32-bit ones, last first (each wide slot
+  // covers narrow ones at or after its own index). Under the exclusive lock.
+  void Widen();
 
   std::uint64_t first_;
   std::uint64_t span_;
-  std::unique_ptr<std::uint32_t[], Free> slots_;
-  std::mutex mutex_;                   // guards leaves_
+  std::unique_ptr<void, Free> slots_;  // room for span 32-bit slots; the first half holds 16-bit ones while narrow_
+  bool narrow_ = true;
+  // Exclusive: adding a leaf, widening. Shared: writing a leaf's slots, which
+  // for distinct IDs touch distinct slots.
+  std::shared_mutex mutex_;
   std::vector<std::uint64_t> leaves_;  // leaf keys by ordinal
 };
 

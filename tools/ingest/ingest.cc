@@ -594,7 +594,11 @@ IngestReport Ingest(const IngestOptions& options) {
       id_store->BeginEpoch(header.time, header.redshift);
       IdIndexEpochWriter ids(*id_store, id_index_page_size);
       if (id_table) {
-        ids.AddTable(id_table->first(), id_table->slots(), id_table->leaves());
+        if (id_table->narrow()) {
+          ids.AddTable(id_table->first(), id_table->narrow_slots(), id_table->leaves());
+        } else {
+          ids.AddTable(id_table->first(), id_table->wide_slots(), id_table->leaves());
+        }
       } else {
         auto reader = id_pairs->Open();
         IdLeafRecord r{};
