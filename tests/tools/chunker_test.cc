@@ -219,7 +219,9 @@ ChunkerOptions ResidentTestOptions(const fs::path& temp) {
 
 // A point set held in memory whole is cut into the same chunks as a stream
 // of batches, whether the chunks under a leaf-sized node are merged or not,
-// for any thread count, and whether its positions are held as floats.
+// for any thread count, whether its positions are held as floats, and
+// whether the first cut is shallow enough for 16-bit cell codes (two
+// levels) or not (four).
 TEST(Chunker, ResidentSplitCutsTheSameChunks) {
   testing_support::TempDir dir("chunker-resident-test");
   const ParticleChunk double_points = Points(60000);
@@ -229,21 +231,24 @@ TEST(Chunker, ResidentSplitCutsTheSameChunks) {
     const ParticleChunk& points = float_positions ? float_points : double_points;
     for (const std::uint64_t leaf_capacity : {std::uint64_t{0}, std::uint64_t{700}}) {
       for (const int threads : {1, 3}) {
-        SCOPED_TRACE("leaf capacity " + std::to_string(leaf_capacity) + ", threads " + std::to_string(threads) +
-                     (float_positions ? ", float positions" : ""));
-        ChunkerOptions options = ResidentTestOptions(dir.path());
-        options.leaf_capacity = leaf_capacity;
-        options.threads = threads;
-        ExpectResidentSplitLikeStreamed(points, options, float_positions, dir.path());
+        for (const int split_levels : {2, 4}) {
+          SCOPED_TRACE("leaf capacity " + std::to_string(leaf_capacity) + ", threads " + std::to_string(threads) +
+                       ", split levels " + std::to_string(split_levels) + (float_positions ? ", float positions" : ""));
+          ChunkerOptions options = ResidentTestOptions(dir.path());
+          options.leaf_capacity = leaf_capacity;
+          options.threads = threads;
+          options.split_levels = split_levels;
+          ExpectResidentSplitLikeStreamed(points, options, float_positions, dir.path());
+        }
       }
     }
   }
 }
 
-// The resident split reads each point's cell down to ten levels below the
-// region from codes computed once; a clump denser than a chunk within one
-// such cell is split further from its positions, into the same chunks as a
-// stream's.
+// The resident split reads each point's cell down to five or ten levels
+// below the region from codes computed once; a clump denser than a chunk
+// within one such cell is split further from its positions, into the same
+// chunks as a stream's.
 TEST(Chunker, ResidentSplitGoesBelowItsPrecomputedCells) {
   testing_support::TempDir dir("chunker-resident-deep-test");
   ParticleChunk points = Points(20000);
@@ -253,20 +258,23 @@ TEST(Chunker, ResidentSplitGoesBelowItsPrecomputedCells) {
     for (int a = 0; a < 3; ++a) points.position[3 * i + a] = speck(rng);
   }
   for (const int threads : {1, 3}) {
-    SCOPED_TRACE("threads " + std::to_string(threads));
-    ChunkerOptions options = ResidentTestOptions(dir.path());
-    options.threads = threads;
-    ExpectResidentSplitLikeStreamed(points, options, /*held_as_floats=*/false, dir.path());
-    Chunker chunker(kCube, options);
-    ResidentEpoch held;
-    held.Read(PassOver(points, 7000), 0, options.columns);
-    const std::vector<Chunk> chunks = chunker.SplitResident(NodeKey::Root(), held);
-    int deepest = 0;
-    for (const Chunk& chunk : chunks) {
-      EXPECT_LE(chunk.point_count, options.max_chunk_points) << chunk.key.Path();
-      deepest = std::max(deepest, chunk.key.level());
+    for (const int split_levels : {2, 4}) {
+      SCOPED_TRACE("threads " + std::to_string(threads) + ", split levels " + std::to_string(split_levels));
+      ChunkerOptions options = ResidentTestOptions(dir.path());
+      options.threads = threads;
+      options.split_levels = split_levels;
+      ExpectResidentSplitLikeStreamed(points, options, /*held_as_floats=*/false, dir.path());
+      Chunker chunker(kCube, options);
+      ResidentEpoch held;
+      held.Read(PassOver(points, 7000), 0, options.columns);
+      const std::vector<Chunk> chunks = chunker.SplitResident(NodeKey::Root(), held);
+      int deepest = 0;
+      for (const Chunk& chunk : chunks) {
+        EXPECT_LE(chunk.point_count, options.max_chunk_points) << chunk.key.Path();
+        deepest = std::max(deepest, chunk.key.level());
+      }
+      EXPECT_GT(deepest, 10) << "the speck is split below the precomputed cells";
     }
-    EXPECT_GT(deepest, 10) << "the speck is split below the precomputed cells";
   }
 }
 
