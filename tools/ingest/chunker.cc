@@ -323,7 +323,7 @@ bool Chunker::Oversized(const Chunk& chunk) const {
 // levels of re-splits below it fit in five levels, as they do up to some
 // 10^8 points; else 32 bits (ten levels). The array is the split's largest
 // fresh memory, whose pages the dense ID table reuses once it is freed:
-// halving both lowered a 10^8-point ingest's peak RSS by 190 MB and its
+// halving both lowered a 10^8-point ingest's peak RSS by 190 MiB and its
 // system time by a fifth when it ran after a pause. A cut below the codes'
 // level is made from the positions.
 struct Chunker::ResidentCells {
