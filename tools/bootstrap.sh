@@ -15,6 +15,8 @@ packages=(
   build-essential cmake pkg-config git
   libhdf5-dev libzstd-dev libxxhash-dev libfftw3-dev
   libcli11-dev nlohmann-json3-dev
+  # k-nearest-neighbour smoothing lengths (the reference and ingest)
+  libnanoflann-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   # renderer: OpenGL 4.5 core through OSMesa (headless) or GLFW (windows), a GL
   # loader generated at build time by glad, Dear ImGui, PNG output, Xvfb for the

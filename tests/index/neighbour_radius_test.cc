@@ -1,0 +1,61 @@
+#include "index/neighbour_radius.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace octocosm {
+namespace {
+
+// The k-th smallest distance from `q` to the points, by sorting all of them.
+double BruteForceRadius(const std::vector<double>& points, const double* q, int k) {
+  std::vector<double> d;
+  for (std::size_t i = 0; i < points.size() / 3; ++i) {
+    const double dx = points[3 * i] - q[0], dy = points[3 * i + 1] - q[1], dz = points[3 * i + 2] - q[2];
+    d.push_back(std::sqrt(dx * dx + dy * dy + dz * dz));
+  }
+  if (d.size() < static_cast<std::size_t>(k)) return std::numeric_limits<double>::infinity();
+  std::nth_element(d.begin(), d.begin() + (k - 1), d.end());
+  return d[static_cast<std::size_t>(k - 1)];
+}
+
+TEST(NeighbourRadii, EqualsTheKthDistanceOfAllPointsOnClusteredPoints) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> clump(0.0, 0.01);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::vector<double> points;
+  for (int i = 0; i < 3000; ++i) {
+    const bool in_clump = i % 2 == 0;
+    for (int a = 0; a < 3; ++a) points.push_back(in_clump ? 0.3 + clump(rng) : uniform(rng));
+  }
+  const NeighbourRadii radii(points);
+  for (int k : {1, 2, 8, 32, 100}) {
+    for (std::size_t i = 0; i < 3000; i += 37) {
+      // Queries at particles (the particle counts itself) and between them.
+      EXPECT_DOUBLE_EQ(radii.Radius(&points[3 * i], k), BruteForceRadius(points, &points[3 * i], k)) << k << " " << i;
+      const double q[3] = {uniform(rng), uniform(rng), uniform(rng)};
+      EXPECT_DOUBLE_EQ(radii.Radius(q, k), BruteForceRadius(points, q, k)) << k;
+    }
+  }
+  // k = 1 at a particle is the particle itself.
+  EXPECT_EQ(radii.Radius(&points[0], 1), 0.0);
+}
+
+TEST(NeighbourRadii, CoincidentPointsAndTooFewPoints) {
+  std::vector<double> points(3 * 50, 0.25);
+  const NeighbourRadii radii(points);
+  EXPECT_EQ(radii.Radius(&points[0], 32), 0.0);
+  EXPECT_EQ(radii.Radius(&points[0], 50), 0.0);
+  EXPECT_TRUE(std::isinf(radii.Radius(&points[0], 51)));
+  const NeighbourRadii none(std::span<const double>{});
+  const double q[3] = {0, 0, 0};
+  EXPECT_TRUE(std::isinf(none.Radius(q, 1)));
+  EXPECT_ANY_THROW(radii.Radius(q, 0));
+}
+
+}  // namespace
+}  // namespace octocosm
