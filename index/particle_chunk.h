@@ -29,6 +29,15 @@ struct ParticleChunk {
   std::vector<double> mass;           // size(); always filled (from a mass column, a mass table, or 1)
   std::vector<std::uint64_t> id;      // size(), or empty when the input has no IDs
   std::vector<std::uint8_t> type;     // size(); particle type (GADGET PartType), 0 when the format has none
+  // Each particle's smoothing length given from outside (a snapshot's own,
+  // or a nearest-neighbour pass's), or empty when none is given: size()
+  // values when present. A value > 0 is the radius of the particle's kernel
+  // support in input length units, which the octree's leaves keep; 0 means
+  // "not given" for that particle, which then gets the leaf's density-grid
+  // length like every particle of an input without the column
+  // (index/subtree_builder.h). Finite and >= 0: readers reject other
+  // values as bad input, the octree builder as an invalid argument.
+  std::vector<float> smoothing;
   std::vector<float> velocity;        // the vector columns (VectorColumn): 3 * size() or empty
   std::vector<float> displacement;
   std::vector<float> next_velocity;
@@ -38,6 +47,7 @@ struct ParticleChunk {
   std::size_t size() const { return mass.size(); }
   bool has_velocity() const { return !velocity.empty(); }
   bool has_id() const { return !id.empty(); }
+  bool has_smoothing() const { return !smoothing.empty(); }
 
   void clear();
 };
@@ -55,6 +65,7 @@ inline void ParticleChunk::clear() {
   mass.clear();
   id.clear();
   type.clear();
+  smoothing.clear();
   for (std::vector<float>* column : VectorColumns(*this)) column->clear();
 }
 
