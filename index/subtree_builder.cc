@@ -8,6 +8,7 @@
 #include <string>
 #include <utility>
 
+#include "index/block_codec.h"
 #include "index/radix_sort.h"
 #include "storage/error.h"
 
@@ -32,7 +33,8 @@ using Placed = PlacedParticle;
 void PlaceParticles(const ParticleChunk& particles, NodeKey region, const Cube& cube, std::vector<Placed>& placed) {
   const std::size_t n = particles.size();
   bool lengths_agree = particles.position.size() == 3 * n && particles.type.size() == n &&
-                       (!particles.has_id() || particles.id.size() == n);
+                       (!particles.has_id() || particles.id.size() == n) &&
+                       (!particles.has_smoothing() || particles.smoothing.size() == n);
   for (const std::vector<float>* column : VectorColumns(particles)) {
     lengths_agree &= column->empty() || column->size() == 3 * n;
   }
@@ -63,6 +65,29 @@ void PlaceParticles(const ParticleChunk& particles, NodeKey region, const Cube& 
                                    " has mass " + std::to_string(particles.mass[i]) + ", must be finite and > 0");
     }
   }
+  for (std::size_t i = 0; i < particles.smoothing.size(); ++i) {
+    const float h = particles.smoothing[i];
+    if (!(h >= 0) || !std::isfinite(h)) {
+      throw Error::InvalidArgument("subtree builder: particle " + std::to_string(i) + " of region " + region.Path() +
+                                   " has smoothing length " + std::to_string(h) + ", must be finite and >= 0");
+    }
+  }
+}
+
+// The smoothing lengths of a leaf whose particles carry given ones
+// (`given`, in the leaf's order): each given length where it is > 0, held
+// to the range a block stores (GivenSmoothingRange), and the density-grid
+// rule's for the others, computed only when there are any.
+std::vector<double> LeafSmoothingWithGiven(const NodePoints& leaf, const std::vector<float>& given, NodeKey key,
+                                           const Cube& cube, const SamplerOptions& options) {
+  const bool all_given = std::all_of(given.begin(), given.end(), [](float h) { return h > 0; });
+  std::vector<double> h = all_given ? std::vector<double>(given.size())
+                                    : LeafSmoothingLengths(leaf.grid, leaf.weight, key, cube, options);
+  const auto [lo, hi] = GivenSmoothingRange(cube.NodeSize(key.level()));
+  for (std::size_t k = 0; k < given.size(); ++k) {
+    if (given[k] > 0) h[k] = std::clamp<double>(given[k], lo, hi);
+  }
+  return h;
 }
 
 // The vector columns a set of points carries, one bit per VectorColumn.
@@ -289,6 +314,9 @@ class SubtreeBuild {
     leaf.type.resize(n);
     leaf.grid.resize(n);
     if (c.has_id()) leaf.id.resize(n);
+    // Given smoothing lengths in the leaf's order; nothing without them.
+    const float* given_from = c.has_smoothing() ? c.smoothing.data() : nullptr;
+    std::vector<float> given_smoothing(given_from != nullptr ? n : 0);
     const auto source_vectors = VectorColumns(c);
     const auto leaf_vectors = VectorColumns(leaf);
     for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
@@ -309,6 +337,7 @@ class SubtreeBuild {
       leaf.type[k] = c.type[i];
       leaf.grid[k] = begin[m].grid;
       if (c.has_id()) leaf.id[k] = c.id[i];
+      if (given_from != nullptr) given_smoothing[k] = given_from[i];
       for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
         if (source_vectors[v]->empty()) continue;
         const float* from = &(*source_vectors[v])[3 * i];
@@ -319,7 +348,11 @@ class SubtreeBuild {
       }
     }
     for (int o = 0; o < 9; ++o) leaf.octant_offsets[o] = static_cast<std::uint32_t>(bounds[o]);
-    leaf.smoothing = LeafSmoothingLengths(leaf.grid, leaf.weight, key, cube_, options_.sampler);
+    if (given_from != nullptr) {
+      leaf.smoothing = LeafSmoothingWithGiven(leaf, given_smoothing, key, cube_, options_.sampler);
+    } else {
+      leaf.smoothing = LeafSmoothingLengths(leaf.grid, leaf.weight, key, cube_, options_.sampler);
+    }
     return leaf;
   }
 
@@ -331,6 +364,11 @@ class SubtreeBuild {
 };
 
 }  // namespace
+
+std::pair<double, double> GivenSmoothingRange(double node_size) {
+  return {node_size * std::exp2(double{kSmoothingLog2Min}),
+          node_size * std::exp2(kSmoothingLog2Min + 65535.0 / kSmoothingPerOctave)};
+}
 
 NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
                         const SubtreeOptions& options, const NodeSink& sink, SubtreeWorkspace* workspace) {

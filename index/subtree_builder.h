@@ -14,6 +14,17 @@
 // coincide there stay together: the one documented exception), and the
 // weights of every node sum to the mass of its subtree.
 //
+// A leaf's points get their smoothing lengths by the density-grid rule
+// (index/sampler.h, step 5: LeafSmoothingLengths), except where the
+// particles carry given ones (ParticleChunk::smoothing, e.g. a snapshot's
+// own): a particle whose given length is > 0 keeps it, held to the range a
+// block can store (GivenSmoothingRange: the codec writes h as a 16-bit log2
+// code relative to the node's size s, from s * 2^-24 to just below
+// s * 2^8, docs/FORMAT.md), and one with 0 gets the grid rule's, computed
+// over all the leaf's points as without given lengths. Inner nodes' points
+// get the sampler's lengths either way: a kept point stands for more mass
+// than its particle, and its length must cover that.
+//
 // Each node is handed to `sink` as soon as it is complete, children before
 // their parent (post-order), with its points ordered by child octant and
 // octant_offsets filled (ready for EncodeBlock). The sink is called on the
@@ -36,6 +47,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "index/cube.h"
@@ -75,10 +87,11 @@ struct SubtreeWorkspace {
 };
 
 // Builds the subtree of `region` from `particles`, which must all lie in the
-// region (Cube::Holds) with finite positions and finite masses > 0; the
-// optional columns present in `particles` (id and the vector columns) are
-// carried into every node: a kept point keeps its particle's values. The
-// particles are left as they are. Returns the region's own node (the same
+// region (Cube::Holds) with finite positions, finite masses > 0 and, when
+// given, smoothing lengths finite and >= 0; the optional columns present in
+// `particles` (id and the vector columns) are carried into every node: a
+// kept point keeps its particle's values. Given smoothing lengths go to the
+// leaves (above). The particles are left as they are. Returns the region's own node (the same
 // points the sink received for it), for BuildTopLevels; an empty input
 // returns an empty node and calls no sink. Throws Error::InvalidArgument on
 // input that breaks these rules (naming the first offending particle) or on
@@ -86,6 +99,14 @@ struct SubtreeWorkspace {
 // `workspace`, when given, lends its memory to the call.
 NodePoints BuildSubtree(const ParticleChunk& particles, NodeKey region, const Cube& cube,
                         const SubtreeOptions& options, const NodeSink& sink, SubtreeWorkspace* workspace = nullptr);
+
+// The smoothing lengths a leaf of edge `node_size` keeps of given ones:
+// [node_size * 2^-24, node_size * 2^(-24 + 65535 / 2048)], the least and
+// the largest length the block codec stores relative to that node size
+// (kSmoothingLog2Min, kSmoothingPerOctave in index/block_codec.h). A given
+// length outside it is clamped to it; one inside comes back from a block
+// as given, to the codec's relative precision (1.7e-4).
+std::pair<double, double> GivenSmoothingRange(double node_size);
 
 struct RegionRoot {
   NodeKey key;

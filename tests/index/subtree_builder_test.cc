@@ -398,6 +398,107 @@ TEST(SubtreeBuilder, CarriesEveryVectorColumn) {
   }
 }
 
+// A given smoothing length for particle i (ParticleChunk::smoothing): 0
+// ("not given") for every tenth, else from a thousandth of the cube to a few
+// percent of it.
+float GivenSmoothing(std::size_t i) { return i % 10 == 7 ? 0.0f : 0.1f + static_cast<float>(i % 997) * 0.003f; }
+
+// Leaves keep the given lengths, to the codec's precision once encoded;
+// particles without one get what they got without the column, and every
+// inner node is the same block byte for byte: the sampler's lengths there
+// do not see the given ones.
+TEST(SubtreeBuilder, GivenSmoothingLengthsReachTheLeavesAndOnlyTheLeaves) {
+  std::mt19937_64 rng(31);
+  ParticleChunk input = Clumpy(rng, 6000);
+  SubtreeOptions options;
+  options.capacity = 200;
+  Tree without;
+  BuildSubtree(input, NodeKey::Root(), kCube, options, without.Sink());
+  for (std::size_t i = 0; i < input.size(); ++i) input.smoothing.push_back(GivenSmoothing(i));
+  Tree with;
+  BuildSubtree(input, NodeKey::Root(), kCube, options, with.Sink());
+  ASSERT_EQ(with.nodes.size(), without.nodes.size());
+  std::size_t given = 0, grid = 0, inner = 0;
+  for (const auto& [key, points] : with.nodes) {
+    ASSERT_TRUE(without.nodes.count(key)) << key.Path();
+    const NodePoints& before = without.nodes.at(key);
+    const Bytes block = EncodeBlock(points, key, kCube);
+    if (!with.IsLeaf(key)) {
+      EXPECT_EQ(block, EncodeBlock(before, key, kCube)) << "inner node " << key.Path();
+      ++inner;
+      continue;
+    }
+    ASSERT_EQ(points.id, before.id) << key.Path();
+    const NodePoints decoded = DecodeBlock(block, kAllColumns, key, kCube, "test").points;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const float h = input.smoothing[(points.id[i] - 3) / 10];  // Clumpy's IDs are 10 i + 3
+      if (h > 0) {
+        ++given;
+        ASSERT_EQ(points.smoothing[i], double{h}) << "ID " << points.id[i];
+        ASSERT_NEAR(decoded.smoothing[i], h, 2e-4 * h) << "ID " << points.id[i];
+      } else {
+        ++grid;
+        ASSERT_EQ(points.smoothing[i], before.smoothing[i]) << "ID " << points.id[i];
+      }
+    }
+  }
+  EXPECT_GT(inner, 3u);
+  EXPECT_GT(given, 4000u);
+  EXPECT_GT(grid, 400u);
+}
+
+// A column of zeros gives nothing: every block is the one the build gives
+// without the column.
+TEST(SubtreeBuilder, SmoothingLengthsAllNotGivenChangeNoBlock) {
+  std::mt19937_64 rng(32);
+  ParticleChunk input = Clumpy(rng, 3000);
+  SubtreeOptions options;
+  options.capacity = 150;
+  Tree without;
+  BuildSubtree(input, NodeKey::Root(), kCube, options, without.Sink());
+  input.smoothing.assign(input.size(), 0.0f);
+  Tree with;
+  BuildSubtree(input, NodeKey::Root(), kCube, options, with.Sink());
+  ASSERT_EQ(with.nodes.size(), without.nodes.size());
+  for (const auto& [key, points] : with.nodes) {
+    EXPECT_EQ(EncodeBlock(points, key, kCube), EncodeBlock(without.nodes.at(key), key, kCube)) << key.Path();
+  }
+}
+
+// Given lengths beyond what a block stores relative to the leaf's size are
+// clamped to its ends (GivenSmoothingRange), which come back from a block
+// as they went in, to the codec's precision.
+TEST(SubtreeBuilder, GivenSmoothingLengthsAreHeldToWhatABlockStores) {
+  ParticleChunk input;
+  const std::array<float, 4> lengths = {1e-30f, 1e30f, 3.0f, 0.0f};
+  for (std::size_t i = 0; i < lengths.size(); ++i) {
+    input.position.insert(input.position.end(), {10.0 + static_cast<double>(i), 20.0, 30.0});
+    input.mass.push_back(1.0);
+    input.type.push_back(0);
+    input.id.push_back(i + 1);
+    input.smoothing.push_back(lengths[i]);
+  }
+  Tree tree;
+  BuildSubtree(input, NodeKey::Root(), kCube, SubtreeOptions{}, tree.Sink());
+  ASSERT_EQ(tree.nodes.size(), 1u);
+  const NodePoints& leaf = tree.nodes.at(NodeKey::Root());
+  const auto [lo, hi] = GivenSmoothingRange(kCube.size);
+  EXPECT_EQ(lo, kCube.size * std::exp2(-24.0));
+  EXPECT_GT(hi, kCube.size * 255.9);
+  EXPECT_LT(hi, kCube.size * 256);
+  const NodePoints decoded = DecodeBlock(EncodeBlock(leaf, NodeKey::Root(), kCube), kAllColumns, NodeKey::Root(), kCube, "t").points;
+  for (std::size_t i = 0; i < leaf.size(); ++i) {
+    const std::uint64_t id = leaf.id[i];
+    const double expected = id == 1 ? lo : id == 2 ? hi : double{lengths[id - 1]};
+    if (id == 4) {
+      EXPECT_GT(leaf.smoothing[i], 0) << "not given: the grid rule's";
+      continue;
+    }
+    EXPECT_EQ(leaf.smoothing[i], expected) << "ID " << id;
+    EXPECT_NEAR(decoded.smoothing[i], expected, 2e-4 * expected) << "ID " << id;
+  }
+}
+
 // Each inner node samples what its children kept, level after level. The
 // root's weights must still estimate the particles' mass in any region
 // without bias: averaged over seeds, within 4 standard errors of the truth
@@ -598,6 +699,15 @@ TEST(SubtreeBuilder, RejectsBadInput) {
   expect_invalid(c, NodeKey::Root(), options);
   c = good;
   c.type.pop_back();
+  expect_invalid(c, NodeKey::Root(), options);
+  for (const float h : {-1.0f, std::nanf(""), INFINITY}) {
+    c = good;
+    c.smoothing.assign(c.size(), 1.0f);
+    c.smoothing[42] = h;
+    expect_invalid(c, NodeKey::Root(), options);
+  }
+  c = good;
+  c.smoothing.assign(c.size() - 1, 1.0f);
   expect_invalid(c, NodeKey::Root(), options);
   expect_invalid(good, NodeKey::FromPath("r3"), options);  // particles outside the region
   SubtreeOptions bad = options;
