@@ -29,6 +29,10 @@ struct GadgetSpec {
   // Per-particle data in file order (type 0 first).
   std::vector<double> position, velocity, mass_block;
   std::vector<std::uint64_t> ids;
+  // Written as an HSML block after U when not empty (format 2 names it;
+  // in format 1 it is one more unnamed record), as GADGET-2 writes gas
+  // smoothing lengths: one per type 0 particle.
+  std::vector<double> hsml;
 };
 
 class Encoder {
@@ -109,6 +113,7 @@ inline std::string EncodeGadget(const GadgetSpec& spec) {
   }
   if (spec.write_mass && !spec.mass_block.empty()) record("MASS", reals(spec.mass_block));
   record("U", std::string(16, '\0'));  // a block the reader must skip
+  if (!spec.hsml.empty()) record("HSML", reals(spec.hsml));
   return file.bytes();
 }
 

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <numbers>
 
 #include <gtest/gtest.h>
 
@@ -66,6 +67,11 @@ class Hdf5Writer {
   hid_t file_, header_;
 };
 
+// SWIFT's defaults: eta 1.2348 with its cubic spline, gamma 1.825742, and the
+// target number of neighbours that follows, (4 pi / 3) (gamma eta)^3.
+constexpr float kSwiftEta = 1.2348f;
+const float kSwiftNeighbours = static_cast<float>(4 * std::numbers::pi / 3 * std::pow(1.825742 * 1.2348, 3));
+
 // One file of a two-type snapshot: `n0` gas particles with Masses, `n1` dark
 // matter particles with a table mass; IDs start at `first_id`.
 struct Hdf5Spec {
@@ -76,6 +82,14 @@ struct Hdf5Spec {
   bool write_coordinates = true;
   std::uint64_t coordinate_rows_delta = 0;
   double poison = 0;  // nonzero: stored as x of the second dark matter particle
+  // Smoothing lengths of the gas, as dataset PartType0/<smoothing_name> when
+  // not empty.
+  std::vector<double> smoothing;
+  std::string smoothing_name = "SmoothingLength";
+  // A SWIFT file (a /Code group), with its kernel's target number of
+  // neighbours and eta in /HydroScheme (when hydro_scheme is set).
+  bool swift = false;
+  bool hydro_scheme = true;
 };
 
 void WriteHdf5(const std::string& path, const Hdf5Spec& spec) {
@@ -115,6 +129,16 @@ void WriteHdf5(const std::string& path, const Hdf5Spec& spec) {
     w.Dataset(group + "/Velocities", H5T_NATIVE_FLOAT, velocities, 3);
     w.Dataset(group + "/ParticleIDs", H5T_NATIVE_UINT64, ids, 1);
     if (type == 0) w.Dataset(group + "/Masses", H5T_NATIVE_FLOAT, masses, 1);
+    if (type == 0 && !spec.smoothing.empty()) {
+      w.Dataset(group + "/" + spec.smoothing_name, H5T_NATIVE_DOUBLE, spec.smoothing, 1);
+    }
+  }
+  if (spec.swift) {
+    w.Attribute<std::int32_t>("Code", "Version", H5T_NATIVE_INT32, {1});
+    if (spec.hydro_scheme) {
+      w.Attribute<float>("HydroScheme", "Kernel target N_ngb", H5T_NATIVE_FLOAT, {kSwiftNeighbours});
+      w.Attribute<float>("HydroScheme", "Kernel eta", H5T_NATIVE_FLOAT, {kSwiftEta});
+    }
   }
 }
 
@@ -203,6 +227,91 @@ TEST(Hdf5Reader, SwiftStyleHeader) {
   EXPECT_EQ(all.position, (std::vector<double>{1, 2, 3, 4, 5, 6}));
   EXPECT_EQ(all.id, (std::vector<std::uint64_t>{10, 11}));
   EXPECT_EQ(all.mass, (std::vector<double>{7, 8}));
+}
+
+// GADGET-4 and AREPO write the gas's smoothing lengths as
+// PartType0/SmoothingLength: read for type 0, 0 ("not given") for the
+// others, in chunks that straddle the types.
+TEST(Hdf5Reader, SmoothingLengthGivesTheGasItsLengths) {
+  ScratchDir dir;
+  Hdf5Spec spec;
+  spec.smoothing = {0.5, 0.25, 0.0};
+  WriteHdf5(dir.File("snap.hdf5"), spec);
+  for (std::size_t chunk : {std::size_t{2}, std::size_t{1000}}) {
+    ReadOptions options;
+    options.chunk_particles = chunk;
+    auto source = OpenSnapshot(dir.File("snap.hdf5"), options);
+    EXPECT_TRUE(source->header().has_smoothing);
+    EXPECT_EQ(source->header().extra["smoothing_lengths"], "dataset /PartType0/SmoothingLength");
+    const ParticleChunk all = ReadAll(*source);
+    EXPECT_EQ(all.smoothing, (std::vector<float>{0.5f, 0.25f, 0, 0, 0, 0, 0, 0}));
+    EXPECT_EQ(all.id, (std::vector<std::uint64_t>{1, 2, 3, 4, 5, 6, 7, 8}));
+  }
+  ReadOptions without;
+  without.read_smoothing = false;
+  EXPECT_FALSE(OpenSnapshot(dir.File("snap.hdf5"), without)->header().has_smoothing);
+  ReadOptions dark_matter;
+  dark_matter.types = {1};
+  auto source = OpenSnapshot(dir.File("snap.hdf5"), dark_matter);
+  EXPECT_FALSE(source->header().has_smoothing);
+  EXPECT_TRUE(ReadAll(*source).smoothing.empty());
+}
+
+// SWIFT's h is the kernel's support over gamma; the reader multiplies by
+// gamma = (3 N_ngb / (4 pi))^(1/3) / eta from /HydroScheme, and without
+// those attributes reads none rather than guess the kernel.
+TEST(Hdf5Reader, SwiftSmoothingLengthsBecomeTheKernelsSupportRadius) {
+  ScratchDir dir;
+  Hdf5Spec spec;
+  spec.swift = true;
+  spec.smoothing = {0.5, 0.25, 0.0};
+  spec.smoothing_name = "SmoothingLengths";
+  WriteHdf5(dir.File("swift.hdf5"), spec);
+  auto source = OpenSnapshot(dir.File("swift.hdf5"), {});
+  EXPECT_EQ(source->header().format, "hdf5-swift");
+  ASSERT_TRUE(source->header().has_smoothing);
+  const double gamma = std::cbrt(3 * double{kSwiftNeighbours} / (4 * std::numbers::pi)) / double{kSwiftEta};
+  EXPECT_NEAR(gamma, 1.825742, 1e-5) << "the cubic spline's";
+  const ParticleChunk all = ReadAll(*source);
+  ASSERT_EQ(all.smoothing.size(), 8u);
+  EXPECT_FLOAT_EQ(all.smoothing[0], static_cast<float>(0.5 * gamma));
+  EXPECT_FLOAT_EQ(all.smoothing[1], static_cast<float>(0.25 * gamma));
+  for (std::size_t i = 2; i < 8; ++i) EXPECT_EQ(all.smoothing[i], 0.0f) << i;
+
+  spec.hydro_scheme = false;
+  WriteHdf5(dir.File("bare.hdf5"), spec);
+  auto bare = OpenSnapshot(dir.File("bare.hdf5"), {});
+  EXPECT_FALSE(bare->header().has_smoothing);
+  EXPECT_TRUE(bare->header().extra.contains("smoothing_lengths_not_read"));
+  EXPECT_TRUE(ReadAll(*bare).smoothing.empty());
+}
+
+TEST(Hdf5Reader, SmoothingLengthsForEveryFileWithGasOrForNone) {
+  ScratchDir dir;
+  Hdf5Spec first;
+  first.num_files = 2;
+  first.total = {6, 10};
+  first.smoothing = {0.5, 0.25, 0.125};
+  Hdf5Spec second = first;
+  second.first_id = 9;
+  second.smoothing.clear();
+  WriteHdf5(dir.File("snap.0.hdf5"), first);
+  WriteHdf5(dir.File("snap.1.hdf5"), second);
+  auto source = OpenSnapshot(dir.File("snap"), {});
+  EXPECT_FALSE(source->header().has_smoothing);
+  EXPECT_TRUE(source->header().extra.contains("smoothing_lengths_not_read"));
+  EXPECT_EQ(ReadAll(*source).size(), 16u);
+}
+
+TEST(Hdf5Reader, NegativeOrNonFiniteSmoothingLengthNamesTheDataset) {
+  ScratchDir dir;
+  for (const double bad : {-1.0, double{NAN}, double{INFINITY}}) {
+    Hdf5Spec spec;
+    spec.smoothing = {0.5, 0.25, bad};
+    WriteHdf5(dir.File("snap.hdf5"), spec);
+    ExpectBadInput(dir.File("snap.hdf5"), "PartType0 particle 2 (ID 3) has smoothing length");
+    ExpectBadInput(dir.File("snap.hdf5"), "in dataset /PartType0/SmoothingLength; smoothing lengths must be finite");
+  }
 }
 
 TEST(Hdf5Reader, MissingCoordinates) {

@@ -166,6 +166,142 @@ TEST(GadgetReader, NoMappableSegmentsWhereAColumnIsNotAPlainFloatArray) {
   EXPECT_EQ(mappable(spec, dark_matter), 0u) << "a negative table mass (which Next() reports)";
 }
 
+// A format 2 file's HSML block holds one smoothing length per gas (type 0)
+// particle; the other types get 0, "not given". Either byte order, float or
+// double, any chunk size; read_smoothing = false leaves the column out.
+TEST(GadgetReader, Format2HsmlBlockGivesTheGasItsSmoothingLengths) {
+  ScratchDir dir;
+  for (const bool big_endian : {false, true}) {
+    for (const int real_bytes : {4, 8}) {
+      SCOPED_TRACE(std::string(big_endian ? "big" : "little") + "-endian, " + std::to_string(real_bytes) + "-byte reals");
+      GadgetSpec spec = SmallSpec();
+      spec.format = 2;
+      spec.big_endian = big_endian;
+      spec.real_bytes = real_bytes;
+      spec.hsml = {0.75, 1.5, 0.0};
+      WriteBytes(dir.File("snap"), EncodeGadget(spec));
+      for (std::size_t chunk : {std::size_t{1}, std::size_t{2}, std::size_t{1000}}) {
+        ReadOptions options;
+        options.chunk_particles = chunk;
+        auto source = OpenSnapshot(dir.File("snap"), options);
+        EXPECT_TRUE(source->header().has_smoothing);
+        EXPECT_EQ(source->header().extra["smoothing_lengths"], "block HSML (gas)");
+        const ParticleChunk all = ReadAll(*source);
+        EXPECT_EQ(all.smoothing, (std::vector<float>{0.75f, 1.5f, 0, 0, 0, 0, 0}));
+        ExpectMatchesSpec(all, spec);
+      }
+      ReadOptions without;
+      without.read_smoothing = false;
+      auto source = OpenSnapshot(dir.File("snap"), without);
+      EXPECT_FALSE(source->header().has_smoothing);
+      EXPECT_TRUE(ReadAll(*source).smoothing.empty());
+    }
+  }
+}
+
+// Format 1 has no block names: which unnamed record would hold smoothing
+// lengths depends on how the simulation code was built, so none is read.
+TEST(GadgetReader, Format1FilesGiveNoSmoothingLengths) {
+  ScratchDir dir;
+  GadgetSpec spec = SmallSpec();
+  spec.format = 1;
+  spec.hsml = {0.75, 1.5, 2.0};
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
+  auto source = OpenSnapshot(dir.File("snap"), {});
+  EXPECT_FALSE(source->header().has_smoothing);
+  EXPECT_FALSE(source->header().extra.contains("smoothing_lengths"));
+  const ParticleChunk all = ReadAll(*source);
+  EXPECT_TRUE(all.smoothing.empty());
+  ExpectMatchesSpec(all, spec);
+}
+
+// Without gas among the selected types there is nothing to give; a file
+// without gas needs no HSML block; a file with gas but without one (or with
+// one of another length) leaves the whole snapshot without the column,
+// recorded in extra, as a missing VEL block does velocities.
+TEST(GadgetReader, SmoothingLengthsForEveryFileWithGasOrForNone) {
+  ScratchDir dir;
+  GadgetSpec gas = SmallSpec();
+  gas.format = 2;
+  gas.hsml = {0.75, 1.5, 2.0};
+  ReadOptions dark_matter;
+  dark_matter.types = {1};
+  WriteBytes(dir.File("one"), EncodeGadget(gas));
+  EXPECT_FALSE(OpenSnapshot(dir.File("one"), dark_matter)->header().has_smoothing);
+
+  GadgetSpec no_gas = SmallSpec();
+  no_gas.format = 2;
+  no_gas.npart = {0, 4, 0, 0, 0, 0};
+  no_gas.mass_block.clear();
+  no_gas.position.erase(no_gas.position.begin(), no_gas.position.begin() + 9);
+  no_gas.velocity.erase(no_gas.velocity.begin(), no_gas.velocity.begin() + 9);
+  no_gas.ids = {1100, 1101, 1102, 1103};
+  GadgetSpec first = gas;
+  first.num_files = no_gas.num_files = 2;
+  first.total = no_gas.total = std::array<std::uint32_t, 6>{3, 8, 0, 0, 0, 0};
+  WriteBytes(dir.File("two.0"), EncodeGadget(first));
+  WriteBytes(dir.File("two.1"), EncodeGadget(no_gas));
+  auto two = OpenSnapshot(dir.File("two"), {});
+  EXPECT_TRUE(two->header().has_smoothing);
+  EXPECT_EQ(ReadAll(*two).smoothing, (std::vector<float>{0.75f, 1.5f, 2.0f, 0, 0, 0, 0, 0, 0, 0, 0}));
+
+  GadgetSpec second = gas;
+  second.hsml.clear();
+  second.num_files = 2;
+  second.total = first.total = std::array<std::uint32_t, 6>{6, 8, 0, 0, 0, 0};
+  for (auto& id : second.ids) id += 1000;
+  WriteBytes(dir.File("three.0"), EncodeGadget(first));
+  WriteBytes(dir.File("three.1"), EncodeGadget(second));
+  auto three = OpenSnapshot(dir.File("three"), {});
+  EXPECT_FALSE(three->header().has_smoothing);
+  EXPECT_TRUE(three->header().extra.contains("smoothing_lengths_not_read"));
+  EXPECT_TRUE(ReadAll(*three).smoothing.empty());
+
+  GadgetSpec longer = gas;
+  longer.hsml = {0.75, 1.5, 2.0, 2.5};  // one for a type 1 particle as well
+  WriteBytes(dir.File("four"), EncodeGadget(longer));
+  auto four = OpenSnapshot(dir.File("four"), {});
+  EXPECT_FALSE(four->header().has_smoothing);
+  EXPECT_TRUE(four->header().extra.contains("smoothing_lengths_not_read"));
+  ExpectMatchesSpec(ReadAll(*four), longer);
+}
+
+TEST(GadgetReader, NegativeOrNonFiniteSmoothingLengthNamesTheBlock) {
+  ScratchDir dir;
+  for (const double bad : {-0.5, double{NAN}, double{INFINITY}}) {
+    GadgetSpec spec = SmallSpec();
+    spec.format = 2;
+    spec.hsml = {0.75, bad, 2.0};
+    WriteBytes(dir.File("snap"), EncodeGadget(spec));
+    ExpectBadInput(dir.File("snap"), "particle type 0 particle 1 (ID 101) has smoothing length");
+    ExpectBadInput(dir.File("snap"), "in block HSML; smoothing lengths must be finite and >= 0");
+    ReadOptions without;
+    without.read_smoothing = false;
+    auto source = OpenSnapshot(dir.File("snap"), without);
+    EXPECT_EQ(ReadAll(*source).size(), 7u) << "not read, not checked";
+  }
+}
+
+// A segment has no place for smoothing lengths, so a source that gives them
+// gives no segments to map: a mapping reader would drop them.
+TEST(GadgetReader, NoMappableSegmentsWhereTheChunksCarrySmoothingLengths) {
+  static_assert(std::endian::native == std::endian::little, "the file below is written little-endian");
+  ScratchDir dir;
+  GadgetSpec spec = SmallSpec();
+  spec.format = 2;
+  spec.mass_table = {0.5, 2.5, 0, 0, 0, 0};  // table masses for both types: mappable but for the HSML block
+  spec.mass_block.clear();
+  spec.hsml = {0.75, 1.5, 2.0};
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
+  EXPECT_TRUE(OpenSnapshot(dir.File("snap"), {})->MappableSegments().empty());
+  ReadOptions without;
+  without.read_smoothing = false;
+  EXPECT_EQ(OpenSnapshot(dir.File("snap"), without)->MappableSegments().size(), 2u);
+  ReadOptions dark_matter;
+  dark_matter.types = {1};
+  EXPECT_EQ(OpenSnapshot(dir.File("snap"), dark_matter)->MappableSegments().size(), 1u) << "no gas, no smoothing";
+}
+
 TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
   ScratchDir dir;
   GadgetSpec a = SmallSpec();

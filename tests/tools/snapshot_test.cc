@@ -2,9 +2,12 @@
 // counts, IDs, masses, bounds and header values against what the README
 // documents about each file. Skipped when the folder is absent.
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <numeric>
 #include <set>
 
@@ -185,6 +188,66 @@ TEST_F(SharedDataTest, Format2TwoFileSnapshotByBaseNameAndByMember) {
     // 1500.2 (as the README rounds it; the largest is 1500.2229).
     for (std::size_t i = 0; i < 4083; ++i) ASSERT_LT(all.position[3 * i + 2], 1500.23);
   }
+}
+
+// The HSML block of the format 2 pair, as raw floats, file after file (one
+// per gas particle): read here from the bytes, apart from the reader.
+std::vector<float> RawHsmlBlocks() {
+  std::vector<float> values;
+  for (const char* name : {"test_g2_snap.0", "test_g2_snap.1"}) {
+    std::ifstream in(DataFile(std::string("gadget2_format2_multifile/") + name), std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    bool found = false;
+    // Every block: [int32 8]["NAME"][int32 n + 8][int32 8] [int32 n][n bytes][int32 n], little-endian.
+    for (std::size_t offset = 0; offset + 20 <= bytes.size();) {
+      std::uint32_t n = 0;
+      std::memcpy(&n, bytes.data() + offset + 16, 4);
+      if (bytes.compare(offset + 4, 4, "HSML") == 0) {
+        for (std::size_t i = 0; i < n / 4; ++i) {
+          float h;
+          std::memcpy(&h, bytes.data() + offset + 20 + 4 * i, 4);
+          values.push_back(h);
+        }
+        found = true;
+      }
+      offset += 20 + std::size_t{n} + 4;
+    }
+    EXPECT_TRUE(found) << name;
+  }
+  return values;
+}
+
+// GADGET-2 wrote the gas particles' smoothing lengths into the HSML block:
+// each gas particle gets its own, positive and finite, and the dark matter
+// and stars get 0 ("not given").
+TEST_F(SharedDataTest, Format2HsmlBlockGivesTheGasTheirSmoothingLengths) {
+  static_assert(std::endian::native == std::endian::little, "the raw block is decoded in this machine's order");
+  const std::vector<float> raw = RawHsmlBlocks();
+  ASSERT_EQ(raw.size(), 4039u);
+  auto source = OpenSnapshot(DataFile("gadget2_format2_multifile/test_g2_snap"), {});
+  EXPECT_TRUE(source->header().has_smoothing);
+  const ParticleChunk all = ReadAll(*source);
+  ASSERT_EQ(all.smoothing.size(), 8192u);
+  std::size_t gas = 0;
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (all.type[i] != 0) {
+      ASSERT_EQ(all.smoothing[i], 0.0f) << "type " << int(all.type[i]) << " ID " << all.id[i];
+      continue;
+    }
+    ASSERT_TRUE(std::isfinite(all.smoothing[i]) && all.smoothing[i] > 0) << "ID " << all.id[i];
+    ASSERT_EQ(all.smoothing[i], raw[gas]) << "gas particle " << gas << ", ID " << all.id[i];
+    ++gas;
+  }
+  EXPECT_EQ(gas, 4039u);
+  // Tens to hundreds of kpc/h in the 3000 kpc/h box: lengths, not junk bytes.
+  EXPECT_GT(*std::min_element(raw.begin(), raw.end()), 30.0f);
+  EXPECT_LT(*std::max_element(raw.begin(), raw.end()), 700.0f);
+
+  ReadOptions without;
+  without.read_smoothing = false;
+  auto plain = OpenSnapshot(DataFile("gadget2_format2_multifile/test_g2_snap"), without);
+  EXPECT_FALSE(plain->header().has_smoothing);
+  EXPECT_TRUE(ReadAll(*plain).smoothing.empty());
 }
 
 TEST_F(SharedDataTest, AllHdf5SnapshotsOfTheTimeSeries) {

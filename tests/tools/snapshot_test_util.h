@@ -27,6 +27,10 @@ inline ParticleChunk ReadAll(ParticleSource& source, std::size_t* chunks = nullp
     EXPECT_EQ(chunk.type.size(), chunk.size());
     EXPECT_EQ(chunk.has_velocity(), source.header().has_velocity);
     EXPECT_EQ(chunk.has_id(), source.header().has_id);
+    EXPECT_EQ(chunk.has_smoothing(), source.header().has_smoothing);
+    if (chunk.has_smoothing()) {
+      EXPECT_EQ(chunk.smoothing.size(), chunk.size());
+    }
     if (chunk.has_velocity()) {
       EXPECT_EQ(chunk.velocity.size(), 3 * chunk.size());
     }
@@ -38,6 +42,7 @@ inline ParticleChunk ReadAll(ParticleSource& source, std::size_t* chunks = nullp
     all.mass.insert(all.mass.end(), chunk.mass.begin(), chunk.mass.end());
     all.id.insert(all.id.end(), chunk.id.begin(), chunk.id.end());
     all.type.insert(all.type.end(), chunk.type.begin(), chunk.type.end());
+    all.smoothing.insert(all.smoothing.end(), chunk.smoothing.begin(), chunk.smoothing.end());
   }
   EXPECT_EQ(chunk.size(), 0u) << "Next() returning false must leave the chunk empty";
   if (chunks != nullptr) *chunks = count;
@@ -60,7 +65,7 @@ inline void ExpectBadInput(const std::string& path, const std::string& problem, 
 
 inline bool SameParticles(const ParticleChunk& a, const ParticleChunk& b) {
   return a.position == b.position && a.velocity == b.velocity && a.mass == b.mass && a.id == b.id &&
-         a.type == b.type;
+         a.type == b.type && a.smoothing == b.smoothing;
 }
 
 class ScratchDir {

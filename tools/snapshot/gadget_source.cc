@@ -25,6 +25,7 @@ struct GadgetFile {
   std::string path;
   GadgetFileStructure structure;
   Column position, velocity, id, mass;
+  Column smoothing;  // HSML: one per gas (type 0) particle; absent in format 1 files
   // Index of the first particle of each type in POS/VEL/ID, and in MASS.
   std::array<std::uint64_t, kGadgetTypes> type_start{};
   std::array<std::uint64_t, kGadgetTypes> mass_start{};
@@ -68,6 +69,16 @@ GadgetFile DescribeFile(const std::string& path) {
   file.id = FindColumn(file, "ID", n, "1 x " + particles, false);
   file.mass = FindColumn(file, "MASS", n_mass,
                          std::to_string(n_mass) + " particles of types with mass-table entry 0", true);
+  // Smoothing lengths are found by name only: format 1 has no block names,
+  // and which of its unnamed blocks would hold them depends on the options
+  // the simulation code was built with. An HSML block of another length
+  // than the gas particles' (a code that writes it for more types) is left
+  // unread rather than guessed at; FillHeader records that.
+  const GadgetBlock* hsml = file.structure.format == 2 ? file.structure.Find("HSML") : nullptr;
+  const std::uint64_t gas = static_cast<std::uint64_t>(header.npart[0]);
+  if (hsml != nullptr && gas > 0 && (hsml->payload_bytes == 4 * gas || hsml->payload_bytes == 8 * gas)) {
+    file.smoothing = Column{hsml->payload_offset, static_cast<std::size_t>(hsml->payload_bytes / gas)};
+  }
   std::uint64_t start = 0, mass_start = 0;
   for (int t = 0; t < kGadgetTypes; ++t) {
     file.type_start[t] = start;
@@ -119,9 +130,17 @@ class GadgetSource final : public SegmentedSource {
       DecodeReals(buffer_.data(), count, file.mass.width, swap, chunk.mass.data() + old);
     }
     chunk.type.resize(old + count, static_cast<std::uint8_t>(t));
+    if (header_.has_smoothing) {
+      chunk.smoothing.resize(old + count);  // 0, not given, for the types without
+      if (t == 0) {
+        ReadColumn(binary, file.smoothing, begin, count, "HSML");
+        DecodeReals(buffer_.data(), count, file.smoothing.width, swap, chunk.smoothing.data() + old);
+      }
+    }
   }
 
   std::vector<MappableSegment> MappableSegments() const override {
+    if (header_.has_smoothing) return {};  // a segment has no place for them
     std::vector<MappableSegment> mappable;
     for (const Segment& segment : segments_) {
       const GadgetFile& file = files_[segment.file];
@@ -142,12 +161,15 @@ class GadgetSource final : public SegmentedSource {
     return "particle type " + std::to_string(segment.type) + " particle " + std::to_string(index);
   }
 
+  std::string DescribeSmoothing(const Segment&) const override { return "block HSML"; }
+
  private:
   void FillHeader(const ReadOptions& options) {
     const GadgetHeader& first = files_.front().structure.header;
     header_.format = files_.front().structure.format == 2 ? "gadget2" : "gadget1";
     std::vector<std::uint64_t> file_sums(kGadgetTypes, 0);
     bool all_velocity = true, all_id = true;
+    bool any_gas = false, all_smoothing = true, any_hsml = false;
     for (std::size_t f = 0; f < files_.size(); ++f) {
       const GadgetFile& file = files_[f];
       header_.files.push_back(file.path);
@@ -156,6 +178,11 @@ class GadgetSource final : public SegmentedSource {
       if (h.ParticleCount() > 0) {
         all_velocity = all_velocity && file.velocity.width != 0;
         all_id = all_id && file.id.width != 0;
+      }
+      if (h.npart[0] > 0) {
+        any_gas = true;
+        all_smoothing = all_smoothing && file.smoothing.width != 0;
+        any_hsml = any_hsml || file.structure.Find("HSML") != nullptr;
       }
       for (int t = 0; t < kGadgetTypes; ++t) {
         if (h.npart[t] > 0 && IsTypeSelected(options.types, t)) {
@@ -173,6 +200,15 @@ class GadgetSource final : public SegmentedSource {
 
     header_.has_velocity = options.read_velocity && all_velocity;
     header_.has_id = options.read_id && all_id;
+    // Like velocities, for every file that holds gas or for none.
+    const bool gas_read = any_gas && IsTypeSelected(options.types, 0);
+    header_.has_smoothing = options.read_smoothing && gas_read && all_smoothing;
+    if (header_.has_smoothing) {
+      header_.extra["smoothing_lengths"] = "block HSML (gas)";
+    } else if (options.read_smoothing && gas_read && any_hsml) {
+      header_.extra["smoothing_lengths_not_read"] =
+          "an HSML block is missing from a file with gas, or does not hold one value per gas particle";
+    }
     header_.time = first.time;
     header_.redshift = first.redshift;
     header_.box_size = options.box_size_override >= 0 ? options.box_size_override : first.box_size;

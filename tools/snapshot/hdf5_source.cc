@@ -3,7 +3,9 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
+#include <numbers>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -179,7 +181,27 @@ struct Hdf5File {
   std::vector<std::uint64_t> this_file;  // NumPart_ThisFile
   std::vector<double> mass_table;        // MassTable, zeros when absent
   std::vector<bool> has_masses;          // per type: a Masses dataset is present
+  // The name of PartType0's smoothing length dataset ("SmoothingLength" in
+  // GADGET-4 and AREPO, "SmoothingLengths" in SWIFT); empty when it has none
+  // or none is read.
+  std::string smoothing_dataset;
 };
+
+// SWIFT's h is not the radius of the kernel's support H but H / gamma, with
+// gamma fixed by the kernel; SWIFT records its kernel's target number of
+// neighbours N = (4 pi / 3) (gamma eta)^3 and eta in /HydroScheme, from
+// which gamma follows (1.825742 for its default cubic spline). nullopt when
+// either is missing or makes no sense.
+std::optional<double> SwiftKernelGamma(hid_t file, const std::string& path) {
+  Handle scheme = OpenGroupIfPresent(file, "HydroScheme", path);
+  if (!scheme.valid()) return std::nullopt;
+  const auto neighbours = ReadDoubles(scheme.get(), "Kernel target N_ngb", path, "/HydroScheme");
+  const auto eta = ReadDoubles(scheme.get(), "Kernel eta", path, "/HydroScheme");
+  if (!neighbours || neighbours->empty() || !eta || eta->empty()) return std::nullopt;
+  const double gamma = std::cbrt(3 * neighbours->front() / (4 * std::numbers::pi)) / eta->front();
+  if (!std::isfinite(gamma) || !(gamma > 0)) return std::nullopt;
+  return gamma;
+}
 
 std::string GroupName(int type) { return "PartType" + std::to_string(type); }
 
@@ -197,6 +219,7 @@ class Hdf5Source final : public SegmentedSource {
     std::vector<std::string> paths = ExpandFileSet(any_file, declared);
     read_velocity_ = options.read_velocity;
     read_id_ = options.read_id;
+    read_smoothing_ = options.read_smoothing;
     bool all_velocity = true, all_id = true;
     for (std::size_t f = 0; f < paths.size(); ++f) {
       files_.push_back(DescribeFile(paths[f], options.types, all_velocity, all_id));
@@ -210,6 +233,7 @@ class Hdf5Source final : public SegmentedSource {
     header_.has_velocity = options.read_velocity && all_velocity;
     header_.has_id = options.read_id && all_id;
     FillHeader(options);
+    FindSmoothing(options);
   }
 
  protected:
@@ -230,6 +254,16 @@ class Hdf5Source final : public SegmentedSource {
       ReadRows(ids_, group + "/ParticleIDs", H5T_NATIVE_UINT64, begin, count, 1, chunk.id.data() + old);
     }
     const Hdf5File& file = files_[segment.file];
+    if (header_.has_smoothing) {
+      chunk.smoothing.resize(old + count);  // 0, not given, for the types without
+      if (segment.type == 0) {
+        float* h = chunk.smoothing.data() + old;
+        ReadRows(smoothing_, group + "/" + file.smoothing_dataset, H5T_NATIVE_FLOAT, begin, count, 1, h);
+        if (smoothing_scale_ != 1) {
+          for (std::size_t i = 0; i < count; ++i) h[i] = static_cast<float>(h[i] * smoothing_scale_);
+        }
+      }
+    }
     const auto t = static_cast<std::size_t>(segment.type);
     if (masses_.valid()) {
       chunk.mass.resize(old + count);
@@ -244,6 +278,10 @@ class Hdf5Source final : public SegmentedSource {
 
   std::string DescribeParticle(const Segment& segment, std::uint64_t index) const override {
     return GroupName(segment.type) + " particle " + std::to_string(index);
+  }
+
+  std::string DescribeSmoothing(const Segment& segment) const override {
+    return "dataset /" + GroupName(segment.type) + "/" + files_[segment.file].smoothing_dataset;
   }
 
  private:
@@ -289,6 +327,14 @@ class Hdf5Source final : public SegmentedSource {
       if (read_velocity_) all_velocity = CheckDataset(file.get(), group + "/Velocities", path, n, 3, false) && all_velocity;
       if (read_id_) all_id = CheckDataset(file.get(), group + "/ParticleIDs", path, n, 1, true) && all_id;
       description.has_masses[t] = CheckDataset(file.get(), group + "/Masses", path, n, 1, false);
+      if (t == 0 && read_smoothing_) {
+        for (const char* name : {"SmoothingLength", "SmoothingLengths"}) {
+          if (CheckDataset(file.get(), group + "/" + name, path, n, 1, false)) {
+            description.smoothing_dataset = name;
+            break;
+          }
+        }
+      }
       if (!description.has_masses[t] && description.mass_table[t] == 0) {
         throw Error::BadInput(path, "missing dataset /" + group + "/Masses, and MassTable[" + std::to_string(t) +
                                         "] is 0, so type " + std::to_string(t) + " has no masses");
@@ -379,6 +425,42 @@ class Hdf5Source final : public SegmentedSource {
     RecordUnits(file.get(), parameters, path);
   }
 
+  // Smoothing lengths are read when every file that holds selected gas
+  // (type 0) particles has them, as velocities are; SWIFT's only when its
+  // kernel is known (SwiftKernelGamma).
+  void FindSmoothing(const ReadOptions& options) {
+    if (!options.read_smoothing || !IsTypeSelected(options.types, 0)) return;
+    bool all_smoothing = true, any_smoothing = false;
+    for (const Hdf5File& file : files_) {
+      if (file.this_file.front() == 0) continue;
+      all_smoothing = all_smoothing && !file.smoothing_dataset.empty();
+      any_smoothing = any_smoothing || !file.smoothing_dataset.empty();
+    }
+    if (!any_smoothing) return;
+    nlohmann::json& extra = header_.extra;
+    if (!all_smoothing) {
+      extra["smoothing_lengths_not_read"] = "a file with gas has no PartType0 smoothing lengths";
+      return;
+    }
+    std::string name;  // as the first file with gas calls it
+    for (auto file = files_.begin(); name.empty() && file != files_.end(); ++file) name = file->smoothing_dataset;
+    if (header_.format == "hdf5-swift") {
+      Handle file = OpenFile(files_.front().path);
+      const std::optional<double> gamma = SwiftKernelGamma(file.get(), files_.front().path);
+      if (!gamma) {
+        extra["smoothing_lengths_not_read"] =
+            "SWIFT's h is the kernel's support over a gamma that /HydroScheme's \"Kernel target N_ngb\" and "
+            "\"Kernel eta\" give, and they are missing";
+        return;
+      }
+      smoothing_scale_ = *gamma;
+      extra["smoothing_lengths"] = "dataset /PartType0/" + name + " x kernel gamma " + std::to_string(*gamma);
+    } else {
+      extra["smoothing_lengths"] = "dataset /PartType0/" + name;
+    }
+    header_.has_smoothing = true;
+  }
+
   // Keeps the unit attributes (GADGET-4 /Parameters Unit*, SWIFT /Units) so
   // that the manifest says what the numbers mean.
   void RecordUnits(hid_t file, const Handle& parameters, const std::string& path) {
@@ -422,11 +504,15 @@ class Hdf5Source final : public SegmentedSource {
     velocities_.Reset();
     ids_.Reset();
     masses_.Reset();
+    smoothing_.Reset();
     const std::string group = GroupName(segment.type);
     coordinates_ = OpenDataset(group + "/Coordinates");
     if (header_.has_velocity) velocities_ = OpenDataset(group + "/Velocities");
     if (header_.has_id) ids_ = OpenDataset(group + "/ParticleIDs");
     if (files_[segment.file].has_masses[static_cast<std::size_t>(segment.type)]) masses_ = OpenDataset(group + "/Masses");
+    if (header_.has_smoothing && segment.type == 0) {
+      smoothing_ = OpenDataset(group + "/" + files_[segment.file].smoothing_dataset);
+    }
     open_type_ = segment.type;
   }
 
@@ -435,6 +521,7 @@ class Hdf5Source final : public SegmentedSource {
     velocities_.Reset();
     ids_.Reset();
     masses_.Reset();
+    smoothing_.Reset();
     file_.Reset();
     open_type_ = -1;
   }
@@ -467,8 +554,9 @@ class Hdf5Source final : public SegmentedSource {
   }
 
   std::vector<Hdf5File> files_;
-  bool read_velocity_ = true, read_id_ = true;
-  Handle file_, coordinates_, velocities_, ids_, masses_;
+  bool read_velocity_ = true, read_id_ = true, read_smoothing_ = true;
+  double smoothing_scale_ = 1;  // what the file's smoothing lengths are multiplied by (SwiftKernelGamma)
+  Handle file_, coordinates_, velocities_, ids_, masses_, smoothing_;
   std::size_t open_file_index_ = 0;
   int open_type_ = -1;
 };

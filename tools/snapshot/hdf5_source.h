@@ -1,6 +1,8 @@
 // ParticleSource for HDF5 snapshots in the GADGET layout (GADGET-2/3/4, AREPO)
 // and SWIFT's variant of it: /Header attributes and one /PartTypeN group per
-// particle type holding Coordinates, Velocities, ParticleIDs and Masses.
+// particle type holding Coordinates, Velocities, ParticleIDs and Masses, and
+// for gas (PartType0) SmoothingLength (GADGET-4, AREPO) or SmoothingLengths
+// (SWIFT, whose h is converted to the radius of the kernel's support).
 // Datasets are read chunk by chunk with hyperslab selections, converted by
 // HDF5 to the chunk's column types, so float and double files read alike.
 #pragma once

@@ -49,6 +49,10 @@ std::string SegmentedSource::DescribeParticle(const Segment& segment, std::uint6
   return "type " + std::to_string(segment.type) + " particle " + std::to_string(index);
 }
 
+std::string SegmentedSource::DescribeSmoothing(const Segment& segment) const {
+  return "the smoothing lengths of type " + std::to_string(segment.type);
+}
+
 void SegmentedSource::CountSegments(std::size_t type_count) {
   header_.count_per_type.assign(type_count, 0);
   header_.total_count = 0;
@@ -60,13 +64,16 @@ void SegmentedSource::CountSegments(std::size_t type_count) {
 
 void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
                                   std::size_t first) const {
+  const float* smoothing = chunk.has_smoothing() ? chunk.smoothing.data() : nullptr;
   for (std::size_t i = first; i < chunk.size(); ++i) {
     const double* p = &chunk.position[3 * i];
     const float* v = chunk.has_velocity() ? &chunk.velocity[3 * i] : nullptr;
     const bool position_ok = std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
     const bool velocity_ok = v == nullptr || (std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]));
     const bool mass_ok = std::isfinite(chunk.mass[i]) && chunk.mass[i] > 0;
-    if (position_ok && velocity_ok && mass_ok) continue;
+    // 0 is a length not given; NaN fails the comparison.
+    const bool smoothing_ok = smoothing == nullptr || (smoothing[i] >= 0 && std::isfinite(smoothing[i]));
+    if (position_ok && velocity_ok && mass_ok && smoothing_ok) continue;
     std::ostringstream message;
     message << DescribeParticle(segment, begin + (i - first));
     if (chunk.has_id()) message << " (ID " << chunk.id[i] << ")";
@@ -76,8 +83,11 @@ void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, c
     } else if (!velocity_ok) {
       message << " has a non-finite velocity (" << v[0] << ", " << v[1] << ", " << v[2]
               << "); velocities must be finite numbers";
-    } else {
+    } else if (!mass_ok) {
       message << " has mass " << chunk.mass[i] << "; masses must be finite and > 0";
+    } else {
+      message << " has smoothing length " << smoothing[i] << " in " << DescribeSmoothing(segment)
+              << "; smoothing lengths must be finite and >= 0";
     }
     throw Error::BadInput(header_.files.at(segment.file), message.str());
   }

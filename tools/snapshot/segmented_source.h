@@ -1,9 +1,10 @@
 // The part of a ParticleSource that every format shares: walking a list of
 // contiguous runs of particles ("segments": one particle type in one file) in
 // chunk-sized steps, and rejecting values the octree cannot take (non-finite
-// coordinates or velocities, masses that are not finite and > 0), naming the
-// file and the particle rather than failing deep in the build. A format supplies
-// only AppendRange(), which reads part of one segment.
+// coordinates or velocities, masses that are not finite and > 0, smoothing
+// lengths that are not finite and >= 0), naming the file and the particle
+// rather than failing deep in the build. A format supplies only
+// AppendRange(), which reads part of one segment.
 #pragma once
 
 #include <cstddef>
@@ -30,14 +31,18 @@ class SegmentedSource : public ParticleSource {
   explicit SegmentedSource(std::size_t chunk_particles);
 
   // Appends particles [begin, begin + count) of `segment` to `chunk`: position,
-  // mass and type always, velocity and id exactly when the header says so.
-  // Calls for one segment come in increasing order of `begin` until Rewind().
+  // mass and type always, velocity, id and smoothing exactly when the header
+  // says so. Calls for one segment come in increasing order of `begin` until
+  // Rewind().
   virtual void AppendRange(const Segment& segment, std::uint64_t begin, std::size_t count,
                            ParticleChunk& chunk) = 0;
   // Called by Rewind() so that a format can reset its own stream position.
   virtual void OnRewind() {}
   // Names particle `index` of `segment` in messages, e.g. "PartType1 particle 7".
   virtual std::string DescribeParticle(const Segment& segment, std::uint64_t index) const;
+  // Names where `segment`'s smoothing lengths come from in messages, e.g.
+  // "block HSML"; asked only of a source whose header has them.
+  virtual std::string DescribeSmoothing(const Segment& segment) const;
 
   // Fills header_.count_per_type / total_count from segments_ (call once at open).
   void CountSegments(std::size_t type_count);

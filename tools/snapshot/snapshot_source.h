@@ -45,6 +45,9 @@ struct SnapshotHeader {
   std::uint64_t total_count = 0;  // sum of count_per_type
   bool has_velocity = false;      // chunks carry velocities
   bool has_id = false;            // chunks carry IDs
+  // Chunks carry smoothing lengths (ParticleChunk::smoothing): the file's
+  // own, for the particle types that have them (0 for the others).
+  bool has_smoothing = false;
   bool cosmological = false;      // comoving integration (then time is the scale factor)
   double omega0 = 0, omega_lambda = 0, hubble_param = 0;  // 0 when unknown
   nlohmann::json extra = nlohmann::json::object();  // mass table, flags, units, quirks found
@@ -94,6 +97,7 @@ struct ReadOptions {
   std::size_t chunk_particles = std::size_t{1} << 20;
   bool read_velocity = true;
   bool read_id = true;
+  bool read_smoothing = true;  // the file's smoothing lengths, where it has them (docs/INPUT_FORMATS.md)
   RawLayout raw;
   CsvOptions csv;
   double box_size_override = -1;  // >= 0 replaces the header's box size (e.g. 0-box ICs)
@@ -131,7 +135,9 @@ class ParticleSource {
   // may map (MappableSegment), when the format stores every column so; else
   // empty. The values are not checked: a reader of the segments must check
   // what Next() checks (finite positions and velocities) or read through
-  // Next() instead. Masses are finite and > 0.
+  // Next() instead. Masses are finite and > 0. A source whose chunks carry
+  // smoothing lengths gives none: a segment has no place for them, and a
+  // reader of the segments would drop them.
   virtual std::vector<MappableSegment> MappableSegments() const { return {}; }
 };
 
