@@ -46,6 +46,7 @@ PointPass PassOver(const ParticleChunk& points, std::size_t batch_points) {
       batch.mass.assign(points.mass.begin() + begin, points.mass.begin() + end);
       batch.type.assign(points.type.begin() + begin, points.type.begin() + end);
       batch.id.assign(points.id.begin() + begin, points.id.begin() + end);
+      if (points.has_smoothing()) batch.smoothing.assign(points.smoothing.begin() + begin, points.smoothing.begin() + end);
       consume(batch);
     }
   };
@@ -74,6 +75,7 @@ Split SplitAndCheck(const ParticleChunk& points, const SplitSettings& settings, 
   options.threads = settings.threads;
   options.temp_dir = temp.string();
   options.columns.id = true;
+  options.columns.smoothing = points.has_smoothing();
   Chunker chunker(kCube, options);
   std::vector<Chunk> chunks = chunker.Split(NodeKey::Root(), PassOver(points, settings.batch_points));
   Split split;
@@ -100,6 +102,10 @@ Split SplitAndCheck(const ParticleChunk& points, const SplitSettings& settings, 
       for (int a = 0; a < 3; ++a) EXPECT_EQ(taken.position[3 * i + a], points.position[3 * k + a]);
       EXPECT_EQ(taken.mass[i], points.mass[k]);
       EXPECT_EQ(taken.type[i], points.type[k]);
+      EXPECT_EQ(taken.has_smoothing(), points.has_smoothing());
+      if (taken.has_smoothing() && points.has_smoothing()) {
+        EXPECT_EQ(taken.smoothing[i], points.smoothing[k]) << "ID " << id;
+      }
     }
   }
   EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<std::ptrdiff_t>(points.size()))
@@ -130,6 +136,22 @@ TEST(Chunker, SpillingChangesNothingButWhereThePointsWait) {
   EXPECT_GT(deepest, 2u) << "the clump's chunk must have been split again";
   EXPECT_TRUE(fs::is_empty(in_memory));
   EXPECT_TRUE(fs::is_empty(spilling)) << "no chunk file left once every chunk was taken";
+}
+
+// Smoothing lengths, when the points carry them, come back with their points
+// from buffers and from spilled files alike.
+TEST(Chunker, SmoothingLengthsTravelWithTheirPointsThroughSpilledFiles) {
+  testing_support::TempDir dir("chunker-test");
+  ParticleChunk points = Points(40000);
+  for (const std::uint64_t id : points.id) points.smoothing.push_back(id % 5 == 0 ? 0.0f : 0.001f * static_cast<float>(id));
+  const fs::path in_memory = dir.path() / "in-memory", spilling = dir.path() / "spilling";
+  fs::create_directories(in_memory);
+  fs::create_directories(spilling);
+  const Split held = SplitAndCheck(points, {.memory_bytes = std::size_t{1} << 30}, in_memory);
+  const Split spilled = SplitAndCheck(points, {.memory_bytes = 16 << 10}, spilling);
+  EXPECT_GT(spilled.spilled, points.size() / 2) << "a 16 KiB budget must spill most points";
+  EXPECT_EQ(held.ids, spilled.ids);
+  EXPECT_TRUE(fs::is_empty(spilling));
 }
 
 // Points are placed, gathered and spilled on several threads, each gathering

@@ -5,8 +5,12 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <unordered_map>
 
@@ -64,6 +68,64 @@ TEST_F(SharedDataIngestTest, GadgetFilesIngestWithTheirCountsTypesAndIds) {
       else EXPECT_TRUE(check.blocks == lcdm_blocks) << "big and little endian files must give identical stores";
     }
   }
+  EXPECT_TRUE(TempIsEmpty());
+}
+
+// GADGET-2's gas smoothing lengths in the format 2 pair (block HSML) reach
+// the leaves: each gas particle's decoded length is its block value to the
+// codec's precision; the dark matter and stars keep the lengths they get
+// without the block, as does every particle read with read_smoothing off.
+TEST_F(SharedDataIngestTest, Format2HsmlReachesTheGasParticlesLeaves) {
+  static_assert(std::endian::native == std::endian::little, "the raw blocks are decoded in this machine's order");
+  // Each gas particle's HSML value by its ID, from the files' bytes: in each
+  // file the first npart[0] IDs are the gas's, in the HSML block's order.
+  std::unordered_map<std::uint64_t, float> hsml;
+  for (const char* name : {"test_g2_snap.0", "test_g2_snap.1"}) {
+    std::ifstream in(std::string(kData) + "/gadget2_format2_multifile/" + name, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::map<std::string, std::pair<std::size_t, std::uint32_t>> blocks;  // name -> payload offset, bytes
+    // Every block: [int32 8]["NAME"][int32 n + 8][int32 8] [int32 n][n bytes][int32 n].
+    for (std::size_t offset = 0; offset + 20 <= bytes.size();) {
+      std::uint32_t n = 0;
+      std::memcpy(&n, bytes.data() + offset + 16, 4);
+      blocks[bytes.substr(offset + 4, 4)] = {offset + 20, n};
+      offset += 20 + std::size_t{n} + 4;
+    }
+    ASSERT_TRUE(blocks.count("HSML") && blocks.count("ID  ")) << name;
+    const auto [id_at, id_bytes] = blocks.at("ID  ");
+    const auto [h_at, h_bytes] = blocks.at("HSML");
+    ASSERT_LE(h_bytes, id_bytes);
+    for (std::size_t i = 0; i < h_bytes / 4; ++i) {
+      std::uint32_t id;
+      float h;
+      std::memcpy(&id, bytes.data() + id_at + 4 * i, 4);
+      std::memcpy(&h, bytes.data() + h_at + 4 * i, 4);
+      hsml[id] = h;
+    }
+  }
+  ASSERT_EQ(hsml.size(), 4039u);
+  const std::string input = std::string(kData) + "/gadget2_format2_multifile/test_g2_snap";
+  IngestOptions o = Options({input}, "given");
+  o.tree.capacity = 500;
+  IngestOptions reference = o;
+  reference.output = (dir_ / "reference").string();
+  reference.read.read_smoothing = false;
+  Ingest(o);
+  Ingest(reference);
+  const TreeCheck check = CheckTree(Dataset::Open(o.output), 0);
+  const TreeCheck without = CheckTree(Dataset::Open(reference.output), 0);
+  ASSERT_EQ(check.leaf_points.size(), 8192u);
+  std::size_t gas = 0;
+  for (const auto& [id, p] : check.leaf_points) {
+    if (p.type == 0) {
+      const float h = hsml.at(id);
+      ASSERT_NEAR(p.smoothing, h, 2e-4 * h) << "ID " << id;
+      ++gas;
+    } else {
+      ASSERT_EQ(p.smoothing, without.leaf_points.at(id).smoothing) << "ID " << id;
+    }
+  }
+  EXPECT_EQ(gas, 4039u);
   EXPECT_TRUE(TempIsEmpty());
 }
 

@@ -550,6 +550,148 @@ TEST_F(IngestTest, MappedAndReadGadgetSnapshotsGiveTheSameStore) {
   EXPECT_TRUE(TempIsEmpty());
 }
 
+// The smoothing length a gas particle is given in the snapshots of the
+// smoothing tests: 0 ("not given") for every seventh ID, else 0.2 to 1.3
+// (in a box of 100), and another one in every epoch.
+float GivenSmoothing(std::uint64_t id, int epoch = 0) {
+  if (id % 7 == 4) return 0.0f;
+  return (0.2f + static_cast<float>(id % 113) * 0.01f) * (1.0f + 0.5f * static_cast<float>(epoch));
+}
+
+// `particles` as a format 2 GADGET snapshot of two files in a periodic box
+// of 100, the first two fifths of each file's particles gas (type 0) with
+// GivenSmoothing(id, epoch) in the HSML block, the rest dark matter; table
+// masses, float positions, this machine's byte order: a snapshot ingest
+// would map from its files but for the HSML block.
+std::string WriteGasSet(const fs::path& dir, const std::string& name, const std::vector<Particle>& particles,
+                        int epoch = 0) {
+  const std::size_t half = particles.size() / 2;
+  for (int f = 0; f < 2; ++f) {
+    const std::size_t begin = f == 0 ? 0 : half, end = f == 0 ? half : particles.size();
+    const auto gas = static_cast<std::int32_t>((end - begin) * 2 / 5);
+    GadgetSpec spec;
+    spec.format = 2;
+    spec.num_files = 2;
+    spec.npart = {gas, static_cast<std::int32_t>(end - begin) - gas, 0, 0, 0, 0};
+    spec.total = std::array<std::uint32_t, 6>{};
+    spec.mass_table = {0.5, 2.5, 0, 0, 0, 0};
+    for (std::size_t i = begin; i < end; ++i) {
+      for (int a = 0; a < 3; ++a) {
+        spec.position.push_back(particles[i].x[a]);
+        spec.velocity.push_back(static_cast<double>(i % 17) - a);
+      }
+      spec.ids.push_back(particles[i].id);
+      if (i < begin + static_cast<std::size_t>(gas)) spec.hsml.push_back(GivenSmoothing(particles[i].id, epoch));
+    }
+    WriteBytes((dir / (name + "." + std::to_string(f))).string(), EncodeGadget(spec));
+  }
+  return (dir / name).string();
+}
+
+// Checks `check` (a store of particles written by WriteGasSet) against
+// `reference` (the same particles ingested without smoothing lengths): the
+// same nodes, every inner node the same block; each gas particle with a
+// given length holds it to the codec's precision, and every other particle
+// the length it had without the column. Counts the given ones in `given`.
+void ExpectGivenSmoothing(const TreeCheck& check, const TreeCheck& reference, int epoch, std::size_t& given) {
+  ASSERT_EQ(check.leaf_points.size(), reference.leaf_points.size());
+  std::set<std::uint64_t> leaves;
+  for (const auto& [id, p] : check.leaf_points) leaves.insert(p.leaf.value());
+  ASSERT_EQ(check.blocks.size(), reference.blocks.size());
+  for (const auto& [key, blocks] : check.blocks) {
+    ASSERT_TRUE(reference.blocks.count(key)) << NodeKey::FromValue(key).Path();
+    if (!leaves.count(key)) {
+      EXPECT_EQ(blocks, reference.blocks.at(key)) << "inner node " << NodeKey::FromValue(key).Path();
+    }
+  }
+  for (const auto& [id, p] : check.leaf_points) {
+    const LeafPoint& without = reference.leaf_points.at(id);
+    ASSERT_EQ(p.leaf, without.leaf) << "ID " << id;
+    const float h = p.type == 0 ? GivenSmoothing(id, epoch) : 0.0f;
+    if (h > 0) {
+      ++given;
+      ASSERT_NEAR(p.smoothing, h, 2e-4 * h) << "ID " << id << " in " << p.leaf.Path();
+    } else {
+      ASSERT_EQ(p.smoothing, without.smoothing) << "ID " << id << " (type " << int(p.type) << ")";
+    }
+  }
+}
+
+// The gas's smoothing lengths from the snapshot reach the leaves, whether the
+// epoch is held in memory whole or streamed through chunk buffers that spill
+// to temporary files (the budget's smallest, 32 MiB, buffers some 170,000
+// points); both give the same store. Such a snapshot is read, not mapped
+// (a mapping has no place for the lengths), and the same files read
+// without their lengths are mapped.
+TEST_F(IngestTest, GivenSmoothingLengthsReachTheLeavesHeldInMemoryOrStreamed) {
+  const auto particles = Clustered(200000, 31, 100.0);
+  const std::string input = WriteGasSet(dir_, "gas", particles);
+  IngestOptions resident = Options({input}, "resident");
+  resident.tree.capacity = 1000;
+  resident.max_chunk_points = 20000;
+  resident.threads = 2;
+  IngestOptions streamed = resident;
+  streamed.output = (dir_ / "streamed").string();
+  streamed.stream_chunks = true;
+  streamed.memory_budget = std::uint64_t{32} << 20;
+  IngestOptions reference = resident;
+  reference.output = (dir_ / "reference").string();
+  reference.read.read_smoothing = false;
+  const IngestReport resident_report = Ingest(resident);
+  const IngestReport streamed_report = Ingest(streamed);
+  const IngestReport reference_report = Ingest(reference);
+  EXPECT_TRUE(resident_report.epochs[0].resident);
+  EXPECT_FALSE(resident_report.epochs[0].mapped);
+  EXPECT_TRUE(reference_report.epochs[0].mapped) << "the files are mappable but for the smoothing lengths";
+  EXPECT_FALSE(streamed_report.epochs[0].resident);
+  EXPECT_GT(streamed_report.epochs[0].spilled_points, particles.size() / 10) << "chunks must go through files";
+  EXPECT_GT(streamed_report.epochs[0].chunks, 10u);
+  EXPECT_TRUE(TempIsEmpty());
+
+  const TreeCheck without = CheckTree(Dataset::Open(reference.output), 0);
+  const TreeCheck held = CheckTree(Dataset::Open(resident.output), 0);
+  const TreeCheck spilled = CheckTree(Dataset::Open(streamed.output), 0);
+  std::size_t given = 0;
+  ExpectGivenSmoothing(held, without, 0, given);
+  EXPECT_GT(given, particles.size() / 4);
+  EXPECT_EQ(FirstDifference(held, spilled), "") << "held in memory or streamed, the same blocks";
+  EXPECT_NE(FirstDifference(held, without), "") << "the given lengths must show in the leaves";
+}
+
+// A series with IDs goes through the sort by ID and the epoch join; the
+// lengths travel beside the sorted particles, in runs merged from files when
+// the runs are small, and each epoch keeps its own.
+TEST_F(IngestTest, GivenSmoothingLengthsTravelThroughTheSortOfASeries) {
+  const auto e0 = Clustered(20000, 32, 100.0);
+  auto e1 = e0;
+  std::mt19937_64 rng(33);
+  for (auto& p : e1) p.x[0] = std::min(p.x[0] * 0.95 + 2.0, 99.9);
+  std::shuffle(e1.begin(), e1.end(), rng);  // another file order: other particles are gas
+  const std::vector<std::string> inputs = {WriteGasSet(dir_, "e0", e0, 0), WriteGasSet(dir_, "e1", e1, 1)};
+  IngestOptions o = Options(inputs, "series");
+  o.tree.capacity = 700;
+  IngestOptions small = o;
+  small.output = (dir_ / "small").string();
+  small.sort_run_points = 1500;  // 14 sorted runs per epoch, merged
+  small.max_chunk_points = 3000;
+  small.stream_chunks = true;
+  IngestOptions reference = o;
+  reference.output = (dir_ / "reference").string();
+  reference.read.read_smoothing = false;
+  Ingest(o);
+  Ingest(small);
+  Ingest(reference);
+  EXPECT_TRUE(TempIsEmpty());
+  for (int e = 0; e < 2; ++e) {
+    SCOPED_TRACE("epoch " + std::to_string(e));
+    const TreeCheck check = CheckTree(Dataset::Open(o.output), static_cast<std::uint32_t>(e));
+    std::size_t given = 0;
+    ExpectGivenSmoothing(check, CheckTree(Dataset::Open(reference.output), static_cast<std::uint32_t>(e)), e, given);
+    EXPECT_GT(given, e0.size() / 4);
+    EXPECT_EQ(FirstDifference(check, CheckTree(Dataset::Open(small.output), static_cast<std::uint32_t>(e))), "");
+  }
+}
+
 TEST_F(IngestTest, ANonFiniteCoordinateInAMappableSnapshotIsReported) {
   auto particles = Clustered(5000, 13, 100.0);
   particles[4000].x[0] = std::nan("");  // in the second file, of type 2

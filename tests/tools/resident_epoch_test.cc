@@ -165,6 +165,41 @@ TEST(ResidentEpoch, CopiesListedPointsToTheirTargetsAndEmptiesAbsentColumns) {
   }
 }
 
+// Smoothing lengths, when the epoch carries them, are kept as appended and
+// copied with their points; an epoch without them empties a stale column.
+TEST(ResidentEpoch, KeepsAndCopiesSmoothingLengths) {
+  ResidentEpoch epoch;
+  ParticleColumns columns = WithIdAndVelocity();
+  columns.smoothing = true;
+  const std::vector<PageWarmer::Range> fresh = epoch.Reserve(300, columns);
+  std::size_t reserved = 0;
+  for (const PageWarmer::Range& range : fresh) reserved += range.bytes;
+  EXPECT_EQ(reserved, 300u * (12 + 1 + 4 + 4 + 12)) << "positions, types, IDs, smoothing and velocities";
+  ParticleChunk batch = NarrowBatch(300, 1);
+  for (std::size_t i = 0; i < batch.size(); ++i) batch.smoothing.push_back(i % 4 == 0 ? 0.0f : 0.5f + static_cast<float>(i));
+  epoch.Append(batch);
+  EXPECT_EQ(epoch.BytesPerPoint(), 12u + 1 + 4 + 4 + 12);
+  const std::vector<std::uint32_t> listed = {250, 3, 77, 4};
+  const std::vector<std::uint32_t> target = {2, 0, 3, 1};
+  ParticleChunk to;
+  epoch.CopyPoints(listed, target, to);
+  ASSERT_EQ(to.smoothing.size(), 4u);
+  for (std::size_t k = 0; k < listed.size(); ++k) {
+    EXPECT_EQ(to.smoothing[target[k]], batch.smoothing[listed[k]]);
+    EXPECT_EQ(to.id[target[k]], batch.id[listed[k]]);
+  }
+  ParticleChunk without_smoothing = NarrowBatch(10, 1);
+  EXPECT_THROW(epoch.Append(without_smoothing), Error);
+
+  ResidentEpoch plain;
+  plain.Reserve(10, WithIdAndVelocity());
+  plain.Append(NarrowBatch(10, 1));
+  to.smoothing.assign(4, 1.0f);
+  plain.CopyPoints(std::vector<std::uint32_t>{1, 2}, std::vector<std::uint32_t>{0, 1}, to);
+  EXPECT_TRUE(to.smoothing.empty());
+  EXPECT_THROW(plain.Append(batch), Error) << "a batch with smoothing lengths the epoch was not reserved for";
+}
+
 TEST(ResidentEpoch, RefusesABatchWithOtherColumns) {
   ResidentEpoch epoch;
   epoch.Reserve(10, WithIdAndVelocity());
@@ -304,6 +339,9 @@ TEST_F(MappedEpochTest, RefusesWhatItCannotMapAndIsLeftEmpty) {
   ParticleColumns joined = WithIdAndVelocity();
   joined.vector(VectorColumn::kDisplacement) = true;
   EXPECT_TRUE(refused(segments_, Files(), joined)) << "displacements are not in the files";
+  ParticleColumns smoothed = WithIdAndVelocity();
+  smoothed.smoothing = true;
+  EXPECT_TRUE(refused(segments_, Files(), smoothed)) << "smoothing lengths are not in the segments";
   EXPECT_TRUE(refused({}, Files(), WithIdAndVelocity()));
 }
 

@@ -23,6 +23,7 @@ struct LeafPoint {
   std::uint8_t type;
   NodeKey leaf;
   double node_mass;  // sum of the leaf's weights: one weight unit is node_mass / kWeightTotalUnits
+  double smoothing;  // as decoded
   // The vector columns (indexed by VectorColumn), whether the leaf has each,
   // and the codec's error bound of each component in this leaf's block:
   // half a step of the block's range, (max - min) / 131070, plus float rounding.
@@ -107,7 +108,8 @@ inline TreeCheck CheckTree(const Dataset& dataset, std::uint32_t epoch) {
       std::array<std::array<double, 3>, kVectorColumnCount> bounds;
       for (std::size_t v = 0; v < kVectorColumnCount; ++v) bounds[v] = QuantizationBound(*columns[v]);
       for (std::size_t i = 0; i < p.size(); ++i) {
-        LeafPoint lp{{p.position[3 * i], p.position[3 * i + 1], p.position[3 * i + 2]}, p.weight[i], p.type[i], key, sum};
+        LeafPoint lp{{p.position[3 * i], p.position[3 * i + 1], p.position[3 * i + 2]}, p.weight[i], p.type[i], key, sum,
+                     p.smoothing[i]};
         lp.bound = bounds;
         for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
           lp.present[v] = !columns[v]->empty();

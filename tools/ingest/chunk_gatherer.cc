@@ -54,6 +54,7 @@ void ChunkGatherer::Reserve(const ResidentEpoch& resident, std::size_t points) {
   points_.mass.reserve(points);
   points_.type.reserve(points);
   if (resident.columns().id) points_.id.reserve(points);
+  if (resident.columns().smoothing) points_.smoothing.reserve(points);
   const auto to = VectorColumns(points_);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     if (resident.columns().vectors[v]) to[v]->reserve(3 * points);

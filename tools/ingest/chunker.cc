@@ -61,6 +61,7 @@ void AppendPoints(const ParticleChunk& from, std::span<const std::uint32_t> indi
   AppendSelected(from.mass, indices, 1, to.mass);
   AppendSelected(from.type, indices, 1, to.type);
   if (from.has_id()) AppendSelected(from.id, indices, 1, to.id);
+  if (from.has_smoothing()) AppendSelected(from.smoothing, indices, 1, to.smoothing);
   const auto source = VectorColumns(from);
   const auto target = VectorColumns(to);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
@@ -180,6 +181,7 @@ void AppendWhole(const ParticleChunk& from, ParticleChunk& to) {
   append(from.mass, to.mass);
   append(from.type, to.type);
   append(from.id, to.id);
+  append(from.smoothing, to.smoothing);
   const auto source = VectorColumns(from);
   const auto target = VectorColumns(to);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) append(*source[v], *target[v]);

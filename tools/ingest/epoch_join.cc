@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <stdexcept>
 #include <vector>
 
 #include "storage/error.h"
@@ -22,18 +23,43 @@ void Bounds::Add(const ParticleChunk& chunk) {
   count += chunk.size();
 }
 
+namespace {
+
+// The ParticleRecords of a run: all of `run_records`, or with smoothing
+// lengths a share that leaves room for as many SmoothingRecords.
+std::size_t ParticleRunRecords(const ParticleSource& source, std::size_t run_records) {
+  if (!source.header().has_smoothing) return run_records;
+  return std::max<std::size_t>(run_records / (sizeof(ParticleRecord) + sizeof(SmoothingRecord)) * sizeof(ParticleRecord), 1);
+}
+
+}  // namespace
+
 SortedEpoch::SortedEpoch(ParticleSource& source, const std::string& temp_prefix, std::size_t run_records,
                          const std::function<void(std::uint64_t)>& on_points)
-    : sorter_(temp_prefix, run_records) {
+    : sorter_(temp_prefix, ParticleRunRecords(source, run_records)) {
   if (!source.header().has_id) {
     throw Error::InvalidArgument("sorting an epoch by ID needs particle IDs, and " + source.header().files.front() +
                                  " has none");
   }
   has_velocity_ = source.header().has_velocity;
+  if (source.header().has_smoothing) {
+    smoothing_sorter_ = std::make_unique<ExternalSorter<SmoothingRecord>>(temp_prefix + "-smoothing",
+                                                                          ParticleRunRecords(source, run_records));
+  }
   source.Rewind();
   ParticleChunk chunk;
+  std::vector<SmoothingRecord> smoothing;
   while (source.Next(chunk)) {
     bounds_.Add(chunk);
+    if (smoothing_sorter_) {
+      if (chunk.smoothing.size() != chunk.size()) {
+        throw Error::InvalidArgument("sorting an epoch by ID: a batch of " + source.header().files.front() +
+                                     " lacks the smoothing lengths its header announces");
+      }
+      smoothing.resize(chunk.size());
+      for (std::size_t i = 0; i < chunk.size(); ++i) smoothing[i] = SmoothingRecord{chunk.id[i], chunk.smoothing[i]};
+      smoothing_sorter_->Add(smoothing);
+    }
     for (std::size_t i = 0; i < chunk.size(); ++i) {
       ParticleRecord r{};
       r.key = chunk.id[i];
@@ -48,6 +74,7 @@ SortedEpoch::SortedEpoch(ParticleSource& source, const std::string& temp_prefix,
     if (on_points) on_points(chunk.size());
   }
   sorter_.Finish();
+  if (smoothing_sorter_) smoothing_sorter_->Finish();
   auto reader = sorter_.Open();
   ParticleRecord r{};
   bool first = true;
@@ -173,6 +200,8 @@ JoinStats JoinedPass(const SortedEpoch& current, const SortedEpoch* next, const 
     links_out.emplace(links_to_next, kLinkFile);
   }
   if (!links_from_previous.empty()) links_in.emplace(links_from_previous, kLinkFile);
+  std::optional<ExternalSorter<SmoothingRecord>::Reader> smoothing;
+  if (current.has_smoothing()) smoothing.emplace(current.smoothing_sorter().Open());
   // A particle of the next epoch that this one lacks: it has no way back.
   auto skip_next = [&] {
     links_out->Add(BackLink{n.key, {0, 0, 0}, {0, 0, 0}});
@@ -221,6 +250,14 @@ JoinStats JoinedPass(const SortedEpoch& current, const SortedEpoch* next, const 
     batch.mass.push_back(c.mass);
     batch.type.push_back(c.type);
     batch.id.push_back(c.key);
+    if (smoothing) {
+      SmoothingRecord h{};
+      if (!smoothing->Next(h) || h.key != c.key) {
+        throw std::logic_error("epoch join: the smoothing lengths sorted by ID are out of step with the particles at ID " +
+                               std::to_string(c.key));
+      }
+      batch.smoothing.push_back(h.smoothing);
+    }
     if (velocity) Append3(batch.velocity, c.velocity);
     if (next != nullptr) {
       Append3(batch.displacement, offset);

@@ -34,6 +34,17 @@ struct ParticleRecord {
   std::uint8_t type;
 };
 
+// A particle's smoothing length, sorted by ID beside its ParticleRecord when
+// the epoch carries them (ParticleChunk::smoothing): a sorter of its own
+// rather than a wider ParticleRecord (56 bytes would become 64), so that an
+// epoch without them sorts what it sorted before. Both sorters are stable
+// and take the particles in the same order, so their k-th records belong to
+// the same particle, duplicate IDs included.
+struct SmoothingRecord {
+  std::uint64_t key;  // the particle ID
+  float smoothing;
+};
+
 struct Bounds {
   std::array<double, 3> lo{1e300, 1e300, 1e300};
   std::array<double, 3> hi{-1e300, -1e300, -1e300};
@@ -47,17 +58,24 @@ struct Bounds {
 // One epoch's particles in ID order.
 class SortedEpoch {
  public:
-  // Reads `source` once (it must carry IDs). `run_records` bounds memory.
+  // Reads `source` once (it must carry IDs). `run_records` ParticleRecords
+  // bound memory; with smoothing lengths, fewer of them and as many
+  // SmoothingRecords share that room.
   SortedEpoch(ParticleSource& source, const std::string& temp_prefix, std::size_t run_records,
               const std::function<void(std::uint64_t)>& on_points);
 
   const Bounds& bounds() const { return bounds_; }
   bool has_velocity() const { return has_velocity_; }
+  bool has_smoothing() const { return smoothing_sorter_ != nullptr; }
   std::uint64_t duplicate_ids() const { return duplicate_ids_; }
   const ExternalSorter<ParticleRecord>& sorter() const { return sorter_; }
+  // The particles' smoothing lengths, in the order of sorter()'s records;
+  // only when has_smoothing().
+  const ExternalSorter<SmoothingRecord>& smoothing_sorter() const { return *smoothing_sorter_; }
 
  private:
   ExternalSorter<ParticleRecord> sorter_;
+  std::unique_ptr<ExternalSorter<SmoothingRecord>> smoothing_sorter_;
   Bounds bounds_;
   bool has_velocity_ = false;
   std::uint64_t duplicate_ids_ = 0;
@@ -131,7 +149,8 @@ struct JoinStats {
 };
 
 // Calls `consume` with batches of at most `batch_points` particles of
-// `current`, in ID order, with the epoch links filled:
+// `current`, in ID order, with their smoothing lengths when `current` has
+// them, and the epoch links filled:
 //  - with `next`: displacement (and next_velocity, with velocities) from the
 //    join, and the link file `links_to_next` written for the next epoch;
 //  - with `links_from_previous` (the file the previous epoch's join wrote;

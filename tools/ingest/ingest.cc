@@ -509,6 +509,8 @@ IngestReport Ingest(const IngestOptions& options) {
     chunker_options.temp_dir = temp.path();
     chunker_options.threads = static_cast<int>(threads);
     chunker_options.columns.id = has_id;
+    // Epoch by epoch: a series may give smoothing lengths in some snapshots only.
+    chunker_options.columns.smoothing = header.has_smoothing;
     chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity;
     chunker_options.columns.vector(VectorColumn::kDisplacement) = next_sorted != nullptr;
     chunker_options.columns.vector(VectorColumn::kNextVelocity) = next_sorted != nullptr && has_velocity;

@@ -20,7 +20,7 @@ void ResizeColumn(std::vector<T>& column, std::size_t old_size, std::size_t adde
 }  // namespace
 
 std::size_t ParticleColumns::BytesPerPoint() const {
-  std::size_t bytes = 33 + (id ? 8 : 0);
+  std::size_t bytes = 33 + (id ? 8 : 0) + (smoothing ? 4 : 0);
   for (const bool present : vectors) bytes += present ? 12 : 0;
   return bytes;
 }
@@ -31,8 +31,11 @@ ParticleFileWriter::ParticleFileWriter(std::string path, ParticleColumns columns
   if (file_ == nullptr) throw IoErrorFromErrno(path_, "creating a temporary particle file", errno);
   std::setvbuf(file_, nullptr, _IOFBF, kStdioBuffer);
   Write(kMagic, sizeof kMagic);
+  // One flag byte per optional column: the ID, the vectors, the smoothing length.
+  static_assert(2 + kVectorColumnCount <= 8);
   std::uint8_t flags[8] = {columns_.id};
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) flags[1 + v] = columns_.vectors[v];
+  flags[1 + kVectorColumnCount] = columns_.smoothing;
   Write(flags, sizeof flags);
 }
 
@@ -73,6 +76,7 @@ void ParticleFileWriter::Append(const ParticleChunk& chunk, std::size_t begin, s
   Write(chunk.mass.data() + begin, n * sizeof(double));
   Write(chunk.type.data() + begin, n);
   if (columns_.id) Write(chunk.id.data() + begin, n * sizeof(std::uint64_t));
+  if (columns_.smoothing) Write(chunk.smoothing.data() + begin, n * sizeof(float));
   const auto vectors = VectorColumns(chunk);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     if (columns_.vectors[v]) Write(vectors[v]->data() + 3 * begin, 3 * n * sizeof(float));
@@ -104,6 +108,7 @@ ParticleFileReader::ParticleFileReader(std::string path) : path_(std::move(path)
   }
   columns_.id = flags[0] != 0;
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) columns_.vectors[v] = flags[1 + v] != 0;
+  columns_.smoothing = flags[1 + kVectorColumnCount] != 0;
 }
 
 ParticleFileReader::ParticleFileReader(ParticleFileReader&& other) noexcept
@@ -148,6 +153,10 @@ bool ParticleFileReader::ReadBatch(ParticleChunk& chunk, bool append) {
   if (columns_.id) {
     ResizeColumn(chunk.id, old, n, 1);
     Read(chunk.id.data() + old, n * sizeof(std::uint64_t), "IDs");
+  }
+  if (columns_.smoothing) {
+    ResizeColumn(chunk.smoothing, old, n, 1);
+    Read(chunk.smoothing.data() + old, n * sizeof(float), "smoothing lengths");
   }
   const auto vectors = VectorColumns(chunk);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {

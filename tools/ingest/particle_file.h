@@ -21,11 +21,13 @@ namespace octocosm {
 // Which optional columns the batches of a file carry (all batches alike).
 struct ParticleColumns {
   bool id = false;
+  bool smoothing = false;  // ParticleChunk::smoothing
   std::array<bool, kVectorColumnCount> vectors{};  // indexed by VectorColumn
 
   bool& vector(VectorColumn column) { return vectors[static_cast<std::size_t>(column)]; }
   bool vector(VectorColumn column) const { return vectors[static_cast<std::size_t>(column)]; }
-  // Bytes one point takes in a file: position 24, mass 8, type 1 + options.
+  // Bytes one point takes in a file: position 24, mass 8, type 1 + options
+  // (ID 8, smoothing 4, each vector 12).
   std::size_t BytesPerPoint() const;
 };
 

@@ -164,6 +164,10 @@ std::vector<PageWarmer::Range> ResidentEpoch::Reserve(std::size_t points, const 
   if (columns_.id) {
     id_.Reserve(points, fresh);
   }
+  if (columns_.smoothing) {
+    smoothing_.reserve(points);
+    AddFreshRange(smoothing_, fresh);
+  }
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     if (!columns_.vectors[v]) continue;
     vectors_[v].reserve(3 * points);
@@ -176,7 +180,8 @@ std::vector<PageWarmer::Range> ResidentEpoch::Reserve(std::size_t points, const 
 void ResidentEpoch::Append(const ParticleChunk& batch) {
   if (mapped()) throw Error::InvalidArgument("resident epoch: a mapped epoch takes no appended points");
   const std::size_t n = batch.size();
-  bool agree = batch.position.size() == 3 * n && batch.type.size() == n && batch.id.size() == (columns_.id ? n : 0);
+  bool agree = batch.position.size() == 3 * n && batch.type.size() == n && batch.id.size() == (columns_.id ? n : 0) &&
+               batch.smoothing.size() == (columns_.smoothing ? n : 0);
   const auto vectors = VectorColumns(batch);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) agree &= vectors[v]->size() == (columns_.vectors[v] ? 3 * n : 0);
   if (!agree) {
@@ -198,6 +203,7 @@ void ResidentEpoch::Append(const ParticleChunk& batch) {
   type_.insert(type_.end(), batch.type.begin(), batch.type.end());
   position_.Append(batch.position);
   if (columns_.id) id_.Append(batch.id);
+  smoothing_.insert(smoothing_.end(), batch.smoothing.begin(), batch.smoothing.end());
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
     vectors_[v].insert(vectors_[v].end(), vectors[v]->begin(), vectors[v]->end());
   }
@@ -227,6 +233,7 @@ void ResidentEpoch::DescribeOwnColumns() {
                              : static_cast<const void*>(id_.wide_values().data());
   }
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) run.vectors[v] = vectors_[v].data();
+  run.smoothing = smoothing_.data();
   runs_.assign(1, run);
   run_of_block_.clear();
 }
@@ -241,7 +248,7 @@ bool ResidentEpoch::Map(std::span<const MappableSegment> segments, std::span<con
   ParticleColumns allowed;
   allowed.id = columns.id;
   allowed.vector(VectorColumn::kVelocity) = columns.vector(VectorColumn::kVelocity);
-  if (allowed.vectors != columns.vectors || segments.empty()) return refuse();
+  if (allowed.vectors != columns.vectors || columns.smoothing || segments.empty()) return refuse();
   const bool velocity = columns.vector(VectorColumn::kVelocity);
 
   // Each file's range: from its first needed byte to its last.
@@ -352,6 +359,7 @@ std::size_t ResidentEpoch::BytesPerPoint() const {
   std::size_t bytes = 3 * (position_.is_narrow() ? sizeof(float) : sizeof(double)) + sizeof(std::uint8_t);
   if (!per_type_mass_) bytes += sizeof(double);
   if (columns_.id) bytes += id_.is_narrow() ? sizeof(std::uint32_t) : sizeof(std::uint64_t);
+  if (columns_.smoothing) bytes += sizeof(float);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) bytes += columns_.vectors[v] ? 3 * sizeof(float) : 0;
   return bytes;
 }
@@ -391,6 +399,7 @@ void ResidentEpoch::CopyPoints(std::span<const std::uint32_t> listed, std::span<
   to.mass.resize(n);
   to.type.resize(n);
   to.id.resize(columns_.id ? n : 0);
+  to.smoothing.resize(columns_.smoothing ? n : 0);
   const auto out = VectorColumns(to);
   for (std::size_t v = 0; v < kVectorColumnCount; ++v) out[v]->resize(columns_.vectors[v] ? 3 * n : 0);
 
@@ -426,6 +435,7 @@ void ResidentEpoch::CopyPoints(std::span<const std::uint32_t> listed, std::span<
         CopyListed<std::uint64_t>(run.id, run.begin, from, into, 1, to.id.data());
       }
     }
+    if (columns_.smoothing) CopyListed<float>(run.smoothing, run.begin, from, into, 1, to.smoothing.data());
     for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
       if (columns_.vectors[v]) CopyListed<float>(run.vectors[v], run.begin, from, into, 3, out[v]->data());
     }

@@ -5,6 +5,8 @@
 //  - masses as one value per particle type while all particles of a type
 //    weigh the same (a GADGET header's mass table), else one per particle;
 //  - particle IDs as 32 bits while all are below 2^32, else 64.
+// Smoothing lengths, when the points carry them, are kept as they come (a
+// float each) and the vector columns likewise.
 // A column whose values stop fitting is widened once, its earlier values
 // copied over exactly; reading a point gives back exactly what was appended.
 //
@@ -95,7 +97,8 @@ class ResidentEpoch {
   // the velocity. Returns false, the epoch left empty, where the segments
   // cannot be held so (a file that cannot be mapped or is shorter than its
   // segments, one type's masses differing between files, more than 2^32 - 1
-  // points, other columns asked for); reading through the source then does.
+  // points, other columns asked for, smoothing lengths among them);
+  // reading through the source then does.
   // The values are not checked: see ValuesAsRead.
   bool Map(std::span<const MappableSegment> segments, std::span<const std::string> files,
            const ParticleColumns& columns);
@@ -156,6 +159,7 @@ class ResidentEpoch {
     const void* id = nullptr;
     std::size_t id_bytes = 0;           // 4 or 8
     std::array<const void*, kVectorColumnCount> vectors{};  // 3 floats a point each
+    const float* smoothing = nullptr;  // per point, when the columns carry it
   };
   const Run& RunOf(std::size_t i) const;
   // Point `offset` of the run's positions, as doubles (unaligned loads: a
@@ -178,6 +182,7 @@ class ResidentEpoch {
   std::vector<double> mass_;                   // per point, once not per type
   std::vector<std::uint8_t> type_;
   NarrowableColumn<std::uint32_t, std::uint64_t> id_;
+  std::vector<float> smoothing_;
   std::array<std::vector<float>, kVectorColumnCount> vectors_;  // indexed by VectorColumn
 };
 
