@@ -34,7 +34,9 @@ struct LodOptions {
   double pixel_threshold = 1;    // refine while the projected point spacing exceeds this (pixels, > 0)
   std::uint64_t point_budget = 0;  // most points to select; 0: no limit
   // World units by which node cubes grow before the frustum test: points
-  // moved by time interpolation may leave their node's cube.
+  // moved by time interpolation may leave their node's cube. In a periodic
+  // cube such points are drawn wrapped into the cube, so where a grown node
+  // cube crosses a face, its part beyond is also tested at the opposite face.
   double cull_margin = 0;
 };
 

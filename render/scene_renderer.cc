@@ -244,6 +244,10 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   settings.interpolation = stats.interpolation;
   settings.t = t;
   if (stats.interpolation == Interpolation::kHermite) settings.hermite_scale = dataset_.link_to_next(copies[0].epoch)->velocity_scale;
+  if (const Cube& box = dataset_.cube(copies[0].epoch); box.periodic) {
+    settings.box_origin = box.origin;
+    settings.box_size = box.size;
+  }
   splat_.BeginFrame(view, settings);
   splat_.SetSelection((columns_ & ColumnBit(ColumnId::kId)) ? selection_.get() : nullptr);
   for (const Copy& c : copies) {

@@ -16,9 +16,11 @@
 // 1 - t and e + 1 moved back with weight t along the same curve (linear, or
 // cubic Hermite when velocities allow), so that each particle's position,
 // size and colour pass smoothly from one epoch to the next, t = 0 and t = 1
-// reproduce the epochs exactly, and mass is conserved in between. The point
-// budget is shared between the two in proportion to their weights. Without
-// links the nearest epoch is shown.
+// reproduce the epochs exactly, and mass is conserved in between. In a
+// periodic box, displacements are minimal images and the moved positions are
+// wrapped into the box, so a particle crossing a face passes out of one face
+// and in at the opposite one. The point budget is shared between the two in
+// proportion to their weights. Without links the nearest epoch is shown.
 //
 // Two ways to render: Complete() waits for every block the frame selects
 // (headless pictures, tests, benchmarks); Stream() never waits for the disk

@@ -43,6 +43,13 @@ void SetMap(const GlProgram& program, const char* name, ColorMapId id) {
   glProgramUniform3fv(program.get(), Location(program, name), kColorMapKnots, knots[0].data());
 }
 
+// Sets the vec3 uniform at `location` to a + shift - b, in double before the
+// float.
+void SetDifference(GLint location, const std::array<double, 3>& a, double shift, const std::array<double, 3>& b) {
+  glUniform3f(location, static_cast<float>(a[0] + shift - b[0]), static_cast<float>(a[1] + shift - b[1]),
+              static_cast<float>(a[2] + shift - b[2]));
+}
+
 float Unordered(std::uint32_t u) {
   return std::bit_cast<float>((u & 0x80000000u) != 0 ? (u & 0x7FFFFFFFu) : ~u);
 }
@@ -56,6 +63,10 @@ SplatRenderer::SplatRenderer() {
                                  {GL_FRAGMENT_SHADER, {shaders::kShaderToneMapFrag}}});
   statistics_ = Build("image statistics", {{GL_COMPUTE_SHADER, {shaders::kShaderImageStatsComp}}});
   origin_location_ = Location(splat_, "u_origin");
+  box_low_location_ = Location(splat_, "u_box_low");
+  box_high_location_ = Location(splat_, "u_box_high");
+  origin_below_location_ = Location(splat_, "u_origin_below");
+  origin_above_location_ = Location(splat_, "u_origin_above");
 
   GLuint vao = 0;
   glCreateVertexArrays(1, &vao);
@@ -104,6 +115,10 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
     throw Error::InvalidArgument("the mass unit must be finite and > 0");
   }
   if (!(settings.t >= 0 && settings.t <= 1)) throw Error::InvalidArgument("interpolation time must be in [0, 1]");
+  if (!(settings.box_size >= 0) || !std::isfinite(settings.box_size) ||
+      !std::all_of(settings.box_origin.begin(), settings.box_origin.end(), [](double x) { return std::isfinite(x); })) {
+    throw Error::InvalidArgument("the periodic box must be finite, of size >= 0");
+  }
   margin_ = GuardMargin(view.max_blob_radius());
   const int tw = view.width() + 2 * margin_, th = view.height() + 2 * margin_;
   Allocate(accumulation_, GL_RGBA32F, tw, th, "the accumulation buffer");
@@ -134,6 +149,7 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   uniforms_.modes[1] = static_cast<std::int32_t>(settings.interpolation);
   uniforms_.time[0] = static_cast<float>(settings.t);
   uniforms_.time[2] = static_cast<float>(settings.hermite_scale);
+  uniforms_.wrap[0] = settings.box_size > 0 && settings.interpolation != Interpolation::kNone ? 1 : 0;
   SetSelection(nullptr);
   SetCopy(1, 1);
 
@@ -190,9 +206,16 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
   // The node's corner relative to the camera, in double before the float:
   // the precision that matters is near the camera.
   const NodeCube& node = block.node();
-  glUniform3f(origin_location_, static_cast<float>(node.origin[0] - camera_position_[0]),
-              static_cast<float>(node.origin[1] - camera_position_[1]),
-              static_cast<float>(node.origin[2] - camera_position_[2]));
+  SetDifference(origin_location_, node.origin, 0, camera_position_);
+  if (uniforms_.wrap[0] != 0) {
+    // The same for the wrap: the box's faces relative to the node's corner,
+    // and the corner moved by a box length relative to the camera.
+    const double size = settings_.box_size;
+    SetDifference(box_low_location_, settings_.box_origin, 0, node.origin);
+    SetDifference(box_high_location_, settings_.box_origin, size, node.origin);
+    SetDifference(origin_below_location_, node.origin, -size, camera_position_);
+    SetDifference(origin_above_location_, node.origin, size, camera_position_);
+  }
   glDrawArrays(GL_POINTS, static_cast<GLint>(first), static_cast<GLsizei>(count));
 }
 

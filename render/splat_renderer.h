@@ -14,6 +14,7 @@
 // mass units; every read-back multiplies it out again.
 #pragma once
 
+#include <array>
 #include <cstdint>
 
 #include "render/gl_objects.h"
@@ -38,6 +39,11 @@ struct FrameSettings {
   Interpolation interpolation = Interpolation::kNone;
   double t = 0;              // in [0, 1]
   double hermite_scale = 0;  // velocity -> displacement per interval (the ingest's fit)
+  // A periodic box (box_size > 0): points moved by interpolation are drawn
+  // wrapped into [box_origin, box_origin + box_size) on every axis, so that a
+  // particle crossing a face appears at the opposite face, inside the box.
+  std::array<double, 3> box_origin{};
+  double box_size = 0;  // 0: not periodic
 };
 
 class SplatRenderer {
@@ -109,8 +115,11 @@ class SplatRenderer {
     float right[4], up[4], forward[4], viewport[4], limits[4];
     std::int32_t modes[4];
     float time[4];
+    std::int32_t wrap[4];
   } uniforms_{};
   GLint origin_location_ = -1;
+  GLint box_low_location_ = -1, box_high_location_ = -1;
+  GLint origin_below_location_ = -1, origin_above_location_ = -1;
 };
 
 }  // namespace octocosm

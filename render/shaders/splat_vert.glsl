@@ -3,6 +3,14 @@
 // attributes (render/gpu_block.h) and decoded here. Positions are relative to
 // the camera, so floats keep their precision near it however far the data
 // lie from the origin.
+//
+// In a periodic box, a point moved between epochs past a face of the box is
+// drawn at its image inside the box, near the opposite face. Which image is
+// decided on its position relative to its node's corner (small numbers: the
+// box's faces relative to the corner come from the CPU, subtracted in
+// double), and the image is drawn from a corner the CPU moved by one box
+// length, also in double: no float ever holds the difference of two large
+// coordinates.
 
 layout(std140, binding = 0) uniform Frame {
   vec4 u_right;     // camera basis (xyz)
@@ -12,6 +20,7 @@ layout(std140, binding = 0) uniform Frame {
   vec4 u_limits;    // near, far, largest blob radius, 1 / mass unit
   ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), selection on, copy direction (+1 / -1)
   vec4 u_time;      // t in [0, 1], weight of this copy, Hermite velocity scale, unused
+  ivec4 u_wrap;     // 1: moved points are wrapped into the periodic box (u_box_*), 0: not; unused x 3
 };
 
 layout(std140, binding = 1) uniform Block {
@@ -51,6 +60,13 @@ layout(std430, binding = 1) readonly buffer Selection {
 };
 
 uniform vec3 u_origin;  // the node's lower corner minus the camera position
+// With u_wrap.x: the periodic box relative to the node's corner, [low, high)
+// per axis, and the node's corner one box length lower (for points past the
+// upper face) and higher (for points below the lower face), minus the camera.
+uniform vec3 u_box_low;
+uniform vec3 u_box_high;
+uniform vec3 u_origin_below;
+uniform vec3 u_origin_above;
 
 flat out vec2 v_center;  // framebuffer coordinates
 flat out float v_radius;
@@ -110,9 +126,11 @@ void Discard() {
 }
 
 void main() {
-  vec3 p = u_origin + (a_position + 0.5) * b_node.x;
+  // Relative to the node's corner until the end of the move.
+  vec3 p = (a_position + 0.5) * b_node.x;
   vec3 velocity = b_columns1.x >= 0 ? Ranged(a_velocity, b_velocity) : vec3(0.0);
 
+  vec3 origin = u_origin;
   if (u_modes.y != 0) {
     // Both epochs of an interval follow the same curve from p_e to p_e+1, so
     // the two copies of a particle coincide at every t.
@@ -127,7 +145,13 @@ void main() {
       p += (1.0 - h01) * Ranged(a_prev_displacement, b_prev_displacement);
       if (u_modes.y == 2) p += u_time.z * (h10 * Ranged(a_prev_velocity, b_prev_velocity) + h11 * velocity);
     }
+    if (u_wrap.x != 0) {
+      // A path strays less than a box length from its ends, so one image is enough.
+      origin = mix(origin, u_origin_below, greaterThanEqual(p, u_box_high));
+      origin = mix(origin, u_origin_above, lessThan(p, u_box_low));
+    }
   }
+  p += origin;
 
   float depth = dot(p, u_forward.xyz);
   if (!(depth >= u_limits.x && depth <= u_limits.y)) {

@@ -124,6 +124,32 @@ TEST(LodFrontierTest, NodesOutOfViewAreCulled) {
   EXPECT_LT(part.points, h.total_points_in_leaves());
 }
 
+// In a periodic cube, points that interpolation moves past the upper x face
+// are drawn near the lower one: a camera that sees only a thin slab inside
+// the lower face must keep the nodes at the upper face that the margin
+// reaches across it, and only then.
+TEST(LodFrontierTest, PeriodicMarginReachesAcrossTheBox) {
+  const NodeHierarchy h = RandomTree(6, 4, 1.0);
+  ScreenErrorView view = ViewFrom({0.05, 0.5, 0.5}, 1e-9);
+  view.camera.look_at = {0, 0.5, 0.5};
+  view.camera.far = 0.04;  // sees 0.01 <= x <= 0.05
+  const auto at_upper_face = [&](const LodFrontier& f, const Cube& cube) {
+    int n = 0;
+    for (std::int32_t s : f.selected) {
+      const NodeCube c = cube.NodeCubeOf(h.node(s).key);
+      n += c.origin[0] + c.size == 1;
+    }
+    return n;
+  };
+  const Cube periodic{{0, 0, 0}, 1, true};
+  const Cube bounded{{0, 0, 0}, 1, false};
+  EXPECT_GT(at_upper_face(SelectLodFrontier(h, periodic, view, {1e-9, 0, 0.05}), periodic), 0);
+  EXPECT_EQ(at_upper_face(SelectLodFrontier(h, bounded, view, {1e-9, 0, 0.05}), bounded), 0);
+  EXPECT_EQ(at_upper_face(SelectLodFrontier(h, periodic, view, {1e-9, 0, 0}), periodic), 0);
+  // A margin that stops short of the slab (the images reach x = 0.005) keeps none.
+  EXPECT_EQ(at_upper_face(SelectLodFrontier(h, periodic, view, {1e-9, 0, 0.005}), periodic), 0);
+}
+
 TEST(LodFrontierTest, BadOptionsAreRejected) {
   const NodeHierarchy h = RandomTree(5, 2, 0.5);
   const Cube cube{{0, 0, 0}, 1, false};

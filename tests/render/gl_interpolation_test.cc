@@ -6,6 +6,7 @@
 #include <cmath>
 #include <fstream>
 #include <random>
+#include <utility>
 
 #include "render/offscreen_renderer.h"
 #include "tests/support/temp_dir.h"
@@ -121,18 +122,25 @@ SceneOptions FullDetail(Interpolation interpolation) {
 
 // A clump crossing the periodic boundary at x = 100 moves 4 units to the
 // right: from x ~ 97 to x ~ 1 (wrapped). Drawn at time t, the copy of epoch
-// 0 (weight 1 - t) must sit at 97 + 4 t and the copy of epoch 1 (weight t) at
-// 1 - 4 (1 - t): both the short way across the boundary, and nothing in the
-// middle of the box, where the long way (-96 units) would pass. Mass in the
-// middle: none; mass of each copy to 1e-3; centres to 0.1 units (under a
-// fifth of a pixel; the clump's own spread is 0.15).
+// 0 (weight 1 - t) moves the short way forward, to p_0 + 4 t, and the copy of
+// epoch 1 (weight t) the short way back, to p_1 - 4 (1 - t); both are drawn
+// wrapped into the box [0, 100), so a particle past x = 100 appears near
+// x = 0 and one below x = 0 near x = 100. Expected: no mass outside the box
+// beyond a blob's radius (the clump's blobs are one pixel, 0.625 units);
+// none in the middle of the box, where the long way (-96 units) would pass;
+// in each half of the box the mass of both copies that the wrapped short way
+// puts there, to 1e-3, centred where it puts it to 0.15 units in x (a
+// quarter of a pixel: one-pixel blobs lean towards the nearest pixel centre,
+// which the halves of a clump cut by a face, at a pixel edge, do not average
+// out) and 0.1 in y.
 TEST(GlInterpolation, PeriodicCrossingMovesTheShortWay) {
   testing_support::TempDir dir("gl-interpolation-periodic");
   const std::size_t n = 3000;
+  const double box = 100;
   std::vector<Particle> first = Clump(n, {97, 40, 50}, {0, 0, 0}, 1);
   std::vector<Particle> second = first;
-  for (Particle& p : second) p.position[0] = std::fmod(p.position[0] + 4, 100.0);
-  const std::string store = IngestSeries(dir, first, second, 100);
+  for (Particle& p : second) p.position[0] = std::fmod(p.position[0] + 4, box);
+  const std::string store = IngestSeries(dir, first, second, box);
   const Dataset d = Dataset::Open(store);
   ASSERT_TRUE(d.link_to_next(0).has_value());
   ASSERT_TRUE(d.cube(0).periodic);
@@ -141,20 +149,38 @@ TEST(GlInterpolation, PeriodicCrossingMovesTheShortWay) {
   const RenderView view = TopView();
   const double whole = Total(*renderer.Render(view, 0, {}, true).hdr);
   ASSERT_GT(whole, 0);
+  const auto wrap = [&](double x) { return x - box * std::floor(x / box); };
   for (const double t : {0.25, 0.5, 0.75}) {
     SCOPED_TRACE("t = " + std::to_string(t));
+    // Where the copies go: mass (as a share of the whole) and mass-weighted x per half.
+    MassMoments expected_left, expected_right;
+    for (std::size_t i = 0; i < n; ++i) {
+      double d0 = second[i].position[0] - first[i].position[0];
+      d0 -= box * std::round(d0 / box);  // the minimal image
+      for (const auto& [x, weight] : {std::pair{first[i].position[0] + t * d0, (1 - t) / n},
+                                      std::pair{second[i].position[0] - (1 - t) * d0, t / n}}) {
+        MassMoments& side = wrap(x) < box / 2 ? expected_left : expected_right;
+        side.mass += weight;
+        side.x += weight * wrap(x);
+      }
+    }
     const Picture p = renderer.Render(view, t, {}, true);
     EXPECT_EQ(p.stats.interpolation, Interpolation::kLinear);
     EXPECT_EQ(p.stats.epochs_drawn, 2u);
+    const double blob = 400 / view.focal_pixels();  // one pixel, in world units at z = 50
+    const MassMoments outside = Moments(*p.hdr, view, [&](double x) { return x < -blob || x > box + blob; });
     const MassMoments middle = Moments(*p.hdr, view, [](double x) { return x > 10 && x < 90; });
-    const MassMoments right = Moments(*p.hdr, view, [](double x) { return x >= 90; });
-    const MassMoments left = Moments(*p.hdr, view, [](double x) { return x <= 10; });
+    const MassMoments right = Moments(*p.hdr, view, [](double x) { return x >= 50; });
+    const MassMoments left = Moments(*p.hdr, view, [](double x) { return x < 50; });
+    EXPECT_EQ(outside.mass, 0.0);
     EXPECT_EQ(middle.mass, 0.0);
-    EXPECT_NEAR(right.mass / whole, 1 - t, 1e-3);
-    EXPECT_NEAR(left.mass / whole, t, 1e-3);
-    EXPECT_NEAR(right.x, 97 + 4 * t, 0.1);
-    EXPECT_NEAR(left.x, 1 - 4 * (1 - t), 0.1);
-    EXPECT_NEAR(right.y, 40, 0.1);
+    EXPECT_NEAR(right.mass / whole, expected_right.mass, 1e-3);
+    EXPECT_NEAR(left.mass / whole, expected_left.mass, 1e-3);
+    for (const auto& [side, expected] : {std::pair{right, expected_right}, std::pair{left, expected_left}}) {
+      if (expected.mass < 1e-3) continue;
+      EXPECT_NEAR(side.x, expected.x / expected.mass, 0.15);
+      EXPECT_NEAR(side.y, 40, 0.1);
+    }
   }
 }
 
