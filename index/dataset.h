@@ -31,6 +31,33 @@ struct EpochLink {
   double max_excursion = 0;
 };
 
+// A moment of a cosmological series: a redshift z or a scale factor
+// a = 1 / (1 + z).
+struct PhysicalTime {
+  enum class Scale { kRedshift, kScaleFactor };
+  Scale scale = Scale::kScaleFactor;
+  double value = 1;
+
+  // a. Throws Error::InvalidArgument for a redshift that is not > -1 or a
+  // scale factor that is not > 0 (or either not finite).
+  double ScaleFactor() const;
+  // "redshift 2", "scale factor 0.25": how messages name it.
+  std::string ToString() const;
+};
+
+// The fractional epoch e + t that shows `time` in a series whose epochs have
+// the scale factors `epoch_scale_factors` (empty for an epoch whose snapshot
+// records none): epochs e and e + 1 are the recorded times on either side of
+// it, and t runs linearly in the scale factor from one to the other, however
+// unevenly the epochs are spaced. A scale factor within a relative 1e-7 of an
+// epoch's is that epoch: headers record time and redshift apart, some in
+// single precision, and a redshift given as recorded must show its epoch
+// exactly. Throws Error::InvalidArgument naming `store` when an epoch records
+// no scale factor, when the scale factors do not increase strictly from epoch
+// to epoch, or when the time lies outside theirs.
+double FractionalEpochAt(const std::vector<std::optional<double>>& epoch_scale_factors, const PhysicalTime& time,
+                         const std::string& store);
+
 class Dataset {
  public:
   // Opens the store at `directory`; throws Error (kCorruption when the
@@ -54,6 +81,11 @@ class Dataset {
   // How `epoch` links to the next; empty for the last epoch and for a series
   // without IDs.
   const std::optional<EpochLink>& link_to_next(std::uint32_t epoch) const { return links_.at(epoch); }
+  // The scale factor of the epoch's snapshot: its recorded time, where the
+  // snapshot's header says the run is cosmological; empty otherwise.
+  const std::optional<double>& scale_factor(std::uint32_t epoch) const { return scale_factors_.at(epoch); }
+  // FractionalEpochAt over this store's epochs.
+  double FractionalEpochAt(const PhysicalTime& time) const;
   bool has_id_index() const { return !id_index_.empty(); }
   // The directory of the ID index store (empty when the dataset has no IDs).
   const std::string& id_index_directory() const { return id_index_; }
@@ -68,6 +100,7 @@ class Dataset {
   std::vector<std::uint64_t> points_;
   std::vector<double> masses_;
   std::vector<std::optional<EpochLink>> links_;
+  std::vector<std::optional<double>> scale_factors_;
   ColumnSet every_epoch_columns_ = 0;  // the columns of every epoch
   ColumnSet forward_columns_ = 0;      // of every epoch but the last
   ColumnSet backward_columns_ = 0;     // of every epoch but the first
