@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -44,7 +45,11 @@ double ReadNumber(const nlohmann::json& j, const std::string& file, const std::s
 
 }  // namespace
 
-CameraPath CameraPath::Load(const std::string& path, const Cube& cube) {
+CameraPath CameraPath::Load(const std::string& path, const Cube& cube, const Dataset& dataset) {
+  return Load(path, cube, [&dataset](const PhysicalTime& time) { return dataset.FractionalEpochAt(time); });
+}
+
+CameraPath CameraPath::Load(const std::string& path, const Cube& cube, const EpochAt& epoch_at) {
   std::ifstream in(path);
   if (!in) throw Error::NotFound(path + ": cannot open the camera path");
   nlohmann::json j;
@@ -72,7 +77,20 @@ CameraPath CameraPath::Load(const std::string& path, const Cube& cube) {
     if (f.contains("look_at")) key.look_at = ReadVec3(f["look_at"], path, where + " look_at");
     if (f.contains("up")) key.up = ReadVec3(f["up"], path, where + " up");
     if (f.contains("fov")) key.fov = ReadNumber(f["fov"], path, where + " fov");
+    if (f.contains("epoch") + f.contains("redshift") + f.contains("scale_factor") > 1) {
+      throw Error::BadInput(path, where + ": give one of \"epoch\", \"redshift\" and \"scale_factor\"");
+    }
     if (f.contains("epoch")) key.epoch = ReadNumber(f["epoch"], path, where + " epoch");
+    for (const auto& [name, scale] : {std::pair{"redshift", PhysicalTime::Scale::kRedshift},
+                                      std::pair{"scale_factor", PhysicalTime::Scale::kScaleFactor}}) {
+      if (!f.contains(name)) continue;
+      const PhysicalTime time{scale, ReadNumber(f[name], path, where + " " + name)};
+      try {
+        key.epoch = epoch_at(time);
+      } catch (const Error& e) {
+        throw Error(e.kind(), path + ": " + where + ": " + e.what());
+      }
+    }
     if (k > 0 && !(key.t > previous.t)) throw Error::BadInput(path, where + ": t must increase from keyframe to keyframe");
     keyframes.push_back(key);
     previous = key;

@@ -12,19 +12,24 @@
 // `t` is the keyframe's time in seconds (strictly increasing; the first is
 // usually 0). Each keyframe may leave out any member but `t`; it then keeps
 // the previous keyframe's value (the first keyframe's defaults: look_at the
-// cube's centre, up +y, fov 60, epoch 0; its camera is required). Between
-// keyframes the camera position and the look-at point follow Catmull-Rom
-// splines through the keyframes (smooth at every keyframe), and fov, up and
-// the epoch time (a fractional epoch: the renderer interpolates between
-// epochs) change linearly. Frames are taken every 1/fps seconds from the
-// first keyframe's t to the last's.
+// cube's centre, up +y, fov 60, epoch 0; its camera is required). Instead of
+// "epoch" a keyframe may give the physical time of a cosmological store,
+// "redshift": z or "scale_factor": a (at most one of the three), which
+// becomes a fractional epoch as --redshift does (Dataset::FractionalEpochAt).
+// Between keyframes the camera position and the look-at point follow
+// Catmull-Rom splines through the keyframes (smooth at every keyframe), and
+// fov, up and the epoch time (a fractional epoch: the renderer interpolates
+// between epochs) change linearly. Frames are taken every 1/fps seconds from
+// the first keyframe's t to the last's.
 #pragma once
 
 #include <array>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "index/cube.h"
+#include "index/dataset.h"
 #include "index/frustum.h"
 
 namespace octocosm {
@@ -45,9 +50,16 @@ struct CameraPathFrame {
 
 class CameraPath {
  public:
+  // A keyframe's "redshift" or "scale_factor" as a fractional epoch.
+  using EpochAt = std::function<double(const PhysicalTime&)>;
+
   // Throws Error::NotFound when the file is missing and Error::BadInput
-  // naming the file (and the keyframe) for anything malformed.
-  static CameraPath Load(const std::string& path, const Cube& cube);
+  // naming the file (and the keyframe) for anything malformed; an error of
+  // `epoch_at` (Error::InvalidArgument for a time the store does not hold)
+  // comes back naming the file and the keyframe too, of the same kind.
+  static CameraPath Load(const std::string& path, const Cube& cube, const EpochAt& epoch_at);
+  // Load with the times of `dataset`'s epochs.
+  static CameraPath Load(const std::string& path, const Cube& cube, const Dataset& dataset);
   static CameraPath FromKeyframes(std::vector<CameraKeyframe> keyframes, double fps);
 
   double fps() const { return fps_; }

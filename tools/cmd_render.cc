@@ -42,9 +42,9 @@ void PrintSummary(const RenderFlags& f, const std::string& what, const Picture& 
                f.scene.exposure > 0 ? "" : " (automatic)");
 }
 
-void RunRender(const RenderFlags& f) {
+void RunRender(RenderFlags f) {  // a copy: the time flags resolve into it
   const Dataset dataset = Dataset::Open(f.store);
-  CheckSceneFlags(f.scene, dataset);
+  ResolveSceneFlags(f.scene, dataset);
   const ToneMapSettings tone = ToneSettingsFrom(f.scene);
   const double aspect = static_cast<double>(f.width) / f.height;
   const Cube& cube = dataset.cube(NearestEpoch(f.scene.time));
@@ -95,7 +95,7 @@ void RunRender(const RenderFlags& f) {
 
   // A movie: one PNG per frame of the camera path, the exposure smoothed.
   if (f.frames.empty()) throw Error::InvalidArgument("--path needs --frames DIR for the numbered pictures");
-  const CameraPath path = CameraPath::Load(f.path, cube);
+  const CameraPath path = CameraPath::Load(f.path, cube, dataset);
   std::filesystem::create_directories(f.frames);
   ExposureSmoother smoother;
   for (std::size_t k = 0; k < path.frame_count(); ++k) {
@@ -126,8 +126,8 @@ void AddRenderCommand(CLI::App& app) {
       "level of detail its camera needs: nodes in view, refined until their points are --error pixels apart,\n"
       "within --budget points. Points are blobs of a cubic kernel sized by their smoothing lengths, added up in\n"
       "a float buffer (mass per pixel) and tone mapped. --time between two epochs interpolates the particles'\n"
-      "motion. --reference draws every particle of the original snapshot on the CPU instead: the ground truth.\n"
-      "See docs/RENDERING.md.");
+      "motion; --redshift or --scale-factor give the time as a cosmological store records it. --reference\n"
+      "draws every particle of the original snapshot on the CPU instead: the ground truth. See docs/RENDERING.md.");
   cmd->add_option("store", f.store, "store directory")->required();
   cmd->add_option("-o,--output", f.output, "PNG to write")->default_val("octocosm.png");
   cmd->add_option("--width", f.width, "image width, pixels")->default_val(1280)->check(CLI::Range(1, 16384));

@@ -85,11 +85,11 @@ void LoadEveryTree(SceneRenderer& scene, const Dataset& dataset) {
   for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) scene.hierarchy(e);
 }
 
-void RunView(const ViewFlags& f) {
+void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
   // The store and everything the flags decide, before a window opens: a bad
   // flag or store fails fast, with or without a display.
   const Dataset dataset = Dataset::Open(f.store);
-  CheckSceneFlags(f.scene, dataset);
+  ResolveSceneFlags(f.scene, dataset);
   if (f.fps_cap < 0) throw Error::InvalidArgument("--fps-cap must be >= 0 (0: no cap)");
   if (!(f.settle_timeout > 0)) throw Error::InvalidArgument("--settle-timeout must be > 0 seconds");
   const SceneOptions scene_options = SceneOptionsFrom(f.scene);
@@ -100,7 +100,7 @@ void RunView(const ViewFlags& f) {
   const std::vector<std::uint64_t> initial_selection = SelectedIds(f.scene, dataset, NearestEpoch(f.scene.time));
   ViewerScriptOptions script_options;
   script_options.store = f.store;
-  if (!f.path.empty()) script_options.path = CameraPath::Load(f.path, start_cube);
+  if (!f.path.empty()) script_options.path = CameraPath::Load(f.path, start_cube, dataset);
   script_options.screenshot = f.screenshot;
   script_options.exit_after = f.exit_after_path;
   script_options.settle_timeout = f.settle_timeout;

@@ -13,7 +13,17 @@ namespace octocosm {
 
 void AddSceneFlags(CLI::App& cmd, SceneFlags& f) {
   AddCameraFlags(cmd, f.camera);
-  cmd.add_option("--time", f.time, "epoch to show; a fraction interpolates between two epochs (e.g. 2.25)")->default_val(0);
+  CLI::Option* time =
+      cmd.add_option("--time", f.time, "epoch to show; a fraction interpolates between two epochs (e.g. 2.25)")->default_val(0);
+  CLI::Option* redshift = cmd.add_option(
+      "--redshift", f.redshift,
+      "redshift to show, instead of --time (cosmological stores): the epochs on either side, interpolated linearly in "
+      "the scale factor");
+  CLI::Option* scale_factor =
+      cmd.add_option("--scale-factor", f.scale_factor, "scale factor a = 1/(1+z) to show, instead of --time; as --redshift");
+  redshift->excludes(time);
+  scale_factor->excludes(time);
+  scale_factor->excludes(redshift);
   cmd.add_option("--error", f.error, "level of detail: refine while points are more than this many pixels apart")->default_val(1);
   cmd.add_option("--budget", f.budget, "most points to draw (0: no limit)")->default_val(0);
   cmd.add_flag("--full", f.full, "draw every particle (every leaf in view), ignoring --error and --budget");
@@ -29,11 +39,13 @@ void AddSceneFlags(CLI::App& cmd, SceneFlags& f) {
   cmd.add_option("--softening", f.softening, "asinh curve: linear below exposure * softening")->default_val(1e-3);
   cmd.add_option("--max-radius", f.max_radius, "largest blob radius, pixels")->default_val(kDefaultMaxBlobRadius);
   cmd.add_option("--select", f.select, "highlight the particle IDs listed in this file (one per line)");
-  cmd.add_option("--select-box", f.select_box, "highlight the particles in the box x0,y0,z0,x1,y1,z1 (at --time's nearest epoch)");
+  cmd.add_option("--select-box", f.select_box, "highlight the particles in the box x0,y0,z0,x1,y1,z1 (in the epoch nearest the time shown)");
   cmd.add_option("--cache", f.cache, "memory for blocks read from the store")->default_val("1G");
 }
 
-void CheckSceneFlags(const SceneFlags& f, const Dataset& dataset) {
+void ResolveSceneFlags(SceneFlags& f, const Dataset& dataset) {
+  if (f.redshift) f.time = dataset.FractionalEpochAt({PhysicalTime::Scale::kRedshift, *f.redshift});
+  if (f.scale_factor) f.time = dataset.FractionalEpochAt({PhysicalTime::Scale::kScaleFactor, *f.scale_factor});
   if (!(f.time >= 0 && f.time <= dataset.epoch_count() - 1.0)) {
     throw Error::InvalidArgument("--time " + std::to_string(f.time) + " is outside the store's epochs 0.." +
                                  std::to_string(dataset.epoch_count() - 1));

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -21,7 +22,10 @@ namespace octocosm {
 
 struct SceneFlags {
   CameraFlags camera;
-  double time = 0;
+  double time = 0;  // a fractional epoch
+  // The physical time of a cosmological store instead (--redshift,
+  // --scale-factor): ResolveSceneFlags turns it into `time`.
+  std::optional<double> redshift, scale_factor;
   // Level of detail.
   double error = 1;
   std::uint64_t budget = 0;
@@ -35,15 +39,19 @@ struct SceneFlags {
   std::string cache = "1G";
 };
 
-// Registers the camera flags (tools/camera_flags.h) and --time, --error,
-// --budget, --full, --color, --colormap, --attribute-colormap, --color-range,
-// --curve, --exposure, --percentile, --decades, --softening, --max-radius,
-// --select, --select-box, --cache.
+// Registers the camera flags (tools/camera_flags.h) and --time, --redshift,
+// --scale-factor (one of the three), --error, --budget, --full, --color,
+// --colormap, --attribute-colormap, --color-range, --curve, --exposure,
+// --percentile, --decades, --softening, --max-radius, --select, --select-box,
+// --cache.
 void AddSceneFlags(CLI::App& command, SceneFlags& flags);
 
-// Throws Error::InvalidArgument naming the flag for a --time outside the
-// store's epochs or an --error that is not > 0.
-void CheckSceneFlags(const SceneFlags& flags, const Dataset& dataset);
+// Sets `time` from --redshift or --scale-factor (Dataset::FractionalEpochAt),
+// when one is given, and checks the flags that need the store. Throws
+// Error::InvalidArgument for a physical time the store's epochs do not
+// span or cannot place (naming the store), a --time outside the store's
+// epochs, or an --error that is not > 0 (naming the flag).
+void ResolveSceneFlags(SceneFlags& flags, const Dataset& dataset);
 
 // The epoch a fractional time shows when it is not interpolated, and the one
 // --select-box selects in.
