@@ -296,7 +296,7 @@ void Run(const Flags& f) {
     ReferenceRenderOptions options;
     options.threads = f.threads;
     ReferenceRenderStats stats;
-    references = RenderReference(dataset, 0, snapshot, render_views, options, &stats);
+    references = RenderReference(snapshot, render_views, options, &stats);
     reference_seconds = stats.seconds / static_cast<double>(views.size());
     std::ofstream(dir / "reference-seconds.txt") << reference_seconds << "\n";
     for (std::size_t v = 0; v < views.size(); ++v) WritePfm((dir / ("reference-" + views[v].name + ".pfm")).string(), references[v]);

@@ -38,6 +38,12 @@ void AddIngestCommand(CLI::App& app) {
                   "density exponent of the subselection: 0 keeps points in proportion to mass, larger values thin "
                   "sparse regions less")->default_val(0.5)->check(CLI::Range(0.0, 4.0));
   cmd->add_option("--seed", o.tree.sampler.seed, "seed of the deterministic sampling hash")->default_val(0);
+  cmd->add_option("--neighbours", o.neighbours,
+                  "leaves' smoothing lengths (where the snapshot has none): the radius of this many nearest "
+                  "neighbours, as render --reference draws them; 0: from the leaf's density grid (faster, no "
+                  "neighbour pass)")
+      ->default_val(kDefaultNeighbours)
+      ->check(CLI::Range(0, 4096));
   cmd->add_option("--memory", flags->memory, "memory budget, e.g. 2G (default: half the physical memory)");
   cmd->add_option("--temp-dir", o.temp_dir, "where temporary files go (default: beside the output)");
   cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);

@@ -15,7 +15,9 @@
 #include "tools/camera_flags.h"
 #include "tools/camera_path.h"
 #include "tools/commands.h"
+#include "tools/cli_util.h"
 #include "tools/image_io.h"
+#include "tools/ingest/ingest.h"
 #include "tools/read_flags.h"
 #include "tools/reference_render.h"
 #include "tools/render_flags.h"
@@ -29,6 +31,8 @@ struct RenderFlags {
   SceneFlags scene;
   ReadFlags read;
   unsigned threads = 0;
+  int neighbours = kDefaultNeighbours;
+  std::string memory, temp_dir;
   bool quiet = false;
 };
 
@@ -64,15 +68,23 @@ void RunRender(RenderFlags f) {  // a copy: the time flags resolve into it
     options.color = tone.color;
     options.selection = ids.empty() ? nullptr : &selection;
     options.threads = f.threads;
+    options.smoothing.neighbours = f.neighbours;
+    options.smoothing.memory_budget = f.memory.empty() ? DefaultMemoryBudget() : ParseByteSize(f.memory, "--memory");
+    options.smoothing.temp_dir = f.temp_dir;
+    options.smoothing.quiet = f.quiet;
     ReferenceRenderStats stats;
-    const HdrImage hdr = RenderReference(dataset, NearestEpoch(f.scene.time), f.reference, view, options, &stats);
+    const HdrImage hdr = RenderReference(f.reference, view, options, &stats);
     const ToneMapParameters parameters = ResolveToneMap(tone, MeasureImage(hdr, tone.color));
     WritePng(f.output, ToBytes(ToneMap(hdr, parameters)));
     if (!f.hdr.empty()) WritePfm(f.hdr, hdr);
     if (!f.quiet) {
-      std::fprintf(stderr, "render: reference %s %dx%d: %llu particles, %llu drawn, %.3f s; exposure %.4g%s\n",
+      std::fprintf(stderr,
+                   "render: reference %s %dx%d: %llu particles, %llu drawn, %.3f s (smoothing lengths %.3f s: %llu "
+                   "from the snapshot, %llu from %d neighbours); exposure %.4g%s\n",
                    f.output.c_str(), f.width, f.height, static_cast<unsigned long long>(stats.particles),
-                   static_cast<unsigned long long>(stats.points_drawn), stats.seconds, parameters.exposure,
+                   static_cast<unsigned long long>(stats.points_drawn), stats.seconds, stats.smoothing.seconds,
+                   static_cast<unsigned long long>(stats.smoothing.given),
+                   static_cast<unsigned long long>(stats.smoothing.searched), f.neighbours, parameters.exposure,
                    f.scene.exposure > 0 ? "" : " (automatic)");
     }
     return;
@@ -136,9 +148,16 @@ void AddRenderCommand(CLI::App& app) {
   cmd->add_option("--hdr", f.hdr, "also write the mass per pixel as a PFM image");
   cmd->add_option("--path", f.path, "camera path (JSON, docs/RENDERING.md): render every frame of it");
   cmd->add_option("--frames", f.frames, "directory for the numbered frames of --path");
-  cmd->add_option("--reference", f.reference, "render every particle of this snapshot (the one --time's epoch was ingested from) on the CPU");
+  cmd->add_option("--reference", f.reference,
+                  "render every particle of this snapshot on the CPU, each with the snapshot's own smoothing length or "
+                  "the radius of its --neighbours nearest neighbours (the store gives only the camera)");
+  cmd->add_option("--neighbours", f.neighbours, "--reference: neighbours a smoothing length encloses (as ingest's)")
+      ->default_val(kDefaultNeighbours)
+      ->check(CLI::Range(1, 4096));
+  cmd->add_option("--memory", f.memory, "--reference: memory budget for the smoothing lengths, e.g. 2G (default: half the physical memory)");
+  cmd->add_option("--temp-dir", f.temp_dir, "--reference: where temporary files go when the snapshot exceeds --memory (default: $TMPDIR or /tmp)");
   AddReadFlags(*cmd, f.read);
-  cmd->add_option("--threads", f.threads, "threads of the reference renderer (default: all cores)")->default_val(0);
+  cmd->add_option("--threads", f.threads, "--reference: threads (default: all cores)")->default_val(0);
   cmd->add_option("--backend", f.backend, "headless OpenGL: osmesa (software, always there) or egl (a GPU driver)")
       ->default_val("osmesa");
   cmd->add_flag("-q,--quiet", f.quiet, "no summary on stderr");

@@ -17,6 +17,9 @@ void AddReadFlags(CLI::App& command, ReadFlags& flags) {
       ->default_val(std::size_t{1} << 16);
   command.add_flag("--no-velocity", flags.no_velocity, "do not read velocities");
   command.add_flag("--no-ids", flags.no_ids, "do not read particle IDs");
+  command.add_flag("--no-snapshot-smoothing", flags.no_snapshot_smoothing,
+                   "do not read the snapshot's own smoothing lengths (HSML, SmoothingLength): compute every one "
+                   "from neighbours");
 }
 
 ReadOptions ReadOptionsFrom(const ReadFlags& flags) {
@@ -24,6 +27,7 @@ ReadOptions ReadOptionsFrom(const ReadFlags& flags) {
   read.format = flags.format;
   read.read_velocity = !flags.no_velocity;
   read.read_id = !flags.no_ids;
+  read.read_smoothing = !flags.no_snapshot_smoothing;
   read.chunk_particles = flags.chunk_particles;
   read.box_size_override = flags.box_size;
   if (!flags.raw_layout.empty()) read.raw = RawLayout::Parse(flags.raw_layout);

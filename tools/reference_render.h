@@ -1,17 +1,16 @@
 // `octocosm render --reference`: the ground truth. Every particle of the
 // original snapshot, read again from the files in double precision, drawn
 // on the CPU by render/reference_rasterizer.h with the same camera and kernel
-// as the GPU: no sampling, no quantization, no float.
+// as the GPU: no sampling, no quantization, no float, and nothing from a
+// store.
 //
-// Smoothing lengths. A particle has no size in a snapshot; octocosm defines
-// it at ingest from the particle's leaf (index/sampler.h, step 5 with the
-// particle's own mass: h = eta * (m / rho)^(1/3), rho from the leaf's fine
-// density grid). The reference uses that same definition, computed here from
-// the snapshot's own positions and masses: the store supplies only the leaf
-// partition (which leaf holds each position) and the grid resolution. Two
-// passes over the snapshot: the first sums the mass in every occupied fine
-// cell (sorted (cell, mass) pairs: about 16 bytes of memory per particle),
-// the second draws.
+// Smoothing lengths are the standard ones (tools/smoothing_pass.h): the
+// snapshot's own where it has them (GADGET's HSML, HDF5 SmoothingLength of
+// SPH gas), else the radius holding each particle's k nearest neighbours
+// (k = 32 by default), across the faces of a periodic box. That pass reads
+// the snapshot one or more times in bounded memory; one more read draws. A
+// store's full-detail rendering draws the same blobs when it was ingested
+// with the same k (ingest's default).
 #pragma once
 
 #include <cstdint>
@@ -19,17 +18,20 @@
 #include <string>
 #include <vector>
 
-#include "index/dataset.h"
 #include "render/image.h"
 #include "render/render_view.h"
 #include "render/selection_set.h"
 #include "render/tone_map.h"
+#include "tools/smoothing_pass.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
 
 struct ReferenceRenderOptions {
-  ReadOptions read;            // as the snapshot was read by ingest
+  ReadOptions read;            // as the snapshot was read by ingest (box size, types)
+  // The smoothing lengths' pass: neighbours, use of the snapshot's own
+  // lengths, memory budget, temporary directory. Its box is the snapshot's.
+  SmoothingPassOptions smoothing;
   ColorMode color = ColorMode::kDensity;
   const SelectionSet* selection = nullptr;  // highlighted IDs, or null
   unsigned threads = 0;        // 0: all cores
@@ -37,20 +39,17 @@ struct ReferenceRenderOptions {
 
 struct ReferenceRenderStats {
   std::uint64_t particles = 0;
-  std::uint64_t points_drawn = 0;  // between the near and far planes
-  double seconds = 0;
+  std::uint64_t points_drawn = 0;  // between the near and far planes, in the first view
+  SmoothingPassReport smoothing;
+  double seconds = 0;              // the whole job, smoothing lengths included
 };
 
-// Renders snapshot `input` as epoch `epoch` of `dataset`, one image per
-// view from the same two passes. Throws Error::BadInput (naming the
-// snapshot) when a particle lies where the store has no leaf, i.e. the
-// snapshot is not the one the epoch was ingested from, or was read with
-// other flags; Error from the readers otherwise. `stats` counts points drawn
-// in the first view.
-std::vector<HdrImage> RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input,
-                                      std::span<const RenderView> views, const ReferenceRenderOptions& options,
-                                      ReferenceRenderStats* stats = nullptr);
-HdrImage RenderReference(const Dataset& dataset, std::uint32_t epoch, const std::string& input, const RenderView& view,
-                         const ReferenceRenderOptions& options, ReferenceRenderStats* stats = nullptr);
+// Renders snapshot `input`, one image per view from the same passes. Throws
+// Error from the readers, from the smoothing pass, or InvalidArgument when a
+// colour mode needs velocities the snapshot lacks.
+std::vector<HdrImage> RenderReference(const std::string& input, std::span<const RenderView> views,
+                                      const ReferenceRenderOptions& options, ReferenceRenderStats* stats = nullptr);
+HdrImage RenderReference(const std::string& input, const RenderView& view, const ReferenceRenderOptions& options,
+                         ReferenceRenderStats* stats = nullptr);
 
 }  // namespace octocosm

@@ -300,7 +300,7 @@ class SmoothingPass {
     while (source_.Next(chunk)) {
       const std::size_t n = chunk.size();
       if (ordinal + n > table_->size()) TooMany();
-      const bool has_given = options_.use_given && chunk.has_smoothing();
+      const bool has_given = chunk.has_smoothing();
       for (std::size_t i = 0; i < n; ++i) {
         double p[3] = {chunk.position[3 * i], chunk.position[3 * i + 1], chunk.position[3 * i + 2]};
         if (domain_.periodic) domain_.cube.Wrap(p);
@@ -665,9 +665,11 @@ class SmoothingPass {
 class SmoothedSource : public ParticleSource {
  public:
   SmoothedSource(std::unique_ptr<ParticleSource> inner, std::shared_ptr<const SmoothingLengthTable> table)
-      : inner_(std::move(inner)), table_(std::move(table)) {}
+      : inner_(std::move(inner)), table_(std::move(table)), header_(inner_->header()) {
+    header_.has_smoothing = true;
+  }
 
-  const SnapshotHeader& header() const override { return inner_->header(); }
+  const SnapshotHeader& header() const override { return header_; }
 
   bool Next(ParticleChunk& chunk) override {
     if (!inner_->Next(chunk)) return false;
@@ -691,6 +693,7 @@ class SmoothedSource : public ParticleSource {
  private:
   std::unique_ptr<ParticleSource> inner_;
   std::shared_ptr<const SmoothingLengthTable> table_;
+  SnapshotHeader header_;
   std::uint64_t next_ = 0;
 };
 

@@ -1,5 +1,7 @@
 // Smoothing lengths for every particle of a snapshot, out of core: the
-// snapshot's own where it has them (GADGET's HSML, HDF5 SmoothingLength), and
+// snapshot's own where its chunks carry them (ParticleChunk::smoothing > 0:
+// GADGET's HSML, HDF5 SmoothingLength, unless ReadOptions::read_smoothing is
+// off), and
 // otherwise the radius holding each particle's k nearest neighbours
 // (index/neighbour_radius.h), exact, across region borders and, in a periodic
 // box, across its faces. The ground truth (`octocosm render --reference`) and
@@ -47,7 +49,6 @@ struct SmoothingPassOptions {
   // are found across its faces.
   double box_size = 0;
   std::array<double, 3> box_origin{0, 0, 0};
-  bool use_given = true;               // keep the snapshot's own smoothing lengths where it has them
   std::uint64_t memory_budget = 0;     // bytes for particles held at once; 0 = 1 GiB
   std::string temp_dir;                // parent of the temporary files; "" = $TMPDIR or /tmp
   unsigned threads = 0;                // 0 = all cores

@@ -89,11 +89,12 @@ class GlRenderTest : public ::testing::Test {
     return o;
   }
 
-  static HdrImage Reference(const Dataset& d, const RenderView& view, const SelectionSet* selection = nullptr) {
+  static HdrImage Reference(const RenderView& view, const SelectionSet* selection = nullptr) {
     ReferenceRenderOptions options;
     options.selection = selection;
     options.threads = 2;
-    return RenderReference(d, 0, scene->snapshot, view, options);
+    options.smoothing.quiet = true;
+    return RenderReference(scene->snapshot, view, options);
   }
 };
 
@@ -124,7 +125,7 @@ TEST_F(GlRenderTest, FullDetailMatchesTheReference) {
   for (const bool outside : {true, false}) {
     const RenderView view = outside ? Overview(d) : Inside(d);
     const Picture gpu = renderer.Render(view, 0, {}, true);
-    const HdrImage reference = Reference(d, view);
+    const HdrImage reference = Reference(view);
     if (outside) {
       EXPECT_EQ(gpu.stats.points_drawn, scene->particles) << "every particle, at full detail";
     }
@@ -229,7 +230,7 @@ TEST_F(GlRenderTest, HighlightingAMillionIdsMarksExactlyTheSelectedParticles) {
   const RenderView view = Overview(d);
   const Picture gpu = renderer.Render(view, 0, {}, true);
   const SelectionSet selection(ids);
-  const HdrImage reference = Reference(d, view, &selection);
+  const HdrImage reference = Reference(view, &selection);
   ASSERT_GT(Total(reference, 3), 0.3 * Total(reference, 0));
   EXPECT_NEAR(Total(*gpu.hdr, 3) / Total(reference, 3), 1, 1e-4);
   EXPECT_LT(RelativeL1(*gpu.hdr, reference, 3), 1e-3);

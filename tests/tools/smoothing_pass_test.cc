@@ -177,12 +177,6 @@ TEST(SmoothingPass, KeepsTheSnapshotsOwnSmoothingLengths) {
       }
     }
   }
-  {
-    options.use_given = false;
-    VectorSource source(points, given, 50);
-    const auto table = ComputeSmoothingLengths(source, options);
-    EXPECT_NEAR((*table)[0], BruteForce(points, 0, 32, 50), 1e-6 * (*table)[0]);
-  }
 }
 
 TEST(SmoothingPass, TheWrappedSourceCarriesTheTable) {

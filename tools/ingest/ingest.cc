@@ -33,6 +33,8 @@
 #include "tools/ingest/external_sorter.h"
 #include "tools/ingest/resident_epoch.h"
 #include "tools/progress.h"
+#include "tools/smoothing_pass.h"
+#include "tools/temp_directory.h"
 
 namespace octocosm {
 namespace {
@@ -67,29 +69,6 @@ constexpr std::uint64_t kTailChunkFraction = 8;
 struct IdLeafRecord {
   std::uint64_t key;  // particle ID
   std::uint64_t leaf;
-};
-
-// A directory for temporary files, removed with everything in it when the
-// object dies, whether the ingest succeeded or threw.
-class TempDirectory {
- public:
-  explicit TempDirectory(const std::string& parent) {
-    std::string pattern = (fs::path(parent) / "octocosm-ingest-XXXXXX").string();
-    if (::mkdtemp(pattern.data()) == nullptr) {
-      throw IoErrorFromErrno(pattern, "creating the temporary directory", errno);
-    }
-    path_ = pattern;
-  }
-  ~TempDirectory() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  TempDirectory(const TempDirectory&) = delete;
-  TempDirectory& operator=(const TempDirectory&) = delete;
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
 };
 
 // Removes the output directory on failure, but only if this run created it.
@@ -376,6 +355,7 @@ IngestReport Ingest(const IngestOptions& options) {
 
   // Open the first epoch to learn what the series carries.
   std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);
+  bool source_smoothed = false;
   const bool has_id = source->header().has_id;
   const bool has_velocity = source->header().has_velocity;
   const bool join_epochs = has_id && options.inputs.size() > 1;
@@ -384,11 +364,13 @@ IngestReport Ingest(const IngestOptions& options) {
   const std::string temp_parent =
       options.temp_dir.empty() ? fs::absolute(options.output).parent_path().string() : options.temp_dir;
   fs::create_directories(temp_parent);
-  TempDirectory temp(temp_parent);
+  TempDirectory temp(temp_parent, "octocosm-ingest");
 
   nlohmann::json dataset = {{"generator", "octocosm ingest"},
                             {"capacity", options.tree.capacity},
                             {"max_level", options.tree.max_level},
+                            {"smoothing", {{"rule", options.neighbours > 0 ? "neighbours" : "density grid"},
+                                           {"neighbours", std::max(options.neighbours, 0)}}},
                             {"sampler", {{"alpha", options.tree.sampler.alpha},
                                          {"density_grid_bits", options.tree.sampler.density_grid_bits},
                                          {"seed", options.tree.sampler.seed}}},
@@ -413,6 +395,24 @@ IngestReport Ingest(const IngestOptions& options) {
                                              nlohmann::json::object(), id_store_options);
   }
 
+  // The leaves' smoothing lengths from neighbours (or the snapshot's own),
+  // computed before anything else reads the epoch, in the whole budget (the
+  // pass is done with its memory before the epoch's build takes it, but for
+  // the lengths themselves: 4 bytes a particle, or a mapped file).
+  auto smooth = [&](std::unique_ptr<ParticleSource> raw) -> std::unique_ptr<ParticleSource> {
+    if (options.neighbours <= 0) return raw;
+    SmoothingPassOptions pass;
+    pass.neighbours = options.neighbours;
+    // Neighbours across the faces where ingest wraps into a periodic box.
+    pass.box_size = options.cube ? 0.0 : raw->header().box_size;
+    pass.memory_budget = budget;
+    pass.temp_dir = temp.path();
+    pass.threads = threads;
+    pass.quiet = options.quiet;
+    std::shared_ptr<const SmoothingLengthTable> table = ComputeSmoothingLengths(*raw, pass);
+    return WithSmoothingLengths(std::move(raw), std::move(table));
+  };
+
   std::unique_ptr<SortedEpoch> sorted_current, sorted_next;
   std::uint64_t missing_in_prev = 0;  // of the epoch to come, counted by the join before it
   auto sort_epoch = [&](ParticleSource& s, std::size_t e) {
@@ -425,13 +425,17 @@ IngestReport Ingest(const IngestOptions& options) {
 
   for (std::size_t e = 0; e < options.inputs.size(); ++e) {
     if (!source) source = OpenSnapshot(options.inputs[e], options.read);
+    EpochReport epoch_report;
+    PhaseClock clock(epoch_report);
+    if (!source_smoothed) {
+      source = smooth(std::move(source));
+      if (options.neighbours > 0) clock.Lap("smoothing");
+    }
     const SnapshotHeader header = source->header();
     if (header.has_id != has_id || header.has_velocity != has_velocity) {
       throw Error::BadInput(header.files.front(), "this epoch " + std::string(header.has_id ? "has" : "lacks") +
                                                       " IDs / velocities unlike epoch 0; all epochs of a series must carry the same columns");
     }
-    EpochReport epoch_report;
-    PhaseClock clock(epoch_report);
     const std::string label = "epoch " + std::to_string(e);
 
     // 1. sort (series with IDs) or bounds.
@@ -440,7 +444,9 @@ IngestReport Ingest(const IngestOptions& options) {
     if (join_epochs) {
       if (!sorted_current) sorted_current = sort_epoch(*source, e);
       if (e + 1 < options.inputs.size()) {
-        next_source = OpenSnapshot(options.inputs[e + 1], options.read);
+        if (options.neighbours > 0) clock.Lap("sort");
+        next_source = smooth(OpenSnapshot(options.inputs[e + 1], options.read));
+        if (options.neighbours > 0) clock.Lap("next smoothing");
         sorted_next = sort_epoch(*next_source, e + 1);
       }
       bounds = sorted_current->bounds();
@@ -455,7 +461,7 @@ IngestReport Ingest(const IngestOptions& options) {
       }
     }
 
-    clock.Lap(join_epochs ? "sort" : "bounds");
+    clock.Lap(join_epochs ? (next_source && options.neighbours > 0 ? "next sort" : "sort") : "bounds");
     Cube cube;
     if (options.cube) {
       cube = *options.cube;
@@ -656,6 +662,7 @@ IngestReport Ingest(const IngestOptions& options) {
     // The next epoch reuses what this one read ahead.
     sorted_current = std::move(sorted_next);
     source = std::move(next_source);
+    source_smoothed = source != nullptr;
   }
 
   if (id_store) id_store->Finish();

@@ -31,6 +31,7 @@
 
 #include "index/cube.h"
 #include "index/dataset.h"
+#include "index/neighbour_radius.h"
 #include "index/subtree_builder.h"
 #include "storage/page_file_format.h"
 #include "tools/snapshot/snapshot_source.h"
@@ -42,6 +43,12 @@ struct IngestOptions {
   std::string output;               // the store directory to create
   ReadOptions read;
   SubtreeOptions tree;
+  // The leaves' smoothing lengths, where the snapshot has none of its own:
+  // > 0, the radius holding this many nearest neighbours, as the reference
+  // renderer draws them (tools/smoothing_pass.h; a pass over the snapshot
+  // before the rest); 0, the leaf's density grid (index/sampler.h step 5):
+  // no pass, faster, but not the standard.
+  int neighbours = kDefaultNeighbours;
   std::uint64_t memory_budget = 0;  // bytes; 0 = DefaultMemoryBudget()
   std::string temp_dir;             // parent of the temporary directory; "" = beside the output
   std::optional<Cube> cube;         // overrides the periodic box / bounding cube
