@@ -1,8 +1,10 @@
 // octocosm-bench-render: run time against error (issue 5, section 9).
 //
-// On a generated clustered set (default 10^8 points, `octocosm synth scale`,
-// ingested with the default options), three views at 1280x720 — the whole
-// box, a mid zoom onto the densest halo, a deep zoom into it — are drawn:
+// On a generated clustered set (default 10^8 points, `octocosm synth scale`),
+// ingested once per representation of the inner nodes (--coarse: clusters,
+// the default, and sample, a random subselection), three views at 1280x720 —
+// the whole box, a mid zoom onto the densest halo, a deep zoom into it — are
+// drawn:
 //   - by the reference renderer (every particle of the snapshot, on the CPU,
 //     in double precision: `octocosm render --reference`), timed;
 //   - by the GPU renderer at full detail (every leaf in view), timed;
@@ -10,8 +12,9 @@
 //     sweep, cold (block cache and OS page cache dropped) and warm (blocks on
 //     the GPU), with points drawn, bytes read, and PSNR and SSIM of the picture
 //     against the reference's, both tone mapped with the reference's exposure.
-// It prints a table, writes it as CSV, and draws error against time with
-// gnuplot (Debian's gnuplot-nox) as render_bench.png. Optionally: the frame
+// It prints a table, writes it as CSV, and draws error against points drawn
+// and against time, per view and representation, with gnuplot (Debian's
+// gnuplot-nox) as render_bench.png. Optionally: the frame
 // time with 10^6 selected IDs against none.
 //
 // --playback STORE measures playback instead: the viewer's frame loop
@@ -20,6 +23,7 @@
 //
 // Generated data, the store and the reference images stay in --dir and are
 // reused by later runs (delete them to start afresh).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -52,6 +56,7 @@ struct Flags {
   double box = 500;
   int width = 1280, height = 720;
   std::string thresholds = "8,4,2,1,0.5", budgets = "0,1e6,4e6", views = "overview,mid,deep";
+  std::string coarse = "clusters,sample";  // inner nodes' representations to compare, a store each
   std::string backend = "osmesa";
   bool full = true, selection = false, prepare_only = false;
   unsigned threads = 0;
@@ -175,25 +180,41 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
           << r.bytes << ',' << r.cold << ',' << r.warm << ',' << r.psnr << ',' << r.ssim << '\n';
     }
   }
+  // Per view a colour, per representation a point shape; the x axis of the
+  // left panels is points drawn as a share of the view's full-detail frame.
+  std::vector<std::string> modes;
+  for (const Row& r : rows) {
+    if (r.mode != "full" && std::find(modes.begin(), modes.end(), r.mode) == modes.end()) modes.push_back(r.mode);
+  }
   std::ofstream gp(script);
-  gp << "set terminal pngcairo size 1400,560 font ',11'\nset output '" << png.string() << "'\n"
-     << "set datafile separator ','\nset logscale x\nset grid\nset key bottom right\nset key autotitle columnhead\n"
-     << "set multiplot layout 1,2 title 'octocosm: level of detail against the reference (all particles, CPU)'\n"
-     << "set xlabel 'frame time, warm (s)'\nset ylabel 'PSNR (dB)'\nset arrow from graph 0, first 40 to graph 1, first 40 nohead dt 2\n";
-  auto series = [&](const char* column) {
+  gp << "set terminal pngcairo size 1400,1000 font ',11'\nset output '" << png.string() << "'\n"
+     << "set datafile separator ','\nset logscale x\nset grid\nset key bottom right\n"
+     << "set multiplot layout 2,2 title 'octocosm: level of detail against the reference (all particles, CPU)'\n";
+  auto series = [&](int x_column, const char* y_column) {
     std::string plot = "plot ";
     for (std::size_t v = 0; v < views.size(); ++v) {
-      if (v) plot += ", ";
       const std::string name = "'" + views[v].name + "'";
-      plot += "'" + data.string() + "' using (strcol(1) eq " + name + " && strcol(2) eq 'lod' ? $9 : 1/0):" + column +
-              " with points pt 7 ps 1.2 lc " + std::to_string(v + 1) + " title " + name + ", '" + data.string() +
-              "' using (strcol(1) eq " + name + " && strcol(2) eq 'full' ? $9 : 1/0):" + column + " with points pt 6 ps 2.5 lc " +
-              std::to_string(v + 1) + " title " + "'" + views[v].name + ", full detail'";
+      double full_points = 0;
+      for (const Row& r : rows) {
+        if (r.view == views[v].name && r.mode == "full") full_points = static_cast<double>(r.points);
+      }
+      const std::string x = x_column == 5 ? (full_points > 0 ? "($5 / " + std::to_string(full_points) + ")" : "($5)")
+                                          : "($" + std::to_string(x_column) + ")";
+      for (std::size_t m = 0; m < modes.size(); ++m) {
+        if (plot.size() > 5) plot += ", ";
+        plot += "'" + data.string() + "' using (strcol(1) eq " + name + " && strcol(2) eq '" + modes[m] + "' ? " + x +
+                " : 1/0):" + y_column + " with linespoints pt " + std::to_string(m == 0 ? 7 : 4) + " ps 1.2 lc " +
+                std::to_string(v + 1) + " title '" + views[v].name + ", " + modes[m] + "'";
+      }
     }
     return plot + "\n";
   };
-  gp << series("10");
-  gp << "unset arrow\nset ylabel 'SSIM'\nset arrow from graph 0, first 0.98 to graph 1, first 0.98 nohead dt 2\n" << series("11");
+  gp << "set xlabel 'points drawn / points of the full-detail frame'\nset ylabel 'PSNR (dB)'\n"
+     << "set arrow from graph 0, first 40 to graph 1, first 40 nohead dt 2\n" << series(5, "10");
+  gp << "set xlabel 'frame time, warm (s)'\n" << series(9, "10");
+  gp << "unset arrow\nset ylabel 'SSIM'\nset arrow from graph 0, first 0.98 to graph 1, first 0.98 nohead dt 2\n"
+     << "set xlabel 'points drawn / points of the full-detail frame'\n" << series(5, "11");
+  gp << "set xlabel 'frame time, warm (s)'\n" << series(9, "11");
   gp << "unset multiplot\n";
   gp.close();
   const std::string command = "gnuplot " + script.string() + " 2>&1";
@@ -273,16 +294,29 @@ void Run(const Flags& f) {
     synth::RunScaleGenerator(s);
     std::printf("generated %.3g points in %.1f s\n", f.points, Seconds(start));
   }
-  const fs::path store = dir / "store";
-  if (!fs::exists(store / "manifest.json")) {
-    IngestOptions o;
-    o.inputs = {snapshot};
-    o.output = store.string();
-    o.quiet = true;
-    const IngestReport report = Ingest(o);
-    std::printf("ingested %llu points in %.1f s\n", static_cast<unsigned long long>(report.input_points), report.seconds);
+  // One store per representation of the inner nodes; the leaves, and so
+  // the views and the full-detail frames, are the same in all.
+  std::vector<std::string> representations = Split(f.coarse);
+  if (representations.empty()) throw Error::InvalidArgument("--coarse: name at least one of clusters, sample");
+  std::vector<Dataset> datasets;
+  for (const std::string& representation : representations) {
+    if (representation != "clusters" && representation != "sample") {
+      throw Error::InvalidArgument("--coarse: '" + representation + "' is neither clusters nor sample");
+    }
+    const fs::path store = dir / ("store-" + representation);
+    if (!fs::exists(store / "manifest.json")) {
+      IngestOptions o;
+      o.inputs = {snapshot};
+      o.output = store.string();
+      o.tree.coarse = representation == "sample" ? CoarsePoints::kSample : CoarsePoints::kClusters;
+      o.quiet = true;
+      const IngestReport report = Ingest(o);
+      std::printf("ingested %llu points (%s) in %.1f s\n", static_cast<unsigned long long>(report.input_points),
+                  representation.c_str(), report.seconds);
+    }
+    datasets.push_back(Dataset::Open(store.string()));
   }
-  const Dataset dataset = Dataset::Open(store.string());
+  const Dataset& dataset = datasets.front();
   const std::vector<NamedView> views = Views(dataset, Split(f.views));
   std::vector<RenderView> render_views;
   for (const NamedView& v : views) render_views.emplace_back(v.camera, f.width, f.height);
@@ -326,39 +360,49 @@ void Run(const Flags& f) {
       rows.push_back(row);
       PrintRow(row);
     }
-    for (const std::string& t : thresholds) {
-      for (const std::string& b : budgets) {
-        SceneOptions options;
-        options.lod.pixel_threshold = std::stod(t);
-        options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
-        Row row = Measure(dataset, options, render_views[v], backend, tone, reference);
-        row.view = views[v].name;
-        row.mode = "lod";
-        row.threshold = options.lod.pixel_threshold;
-        row.budget = options.lod.point_budget;
-        rows.push_back(row);
-        PrintRow(row);
+    for (std::size_t r = 0; r < representations.size(); ++r) {
+      for (const std::string& t : thresholds) {
+        for (const std::string& b : budgets) {
+          SceneOptions options;
+          options.lod.pixel_threshold = std::stod(t);
+          options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
+          Row row = Measure(datasets[r], options, render_views[v], backend, tone, reference);
+          row.view = views[v].name;
+          row.mode = representations[r];
+          row.threshold = options.lod.pixel_threshold;
+          row.budget = options.lod.point_budget;
+          rows.push_back(row);
+          PrintRow(row);
+        }
       }
     }
   }
   std::printf("\nreference: %.1f s a view (CPU, all points, double precision)\n", reference_seconds);
   std::printf("targets: PSNR >= 40 dB and SSIM >= 0.98 at >= 20x less time than the full rendering\n");
   for (const NamedView& v : views) {
-    const Row* full = nullptr;
-    const Row* best = nullptr;  // fastest LOD row meeting the quality targets
-    for (const Row& r : rows) {
-      if (r.view != v.name) continue;
-      if (r.mode == "full") full = &r;
-      if (r.mode == "lod" && r.psnr >= 40 && r.ssim >= 0.98 && (!best || r.warm < best->warm)) best = &r;
+    for (const std::string& representation : representations) {
+      const Row* full = nullptr;
+      const Row* best = nullptr;  // fastest LOD row meeting the quality targets
+      for (const Row& r : rows) {
+        if (r.view != v.name) continue;
+        if (r.mode == "full") full = &r;
+        if (r.mode == representation && r.psnr >= 40 && r.ssim >= 0.98 && (!best || r.warm < best->warm)) best = &r;
+      }
+      if (!best) {
+        std::printf("  %-9s %-8s no level of detail in the sweep meets PSNR 40 dB and SSIM 0.98\n", v.name.c_str(),
+                    representation.c_str());
+        continue;
+      }
+      std::printf("  %-9s %-8s threshold %g, budget %llu: PSNR %.1f dB, SSIM %.4f, %llu points", v.name.c_str(),
+                  representation.c_str(), best->threshold, static_cast<unsigned long long>(best->budget), best->psnr,
+                  best->ssim, static_cast<unsigned long long>(best->points));
+      if (full) {
+        std::printf(" (%.1f%% of full detail's), %.3f s warm: %.1fx less than the full GPU rendering (%.2f s)",
+                    100.0 * static_cast<double>(best->points) / static_cast<double>(std::max<std::uint64_t>(full->points, 1)),
+                    best->warm, full->warm / best->warm, full->warm);
+      }
+      std::printf(", %.0fx less than the reference\n", reference_seconds / best->warm);
     }
-    if (!best) {
-      std::printf("  %-9s no level of detail in the sweep meets PSNR 40 dB and SSIM 0.98\n", v.name.c_str());
-      continue;
-    }
-    std::printf("  %-9s threshold %g, budget %llu: PSNR %.1f dB, SSIM %.4f, %.3f s warm", v.name.c_str(), best->threshold,
-                static_cast<unsigned long long>(best->budget), best->psnr, best->ssim, best->warm);
-    if (full) std::printf(": %.1fx less than the full GPU rendering (%.2f s)", full->warm / best->warm, full->warm);
-    std::printf(", %.0fx less than the reference\n", reference_seconds / best->warm);
   }
   Plot(dir, rows, views);
 
@@ -394,6 +438,8 @@ int main(int argc, char** argv) {
   app.add_option("--thresholds", f.thresholds, "pixel thresholds of the sweep")->default_val("8,4,2,1,0.5");
   app.add_option("--budgets", f.budgets, "point budgets of the sweep (0: none)")->default_val("0,1e6,4e6");
   app.add_option("--views", f.views, "views: overview, mid, deep")->default_val("overview,mid,deep");
+  app.add_option("--coarse", f.coarse, "inner nodes' representations to compare, a store each: clusters, sample")
+      ->default_val("clusters,sample");
   app.add_option("--backend", f.backend, "osmesa or egl")->default_val("osmesa");
   app.add_option("--threads", f.threads, "threads of the reference renderer (default: all)");
   app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");

@@ -8,6 +8,7 @@
 #include <string>
 #include <utility>
 
+#include "index/aggregator.h"
 #include "index/block_codec.h"
 #include "index/radix_sort.h"
 #include "storage/error.h"
@@ -240,6 +241,127 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   return node;
 }
 
+// The node `key` as clusters of its children's points (index/aggregator.h):
+// each cluster's mass, centre of mass and spread in one point. Children's
+// columns must agree as for SampleParent.
+NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
+                           const SubtreeOptions& options) {
+  int first = -1;
+  for (int o = 0; o < 8 && first < 0; ++o) {
+    if (children[o].size() > 0) first = o;
+  }
+  for (int o = 0; o < 8; ++o) {
+    if (children[o].size() == 0) continue;
+    const NodePoints& a = children[first];
+    const NodePoints& b = children[o];
+    if (a.id.empty() != b.id.empty() || PresentVectorColumns(a) != PresentVectorColumns(b)) {
+      throw Error::InvalidArgument("subtree builder: children of node " + key.Path() +
+                                   " disagree on which columns their points carry");
+    }
+  }
+  // The population: every child's points, child by child, and where each
+  // came from.
+  std::vector<GridPoint> grid;
+  std::vector<double> weight;
+  std::vector<std::uint8_t> types;
+  std::vector<std::pair<std::uint8_t, std::uint32_t>> from;  // (child octant, index in it)
+  std::array<bool, 256> present{};
+  for (int o = 0; o < 8; ++o) {
+    const NodePoints& child = children[o];
+    if (child.size() == 0) continue;
+    AppendGridPoints(child, cube, grid);
+    weight.insert(weight.end(), child.weight.begin(), child.weight.end());
+    types.insert(types.end(), child.type.begin(), child.type.end());
+    for (std::size_t k = 0; k < child.size(); ++k) from.emplace_back(static_cast<std::uint8_t>(o), static_cast<std::uint32_t>(k));
+  }
+  for (const std::uint8_t t : types) present[t] = true;
+  if (options.capacity < 8 * static_cast<std::size_t>(std::max<std::ptrdiff_t>(1, std::count(present.begin(), present.end(), true)))) {
+    return SampleParent(key, children, cube, options);  // too few points for a cluster per octant and type
+  }
+  const Clusters clusters = ClusterPopulation(grid, weight, types, key, options.capacity);
+  const std::size_t n = clusters.size();
+  NodePoints node;
+  node.position.resize(3 * n);
+  node.weight.resize(n);
+  node.smoothing.resize(n);
+  node.type.resize(n);
+  node.grid.resize(n);
+  const bool has_id = first >= 0 && !children[first].id.empty();
+  if (has_id) node.id.resize(n);
+  std::array<bool, kVectorColumnCount> has_vector{};
+  if (first >= 0) {
+    const auto like = VectorColumns(children[first]);
+    const auto target = VectorColumns(node);
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      has_vector[v] = !like[v]->empty();
+      if (has_vector[v]) target[v]->resize(3 * n);
+    }
+  }
+  const auto node_vectors = VectorColumns(node);
+  const auto [min_h, max_h] = GivenSmoothingRange(cube.NodeSize(key.level()));
+  int octant = 0;
+  for (std::size_t c = 0; c < n; ++c) {
+    const std::uint32_t* begin = clusters.member.data() + clusters.begin[c];
+    const std::uint32_t* end = clusters.member.data() + clusters.begin[c + 1];
+    double mass = 0, centre[3] = {0, 0, 0};
+    std::uint32_t heaviest = *begin;
+    for (const std::uint32_t* m = begin; m != end; ++m) {
+      const auto [o, k] = from[*m];
+      const double w = children[o].weight[k];
+      mass += w;
+      for (int a = 0; a < 3; ++a) centre[a] += w * children[o].position[3 * k + a];
+      if (w > weight[heaviest]) heaviest = *m;
+    }
+    for (double& x : centre) x /= mass;
+    // The spread: each member's squared distance from the centre, a third per
+    // axis, and its own blob's variance, mass-weighted.
+    double variance = 0;
+    std::array<std::array<double, 3>, kVectorColumnCount> vector_sum{};
+    for (const std::uint32_t* m = begin; m != end; ++m) {
+      const auto [o, k] = from[*m];
+      const NodePoints& child = children[o];
+      const double w = child.weight[k];
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) d2 += (child.position[3 * k + a] - centre[a]) * (child.position[3 * k + a] - centre[a]);
+      variance += w * (d2 / 3 + KernelVariance(child.smoothing[k]));
+      for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+        if (!has_vector[v]) continue;
+        const float* value = &(*VectorColumns(child)[v])[3 * k];
+        for (int a = 0; a < 3; ++a) vector_sum[v][a] += w * value[a];
+      }
+    }
+    const auto [ho, hk] = from[heaviest];
+    // The centre of mass lies in the cluster's cell, so in the child octant
+    // of its members; should rounding put it on the far side of a face, the
+    // heaviest member's place stands in.
+    GridPoint centre_grid = cube.FinestGridCoords(centre);
+    if (!GridHolds(centre_grid, key) || OctantAt(centre_grid, key.level()) != ho) {
+      for (int a = 0; a < 3; ++a) centre[a] = children[ho].position[3 * hk + a];
+      centre_grid = grid[heaviest];
+    }
+    while (ho > octant) node.octant_offsets[++octant] = static_cast<std::uint32_t>(c);
+    for (int a = 0; a < 3; ++a) node.position[3 * c + a] = centre[a];
+    node.grid[c] = centre_grid;
+    node.weight[c] = mass;
+    node.smoothing[c] = std::clamp(KernelRadiusForVariance(variance / mass), min_h, max_h);
+    node.type[c] = children[ho].type[hk];
+    if (has_id) node.id[c] = children[ho].id[hk];
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (!has_vector[v]) continue;
+      for (int a = 0; a < 3; ++a) (*node_vectors[v])[3 * c + a] = static_cast<float>(vector_sum[v][a] / mass);
+    }
+  }
+  while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(n);
+  return node;
+}
+
+// The node above `children`: clusters or a sample, as the options say.
+NodePoints MakeParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
+                      const SubtreeOptions& options) {
+  if (options.coarse == CoarsePoints::kClusters) return AggregateParent(key, children, cube, options);
+  return SampleParent(key, children, cube, options);
+}
+
 // One BuildSubtree call: the particles, placed, and where nodes go.
 class SubtreeBuild {
  public:
@@ -259,7 +381,7 @@ class SubtreeBuild {
       for (int o = 0; o < 8; ++o) {
         if (bounds[o] < bounds[o + 1]) children[o] = Build(begin + bounds[o], begin + bounds[o + 1], key.Child(o));
       }
-      node = SampleParent(key, children, cube_, options_);
+      node = MakeParent(key, children, cube_, options_);
     }
     sink_(key, node);
     return node;
@@ -391,7 +513,7 @@ TopLevelMerger::TopLevelMerger(const Cube& cube, const SubtreeOptions& options, 
 void TopLevelMerger::CloseDeepest() {
   Open closing = std::move(open_.back());
   open_.pop_back();
-  NodePoints node = SampleParent(closing.key, closing.children, cube_, options_);
+  NodePoints node = MakeParent(closing.key, closing.children, cube_, options_);
   sink_(closing.key, node);
   if (open_.empty()) {
     root_ = std::move(node);

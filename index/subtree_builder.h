@@ -58,9 +58,17 @@
 
 namespace octocosm {
 
+// What an inner node holds: clusters of the points below it, each one point
+// with their mass, centre of mass and spread (index/aggregator.h), or a
+// random subselection of them with mass-conserving weights
+// (index/sampler.h). A node whose capacity is below 8 x its particle types
+// samples (clusters need one per octant and type).
+enum class CoarsePoints { kClusters, kSample };
+
 struct SubtreeOptions {
   std::size_t capacity = 16000;  // most points per node (>= 1)
   int max_level = kMaxLevel;     // deepest level; leaves there may exceed capacity
+  CoarsePoints coarse = CoarsePoints::kClusters;
   SamplerOptions sampler;
 };
 

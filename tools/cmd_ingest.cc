@@ -18,7 +18,7 @@ void AddIngestCommand(CLI::App& app) {
   struct Flags {
     IngestOptions options;
     ReadFlags read;
-    std::string memory, page_size = "4K", cube;
+    std::string memory, page_size = "4K", cube, coarse = "clusters";
   };
   auto flags = std::make_shared<Flags>();
   IngestOptions& o = flags->options;
@@ -38,6 +38,11 @@ void AddIngestCommand(CLI::App& app) {
                   "density exponent of the subselection: 0 keeps points in proportion to mass, larger values thin "
                   "sparse regions less")->default_val(0.5)->check(CLI::Range(0.0, 4.0));
   cmd->add_option("--seed", o.tree.sampler.seed, "seed of the deterministic sampling hash")->default_val(0);
+  cmd->add_option("--coarse", flags->coarse,
+                  "what inner nodes hold: 'clusters' (each point a cluster's mass, centre and spread) or 'sample' "
+                  "(a random subselection of the points below)")
+      ->check(CLI::IsMember({"clusters", "sample"}))
+      ->default_val("clusters");
   cmd->add_option("--neighbours", o.neighbours,
                   "leaves' smoothing lengths (where the snapshot has none): the radius of this many nearest "
                   "neighbours, as render --reference draws them; 0: from the leaf's density grid (faster, no "
@@ -59,6 +64,7 @@ void AddIngestCommand(CLI::App& app) {
     if (!flags->memory.empty()) options.memory_budget = ParseByteSize(flags->memory, "--memory");
     options.page_size = static_cast<std::uint32_t>(ParseByteSize(flags->page_size, "--page-size"));
     options.read = ReadOptionsFrom(flags->read);
+    options.tree.coarse = flags->coarse == "sample" ? CoarsePoints::kSample : CoarsePoints::kClusters;
     if (!flags->cube.empty()) {
       const auto v = ParseNumberList(flags->cube, "--cube");
       if (v.size() != 4) throw Error::InvalidArgument("--cube '" + flags->cube + "': expected x,y,z,size");

@@ -22,6 +22,14 @@ namespace {
 
 const Cube kCube{{-50, -50, -50}, 100, false};
 
+// These tests pin down the subselection's contract (inner nodes keep
+// particles as they are); tests/index/aggregator_test.cc does the clusters'.
+SubtreeOptions Sampled() {
+  SubtreeOptions options;
+  options.coarse = CoarsePoints::kSample;
+  return options;
+}
+
 // Clumps of various sizes on a uniform background; IDs are 10 * i + 3,
 // velocities a function of the ID so that carried columns can be checked.
 ParticleChunk Clumpy(std::mt19937_64& rng, std::size_t n, bool with_ids = true, bool with_velocity = true) {
@@ -187,7 +195,7 @@ TEST(SubtreeBuilder, BuildsAConsistentTree) {
   std::mt19937_64 rng(1);
   const ParticleChunk input = Clumpy(rng, 60000);
   ParticleChunk work = input;
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 1000;
   Tree tree;
   const NodePoints root = BuildSubtree(work, NodeKey::Root(), kCube, options, tree.Sink());
@@ -213,7 +221,7 @@ TEST(SubtreeBuilder, BuildsAConsistentTree) {
 TEST(SubtreeBuilder, ParentOctantsEstimateTheirChildsMassWithoutBias) {
   std::mt19937_64 rng(21);
   ParticleChunk work = Clumpy(rng, 200000);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 1000;
   Tree tree;
   BuildSubtree(work, NodeKey::Root(), kCube, options, tree.Sink());
@@ -246,7 +254,7 @@ TEST(SubtreeBuilder, BuildsASubRegion) {
   const ParticleChunk input = PointsIn(Clumpy(rng, 20000), region);
   ASSERT_GT(input.size(), 100u);
   ParticleChunk work = input;
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 16;
   Tree tree;
   BuildSubtree(work, region, kCube, options, tree.Sink());
@@ -262,7 +270,7 @@ TEST(SubtreeBuilder, AWorkspaceServesCallAfterCall) {
   const NodeKey region = NodeKey::FromPath("r3");
   const ParticleChunk small = PointsIn(large, region);
   ASSERT_GT(small.size(), 1000u);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 500;
   const auto expect_same = [](const Tree& a, const Tree& b) {
     ASSERT_EQ(a.order, b.order);
@@ -300,7 +308,7 @@ TEST(SubtreeBuilder, CoincidentPointsStopAtTheDepthLimit) {
     input.id.push_back(10 * i + 3);
   }
   ParticleChunk work = input;
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 500;
   Tree tree;
   BuildSubtree(work, NodeKey::Root(), kCube, options, tree.Sink());
@@ -316,7 +324,7 @@ TEST(SubtreeBuilder, ShallowDepthLimitMakesLargeLeaves) {
   std::mt19937_64 rng(3);
   const ParticleChunk input = Clumpy(rng, 5000, true, false);
   ParticleChunk work = input;
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 20;
   options.max_level = 2;
   Tree tree;
@@ -335,7 +343,7 @@ TEST(SubtreeBuilder, WorksWithoutIdsOrVelocities) {
   ParticleChunk input = Clumpy(rng, 8000, false, false);
   long double mass = 0;
   for (double m : input.mass) mass += m;
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 300;
   Tree tree;
   ParticleChunk again = input;
@@ -380,7 +388,7 @@ TEST(SubtreeBuilder, CarriesEveryVectorColumn) {
       for (int a = 0; a < 3; ++a) columns[v]->push_back(value(id, v, a));
     }
   }
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 200;
   Tree tree;
   BuildSubtree(input, NodeKey::Root(), kCube, options, tree.Sink());
@@ -410,7 +418,7 @@ float GivenSmoothing(std::size_t i) { return i % 10 == 7 ? 0.0f : 0.1f + static_
 TEST(SubtreeBuilder, GivenSmoothingLengthsReachTheLeavesAndOnlyTheLeaves) {
   std::mt19937_64 rng(31);
   ParticleChunk input = Clumpy(rng, 6000);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 200;
   Tree without;
   BuildSubtree(input, NodeKey::Root(), kCube, options, without.Sink());
@@ -452,7 +460,7 @@ TEST(SubtreeBuilder, GivenSmoothingLengthsReachTheLeavesAndOnlyTheLeaves) {
 TEST(SubtreeBuilder, SmoothingLengthsAllNotGivenChangeNoBlock) {
   std::mt19937_64 rng(32);
   ParticleChunk input = Clumpy(rng, 3000);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 150;
   Tree without;
   BuildSubtree(input, NodeKey::Root(), kCube, options, without.Sink());
@@ -479,7 +487,7 @@ TEST(SubtreeBuilder, GivenSmoothingLengthsAreHeldToWhatABlockStores) {
     input.smoothing.push_back(lengths[i]);
   }
   Tree tree;
-  BuildSubtree(input, NodeKey::Root(), kCube, SubtreeOptions{}, tree.Sink());
+  BuildSubtree(input, NodeKey::Root(), kCube, Sampled(), tree.Sink());
   ASSERT_EQ(tree.nodes.size(), 1u);
   const NodePoints& leaf = tree.nodes.at(NodeKey::Root());
   const auto [lo, hi] = GivenSmoothingRange(kCube.size);
@@ -535,7 +543,7 @@ TEST(SubtreeBuilder, RootEstimatesRegionMassesWithoutBias) {
     double sum[2] = {0, 0}, sum2[2] = {0, 0};  // clump, heavy species
     int depth = 0;
     for (int seed = 0; seed < seeds; ++seed) {
-      SubtreeOptions options;
+      SubtreeOptions options = Sampled();
       options.capacity = 200;
       options.sampler.alpha = alpha;
       options.sampler.seed = static_cast<std::uint64_t>(seed);
@@ -568,7 +576,7 @@ TEST(SubtreeBuilder, RootEstimatesRegionMassesWithoutBias) {
 TEST(SubtreeBuilder, ChildrenCarryingDifferentColumnsAreRejected) {
   std::mt19937_64 rng(9);
   const ParticleChunk input = Clumpy(rng, 3000, true, true);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 100;
   // The particles of two sibling regions, one with next velocities and one without.
   std::array<ParticleChunk, 2> parts;
@@ -595,7 +603,7 @@ TEST(SubtreeBuilder, ChildrenCarryingDifferentColumnsAreRejected) {
 TEST(SubtreeBuilder, TopLevelsMatchOneBuildOverTheWholeCube) {
   std::mt19937_64 rng(5);
   const ParticleChunk input = Clumpy(rng, 40000);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 200;
 
   ParticleChunk whole = input;
@@ -648,7 +656,7 @@ TEST(SubtreeBuilder, TopLevelsOfRegionsAtDifferentDepths) {
   ASSERT_TRUE(deep.IsValid());
   const std::vector<NodeKey> regions = {NodeKey::FromPath("r0"), NodeKey::FromPath("r10"), deep,
                                         NodeKey::FromPath("r7")};
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   options.capacity = 100;
   Tree tree;
   std::vector<RegionRoot> roots;
@@ -680,7 +688,7 @@ TEST(SubtreeBuilder, TopLevelsOfRegionsAtDifferentDepths) {
 TEST(SubtreeBuilder, RejectsBadInput) {
   std::mt19937_64 rng(7);
   const ParticleChunk good = Clumpy(rng, 100);
-  SubtreeOptions options;
+  SubtreeOptions options = Sampled();
   auto expect_invalid = [&](ParticleChunk c, NodeKey region, const SubtreeOptions& o) {
     Tree tree;
     try {

@@ -369,6 +369,7 @@ IngestReport Ingest(const IngestOptions& options) {
   nlohmann::json dataset = {{"generator", "octocosm ingest"},
                             {"capacity", options.tree.capacity},
                             {"max_level", options.tree.max_level},
+                            {"coarse", options.tree.coarse == CoarsePoints::kClusters ? "clusters" : "sample"},
                             {"smoothing", {{"rule", options.neighbours > 0 ? "neighbours" : "density grid"},
                                            {"neighbours", std::max(options.neighbours, 0)}}},
                             {"sampler", {{"alpha", options.tree.sampler.alpha},
