@@ -87,6 +87,7 @@ LevelSamples IngestLevels(const DataSet& data, const ParticleChunk& points, cons
   o.quiet = true;
   o.tree.capacity = settings.capacity;
   o.tree.sampler.alpha = alpha;
+  o.tree.coarse = CoarsePoints::kSample;  // PCL's random sample checks the subselection
   o.cube = cube;
   fs::remove_all(o.output);
   Ingest(o);

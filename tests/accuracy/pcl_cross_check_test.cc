@@ -189,6 +189,7 @@ class LevelScores : public ::testing::Test {
     const ParticleChunk points = ClusteredFloatPoints(kPoints, 3, cube);
     SubtreeOptions options;
     options.capacity = 300;
+    options.coarse = CoarsePoints::kSample;  // PCL's random sample checks the subselection
     std::vector<LevelSamples> trees;
     for (const double alpha : {0.5, 0.0}) {
       options.sampler.alpha = alpha;

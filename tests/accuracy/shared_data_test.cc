@@ -61,6 +61,7 @@ class SharedDataCrossCheck : public IngestFixture, public ::testing::WithParamIn
   LevelSamples IngestLevels(const std::string& name, const std::optional<Cube>& cube, Cube& used) {
     IngestOptions o = Options({input_}, name);
     o.tree.capacity = kCapacity;
+    o.tree.coarse = CoarsePoints::kSample;  // PCL's random sample checks the subselection
     o.cube = cube;
     Ingest(o);
     const Dataset dataset = Dataset::Open(o.output);

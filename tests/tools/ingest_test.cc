@@ -676,6 +676,7 @@ TEST_F(IngestTest, GivenSmoothingLengthsReachTheLeavesHeldInMemoryOrStreamed) {
   resident.max_chunk_points = 20000;
   resident.threads = 2;
   resident.neighbours = 0;  // the dark matter's lengths from the density grid, as without the column
+  resident.tree.coarse = CoarsePoints::kSample;  // inner nodes keep particles, so they compare with the reference's
   IngestOptions streamed = resident;
   streamed.output = (dir_ / "streamed").string();
   streamed.stream_chunks = true;
@@ -716,6 +717,7 @@ TEST_F(IngestTest, GivenSmoothingLengthsTravelThroughTheSortOfASeries) {
   const std::vector<std::string> inputs = {WriteGasSet(dir_, "e0", e0, 0), WriteGasSet(dir_, "e1", e1, 1)};
   IngestOptions o = Options(inputs, "series");
   o.tree.capacity = 700;
+  o.tree.coarse = CoarsePoints::kSample;  // inner nodes keep particles, so they compare with the reference's
   IngestOptions small = o;
   small.output = (dir_ / "small").string();
   small.sort_run_points = 1500;  // 14 sorted runs per epoch, merged

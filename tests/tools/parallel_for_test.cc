@@ -70,11 +70,21 @@ TEST(ParallelForDynamic, AThreadHeldUpLeavesTheRestToTheOthers) {
 
 TEST(ParallelForDynamic, AnErrorIsRethrownOnTheCallingThreadAndStopsTheRest) {
   std::atomic<std::size_t> ran{0};
+  std::atomic<bool> thrown{false};
   EXPECT_THROW(ParallelForDynamic(100000, 2, 10, [&](std::size_t begin, std::size_t) {
                  ++ran;
-                 if (begin == 500) throw std::runtime_error("piece 50");
+                 if (begin == 500) {
+                   thrown = true;
+                   throw std::runtime_error("piece 50");
+                 }
+                 // Pieces after the failing one take a millisecond each, so
+                 // the other thread could take them all only if the failing
+                 // thread stalled for ten seconds between its throw and the
+                 // error's record (a piece already running finishes).
+                 if (begin > 500) std::this_thread::sleep_for(std::chrono::milliseconds(1));
                }),
                std::runtime_error);
+  EXPECT_TRUE(thrown);
   EXPECT_LT(ran, 10000u);  // the pieces after the error are not taken
 }
 
