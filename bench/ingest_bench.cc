@@ -5,7 +5,10 @@
 // `octocosm synth scale`), then runs `octocosm ingest` on it as a child
 // process, so that the child's own peak RSS and CPU time are measured
 // (wait4's rusage), and prints one row per case:
-//   points, input MB, budget, wall s, M points/s, CPU s, CPU use, peak RSS, RSS / budget
+//   points, input MB, budget, neighbours, wall s, M points/s, CPU s, CPU use, peak RSS, RSS / budget
+// Each case runs once per --neighbours value: the default 32 (leaves'
+// smoothing lengths from the 32 nearest neighbours, a pass of its own before
+// the rest) and 0 (the density grid's, no pass).
 // Default cases (issue 3 §7): 10^7 and 10^8 points with the default budget,
 // and 4x10^7 points (1.1 GB of input) under a 256 MiB budget: input > 4x budget.
 //
@@ -129,12 +132,15 @@ int main(int argc, char** argv) {
   bool keep = false;
   bool cold = false;
   std::string potree_converter;
+  std::vector<int> neighbour_modes = {32, 0};
   CLI::App app{"octocosm-bench-ingest: ingest throughput, CPU time and peak RSS on generated clustered data"};
   app.add_option("--dir", dir, "scratch directory (removed afterwards)")->default_val(dir);
   app.add_option("--octocosm", octocosm_path, "the octocosm program to measure")->default_val(octocosm_path);
   app.add_option("--case", case_texts, "cases POINTS[@MEMORY], e.g. 1e7 1e8 4e7@256M")->default_val(case_texts);
   app.add_flag("--keep", keep, "keep the generated snapshots and stores");
   app.add_flag("--cold", cold, "do not read the input into the page cache before each run");
+  app.add_option("--neighbours", neighbour_modes, "ingest --neighbours values to run each case with (0: no neighbour pass)")
+      ->default_val(neighbour_modes);
   app.add_option("--potree-converter", potree_converter,
                  "also run this PotreeConverter 2.x program (-m random) on the same points, written as LAS, in each "
                  "case without a budget, and print octocosm's throughput against it")
@@ -155,8 +161,8 @@ int main(int argc, char** argv) {
                 cold ? "input read from wherever it is (--cold)"
                      : "input dropped from the page cache and read once before each run");
     std::fflush(stdout);  // before the children write theirs
-    std::printf("%12s %10s %9s %9s %11s %8s %7s %11s %10s %10s\n", "points", "input MB", "budget", "wall s",
-                "M points/s", "CPU s", "CPU use", "peak RSS", "RSS/budget", "vs 2.4M/s");
+    std::printf("%12s %10s %9s %10s %9s %11s %8s %7s %11s %10s %10s\n", "points", "input MB", "budget", "neighbours",
+                "wall s", "M points/s", "CPU s", "CPU use", "peak RSS", "RSS/budget", "vs 2.4M/s");
     for (const Case& c : cases) {
       const fs::path snapshots = fs::path(dir) / ("snap-" + std::to_string(c.points));
       if (!fs::exists(snapshots)) {
@@ -168,27 +174,32 @@ int main(int argc, char** argv) {
       }
       const std::uint64_t input_bytes = DirectoryBytes(snapshots);
       const fs::path store = fs::path(dir) / "store";
-      fs::remove_all(store);
-      std::vector<std::string> args = {octocosm_path, "ingest", (snapshots / "snap").string(), "-o", store.string(), "-q"};
-      if (!c.memory.empty()) {
-        args.push_back("--memory");
-        args.push_back(c.memory);
+      std::vector<double> rates;  // per neighbour mode
+      for (const int neighbours : neighbour_modes) {
+        fs::remove_all(store);
+        std::vector<std::string> args = {octocosm_path, "ingest", (snapshots / "snap").string(), "-o", store.string(),
+                                         "-q", "--neighbours", std::to_string(neighbours)};
+        if (!c.memory.empty()) {
+          args.push_back("--memory");
+          args.push_back(c.memory);
+        }
+        if (!cold) ReadThroughPageCache(snapshots);
+        const ChildUsage u = RunChild(args);
+        if (!WIFEXITED(u.status) || WEXITSTATUS(u.status) != 0) {
+          std::fprintf(stderr, "octocosm ingest failed for %llu points\n", static_cast<unsigned long long>(c.points));
+          return 1;
+        }
+        const double budget = c.memory.empty() ? 0.0 : static_cast<double>(ParseByteSize(c.memory, "--case"));
+        const double rate = static_cast<double>(c.points) / u.wall / 1e6;
+        rates.push_back(rate);
+        std::printf("%12llu %10.0f %9s %10d %9.2f %11.2f %8.2f %6.0f%% %11s %10s %9.2fx\n",
+                    static_cast<unsigned long long>(c.points), static_cast<double>(input_bytes) / 1e6,
+                    c.memory.empty() ? "default" : c.memory.c_str(), neighbours, u.wall, rate, u.cpu,
+                    100.0 * u.cpu / u.wall, HumanBytes(u.peak_rss_bytes).c_str(),
+                    budget > 0 ? (std::to_string(u.peak_rss_bytes / budget).substr(0, 4)).c_str() : "-", rate / 2.4);
+        std::fflush(stdout);
+        fs::remove_all(store);
       }
-      if (!cold) ReadThroughPageCache(snapshots);
-      const ChildUsage u = RunChild(args);
-      if (!WIFEXITED(u.status) || WEXITSTATUS(u.status) != 0) {
-        std::fprintf(stderr, "octocosm ingest failed for %llu points\n", static_cast<unsigned long long>(c.points));
-        return 1;
-      }
-      const double budget = c.memory.empty() ? 0.0 : static_cast<double>(ParseByteSize(c.memory, "--case"));
-      const double rate = static_cast<double>(c.points) / u.wall / 1e6;
-      std::printf("%12llu %10.0f %9s %9.2f %11.2f %8.2f %6.0f%% %11s %10s %9.2fx\n",
-                  static_cast<unsigned long long>(c.points), static_cast<double>(input_bytes) / 1e6,
-                  c.memory.empty() ? "default" : c.memory.c_str(), u.wall, rate, u.cpu, 100.0 * u.cpu / u.wall,
-                  HumanBytes(u.peak_rss_bytes).c_str(),
-                  budget > 0 ? (std::to_string(u.peak_rss_bytes / budget).substr(0, 4)).c_str() : "-", rate / 2.4);
-      std::fflush(stdout);
-      fs::remove_all(store);
       if (!potree_converter.empty() && c.memory.empty()) {
         const fs::path las_dir = fs::path(dir) / ("las-" + std::to_string(c.points));
         const fs::path las = las_dir / "snap.las";
@@ -208,8 +219,12 @@ int main(int argc, char** argv) {
         }
         const double potree_rate = static_cast<double>(c.points) / p.wall / 1e6;
         std::printf("%12s PotreeConverter -m random on the same points: %.2f s, %.2f M points/s, CPU %.2f s, "
-                    "peak RSS %s; octocosm %.2fx\n",
-                    "", p.wall, potree_rate, p.cpu, HumanBytes(p.peak_rss_bytes).c_str(), rate / potree_rate);
+                    "peak RSS %s; octocosm",
+                    "", p.wall, potree_rate, p.cpu, HumanBytes(p.peak_rss_bytes).c_str());
+        for (std::size_t m = 0; m < rates.size(); ++m) {
+          std::printf("%s %.2fx with --neighbours %d", m ? "," : "", rates[m] / potree_rate, neighbour_modes[m]);
+        }
+        std::printf("\n");
         std::fflush(stdout);
         fs::remove_all(potree_out);
         if (!keep) fs::remove_all(las_dir);
