@@ -9,7 +9,7 @@
 // Each case runs once per --neighbours value: the default 32 (leaves'
 // smoothing lengths from the 32 nearest neighbours, a pass of its own before
 // the rest) and 0 (the density grid's, no pass).
-// Default cases (issue 3 §7): 10^7 and 10^8 points with the default budget,
+// Default cases: 10^7 and 10^8 points with the default budget,
 // and 4x10^7 points (1.1 GB of input) under a 256 MiB budget: input > 4x budget.
 //
 // Before each run the snapshot's files are dropped from the page cache and

@@ -1,4 +1,4 @@
-// octocosm-bench-render: run time against error (issue 5, section 9).
+// octocosm-bench-render: run time against error.
 //
 // On a generated clustered set (default 10^8 points, `octocosm synth scale`),
 // ingested once per representation of the inner nodes (--coarse: clusters,

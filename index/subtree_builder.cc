@@ -150,15 +150,12 @@ void AppendGridPoints(const NodePoints& node, const Cube& cube, std::vector<Grid
   for (std::size_t i = 0; i < node.size(); ++i) grid.push_back(cube.FinestGridCoords(&node.position[3 * i]));
 }
 
-// The node `key` sampled from its children's points (children[o] is the
-// child in octant o, possibly empty).
-NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
-                        const SubtreeOptions& options) {
-  std::size_t total = 0;
+// The first non-empty child of `key` (-1 when all are empty), after checking
+// that every non-empty child's points carry the same optional columns.
+int FirstChildAgreeingOnColumns(NodeKey key, const std::array<NodePoints, 8>& children) {
   int first = -1;
   for (int o = 0; o < 8; ++o) {
     if (children[o].size() == 0) continue;
-    total += children[o].size();
     if (first < 0) first = o;
     const NodePoints& a = children[first];
     const NodePoints& b = children[o];
@@ -167,6 +164,16 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
                                    " disagree on which columns their points carry");
     }
   }
+  return first;
+}
+
+// The node `key` sampled from its children's points (children[o] is the
+// child in octant o, possibly empty).
+NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
+                        const SubtreeOptions& options) {
+  std::size_t total = 0;
+  for (const NodePoints& child : children) total += child.size();
+  const int first = FirstChildAgreeingOnColumns(key, children);
   const bool has_id = first >= 0 && !children[first].id.empty();
 
   // The sampler needs only grid points, weights and sampling IDs; the other
@@ -246,19 +253,7 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
 // columns must agree as for SampleParent.
 NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
                            const SubtreeOptions& options) {
-  int first = -1;
-  for (int o = 0; o < 8 && first < 0; ++o) {
-    if (children[o].size() > 0) first = o;
-  }
-  for (int o = 0; o < 8; ++o) {
-    if (children[o].size() == 0) continue;
-    const NodePoints& a = children[first];
-    const NodePoints& b = children[o];
-    if (a.id.empty() != b.id.empty() || PresentVectorColumns(a) != PresentVectorColumns(b)) {
-      throw Error::InvalidArgument("subtree builder: children of node " + key.Path() +
-                                   " disagree on which columns their points carry");
-    }
-  }
+  const int first = FirstChildAgreeingOnColumns(key, children);
   // The population: every child's points, child by child, and where each
   // came from.
   std::vector<GridPoint> grid;
