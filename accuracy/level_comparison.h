@@ -1,6 +1,6 @@
 // Octocosm's levels of detail against a uniform random sample of the same
 // size (pcl::RandomSample), level by level, on the voxels of each level
-// (VoxelBitsPerNode): the cross-check of issue 6 §1 (coverage and density),
+// (VoxelBitsPerNode): the cross-check of coverage and density,
 // shared by tests/accuracy and octocosm-bench-accuracy.
 #pragma once
 

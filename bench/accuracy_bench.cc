@@ -1,5 +1,5 @@
 // octocosm-bench-accuracy: how faithful octocosm's levels of detail are,
-// measured against the Point Cloud Library (issue 6; the tables of
+// measured against the Point Cloud Library (the tables of
 // docs/ACCURACY.md come from this program).
 //
 // Data sets:

@@ -10,7 +10,7 @@
 //   key+pool      key order through the BlockCache and a Prefetcher pool
 //   random+pool   random order through the BlockCache and a Prefetcher pool
 // and prints MB/s of block payload for each, with the ratio to raw-seq.
-// Targets (issue 2): key >= 0.8 x raw-seq; random+pool >= 0.5 x raw-seq.
+// Targets: key >= 0.8 x raw-seq; random+pool >= 0.5 x raw-seq.
 //
 // Run it on the disk you will store data on:  octocosm-bench-io --dir /data/tmp
 #include <algorithm>

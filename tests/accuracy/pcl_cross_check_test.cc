@@ -1,4 +1,4 @@
-// octocosm against the Point Cloud Library (issue 6 §1, docs/ACCURACY.md), on
+// octocosm against the Point Cloud Library (docs/ACCURACY.md), on
 // generated clustered points:
 //  - keys: every point's leaf in octocosm's tree is its leaf in PCL's
 //    adaptive octree, exactly, cell faces included;

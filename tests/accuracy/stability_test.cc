@@ -1,4 +1,4 @@
-// The numerical stability suite (issue 6 §2, docs/ACCURACY.md): the inputs
+// The numerical stability suite (docs/ACCURACY.md): the inputs
 // that break numerical code, end to end through the real code paths (Ingest,
 // BuildSubtree, EncodeBlock / DecodeBlock). Each test states the bound it
 // asserts. Cases that are also tests of their own modules (faces and the upper

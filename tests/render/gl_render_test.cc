@@ -277,7 +277,7 @@ TEST_F(GlRenderTest, StreamedFramesConserveMassWhileBlocksArrive) {
   std::printf("streaming: %d frames with stand-ins, worst mass error %.2e\n", frames_with_stand_ins, worst);
 }
 
-// Issue 6: 10^7 blobs accumulated into one pixel. Float sums (RGBA32F
+// 10^7 blobs accumulated into one pixel. Float sums (RGBA32F
 // blending) against the double sum: relative error below 1e-4 (measured
 // 9.4e-6 on llvmpipe).
 TEST_F(GlRenderTest, TenMillionBlobsInOnePixelSumToTheDoubleReference) {
