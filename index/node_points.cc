@@ -6,10 +6,10 @@ namespace octocosm {
 namespace {
 
 template <typename T>
-std::vector<T> Gather(const std::vector<T>& column, const std::vector<std::uint32_t>& order, std::size_t stride) {
+std::vector<T> Gather(const std::vector<T>& column, std::span<const std::uint32_t> order, std::size_t stride) {
   if (column.empty()) return {};
   std::vector<T> out;
-  out.reserve(column.size());
+  out.reserve(order.size() * stride);
   for (const std::uint32_t i : order) {
     for (std::size_t k = 0; k < stride; ++k) out.push_back(column[i * stride + k]);
   }
@@ -44,6 +44,28 @@ void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube) {
   points.type = Gather(points.type, order, 1);
   for (std::vector<float>* column : VectorColumns(points)) *column = Gather(*column, order, 3);
   points.grid = Gather(points.grid, order, 1);
+}
+
+NodePoints SelectRows(const NodePoints& points, std::span<const std::uint32_t> rows) {
+  NodePoints out;
+  out.position = Gather(points.position, rows, 3);
+  out.weight = Gather(points.weight, rows, 1);
+  out.smoothing = Gather(points.smoothing, rows, 1);
+  out.id = Gather(points.id, rows, 1);
+  out.type = Gather(points.type, rows, 1);
+  const auto from = VectorColumns(points);
+  const auto to = VectorColumns(out);
+  for (std::size_t v = 0; v < from.size(); ++v) *to[v] = Gather(*from[v], rows, 3);
+  out.grid = Gather(points.grid, rows, 1);
+  std::array<std::uint32_t, 9> offsets{};
+  int octant = 0;
+  for (const std::uint32_t row : rows) {
+    while (octant < 7 && row >= points.octant_offsets[octant + 1]) ++octant;
+    ++offsets[octant + 1];
+  }
+  for (int o = 0; o < 8; ++o) offsets[o + 1] += offsets[o];
+  out.octant_offsets = offsets;
+  return out;
 }
 
 }  // namespace octocosm

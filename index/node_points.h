@@ -12,6 +12,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "index/cube.h"
@@ -46,5 +47,10 @@ struct NodePoints {
 // are grouped by the child octant of `key` that holds them, and fills
 // octant_offsets. Precondition: every point lies in `key` (Cube::Holds).
 void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube);
+
+// The points `rows` of `points` (ascending, each < points.size()), every
+// non-empty column, with octant_offsets counted from those of `points`: the
+// subset keeps the grouping by child octant.
+NodePoints SelectRows(const NodePoints& points, std::span<const std::uint32_t> rows);
 
 }  // namespace octocosm

@@ -24,21 +24,20 @@ const std::string& IdIndexDirectory(const Dataset& dataset) {
 
 ParticleLocator::ParticleLocator(const Dataset& dataset) : dataset_(dataset), index_(IdIndexDirectory(dataset)) {}
 
-std::vector<std::optional<ParticleState>> ParticleLocator::FindInEpoch(std::uint32_t epoch,
-                                                                       std::span<const std::uint64_t> ids,
-                                                                       bool with_velocity) {
+void ParticleLocator::ForEachLeafHolding(std::uint32_t epoch, std::span<const std::uint64_t> ids, ColumnSet columns,
+                                         std::stop_token stop, const LeafVisitor& visit) {
   if (epoch >= dataset_.epoch_count()) {
     throw Error::InvalidArgument("epoch " + std::to_string(epoch) + " is out of range: the store has " +
                                  std::to_string(dataset_.epoch_count()) + " epoch(s)");
   }
-  std::vector<std::optional<ParticleState>> found(ids.size());
   std::map<std::uint64_t, std::vector<std::size_t>> by_leaf;  // leaf key -> positions in `ids`
   for (std::size_t i = 0; i < ids.size(); ++i) {
     if (const auto leaf = index_.Find(epoch, ids[i])) by_leaf[leaf->value()].push_back(i);
   }
-  ColumnSet columns = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kId);
-  if (with_velocity) columns |= ColumnBit(ColumnId::kVelocity);
+  columns |= ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kId);
+  std::vector<std::pair<std::size_t, std::uint32_t>> matches;  // (position in `ids`, row)
   for (const auto& [leaf_value, wanted] : by_leaf) {
+    if (stop.stop_requested()) return;
     const NodeKey leaf = NodeKey::FromValue(leaf_value);
     const std::optional<IndexEntry> entry = dataset_.store().Lookup({epoch, leaf_value});
     if (!entry) {
@@ -50,36 +49,56 @@ std::vector<std::optional<ParticleState>> ParticleLocator::FindInEpoch(std::uint
     if (points.id.size() != block.header.point_count) {
       throw Error::Corruption(dataset_.Where(epoch, leaf), "the ID index points here but the block has no id column");
     }
-    std::unordered_map<std::uint64_t, std::size_t> row_of;
+    std::unordered_map<std::uint64_t, std::uint32_t> row_of;
     row_of.reserve(points.id.size());
-    for (std::size_t r = points.id.size(); r-- > 0;) row_of[points.id[r]] = r;  // the first row wins, as in the index
+    for (std::size_t r = points.id.size(); r-- > 0;) row_of[points.id[r]] = static_cast<std::uint32_t>(r);  // the first row wins, as in the index
+    matches.clear();
     for (std::size_t i : wanted) {
       const auto row = row_of.find(ids[i]);
       if (row == row_of.end()) {
         throw Error::Corruption(dataset_.Where(epoch, leaf),
                                 "the ID index says particle " + std::to_string(ids[i]) + " is here, but it is not");
       }
+      matches.emplace_back(i, row->second);
+    }
+    visit(leaf, points, matches);
+  }
+}
+
+std::vector<std::optional<ParticleState>> ParticleLocator::FindInEpoch(std::uint32_t epoch,
+                                                                       std::span<const std::uint64_t> ids,
+                                                                       bool with_velocity) {
+  std::vector<std::optional<ParticleState>> found(ids.size());
+  const ColumnSet columns = with_velocity ? ColumnBit(ColumnId::kVelocity) : 0;
+  ForEachLeafHolding(epoch, ids, columns, {}, [&](NodeKey leaf, const NodePoints& points, const Matches& matches) {
+    for (const auto& [i, row] : matches) {
       ParticleState state;
       state.id = ids[i];
       state.epoch = epoch;
       state.leaf = leaf;
-      for (int a = 0; a < 3; ++a) state.position[a] = points.position[3 * row->second + a];
+      for (int a = 0; a < 3; ++a) state.position[a] = points.position[3 * row + a];
       if (!points.velocity.empty()) {
         state.has_velocity = true;
-        for (int a = 0; a < 3; ++a) state.velocity[a] = points.velocity[3 * row->second + a];
+        for (int a = 0; a < 3; ++a) state.velocity[a] = points.velocity[3 * row + a];
       }
       found[i] = state;
     }
-  }
+  });
   return found;
 }
 
-std::vector<std::optional<ParticleState>> ParticleLocator::Trajectory(std::uint64_t id, bool with_velocity) {
-  std::vector<std::optional<ParticleState>> path;
-  for (std::uint32_t e = 0; e < dataset_.epoch_count(); ++e) {
-    path.push_back(FindInEpoch(e, std::span<const std::uint64_t>(&id, 1), with_velocity)[0]);
-  }
-  return path;
+std::vector<LeafSubset> ParticleLocator::LeafSubsetsInEpoch(std::uint32_t epoch, std::span<const std::uint64_t> ids,
+                                                            ColumnSet columns, std::stop_token stop) {
+  std::vector<LeafSubset> subsets;
+  std::vector<std::uint32_t> rows;
+  ForEachLeafHolding(epoch, ids, columns, stop, [&](NodeKey leaf, const NodePoints& points, const Matches& matches) {
+    rows.clear();
+    for (const auto& match : matches) rows.push_back(match.second);
+    std::sort(rows.begin(), rows.end());
+    rows.erase(std::unique(rows.begin(), rows.end()), rows.end());  // an ID asked for twice is drawn once
+    subsets.push_back({leaf, SelectRows(points, rows)});
+  });
+  return subsets;
 }
 
 ParticleIdCollection ParticleIdsInRegion(const Dataset& dataset, std::uint32_t epoch, const Region& region,

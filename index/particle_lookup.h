@@ -1,5 +1,5 @@
-// Particle-ID look-ups: where a particle is in one epoch, or in every epoch
-// (its trajectory). The ID index (index/id_index.h) names the leaf that holds
+// Particle-ID look-ups: where particles are in one epoch, or their rows as
+// stored. The ID index (index/id_index.h) names the leaf that holds
 // the ID; only that leaf's id and position columns (and velocity, when asked)
 // are read, and each leaf once however many of the IDs asked for it holds.
 #pragma once
@@ -7,6 +7,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <stop_token>
@@ -15,9 +16,16 @@
 #include "index/column_reader.h"
 #include "index/dataset.h"
 #include "index/id_index.h"
+#include "index/node_points.h"
 #include "index/region.h"
 
 namespace octocosm {
+
+// Some rows of one leaf, all the columns asked for.
+struct LeafSubset {
+  NodeKey leaf;
+  NodePoints points;  // grouped by child octant like the leaf's (SelectRows)
+};
 
 struct ParticleState {
   std::uint64_t id = 0;
@@ -40,12 +48,25 @@ class ParticleLocator {
   // that does not hold the ID.
   std::vector<std::optional<ParticleState>> FindInEpoch(std::uint32_t epoch, std::span<const std::uint64_t> ids,
                                                         bool with_velocity);
-  // The particle in every epoch (nullopt where it is missing).
-  std::vector<std::optional<ParticleState>> Trajectory(std::uint64_t id, bool with_velocity);
+  // The particles of `ids` that `epoch` holds, as stored at full detail:
+  // for each leaf that holds some, those rows with the columns in `columns`
+  // (position and id always) that the store has; in leaf key order. What a
+  // renderer draws over any level of detail to show a selection exactly.
+  // Returns what was read so far when `stop` is requested. Throws like
+  // FindInEpoch.
+  std::vector<LeafSubset> LeafSubsetsInEpoch(std::uint32_t epoch, std::span<const std::uint64_t> ids,
+                                             ColumnSet columns, std::stop_token stop = {});
 
   const ReadCounters& reads() const { return reads_; }
 
  private:
+  using Matches = std::vector<std::pair<std::size_t, std::uint32_t>>;  // (position in the IDs asked for, row)
+  using LeafVisitor = std::function<void(NodeKey leaf, const NodePoints& points, const Matches& matches)>;
+  // Reads each leaf of `epoch` holding some of `ids` once (`columns`, with
+  // position and id) and hands it to `visit` with the rows of those IDs.
+  void ForEachLeafHolding(std::uint32_t epoch, std::span<const std::uint64_t> ids, ColumnSet columns,
+                          std::stop_token stop, const LeafVisitor& visit);
+
   const Dataset& dataset_;
   IdIndexReader index_;
   ReadCounters reads_;

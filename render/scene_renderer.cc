@@ -94,6 +94,8 @@ void SceneRenderer::UseColumns(ColumnSet columns) {
 }
 
 void SceneRenderer::SetSelection(std::span<const std::uint64_t> ids) {
+  overlays_.clear();
+  selected_ids_.reset();
   if (ids.empty()) {
     selection_.reset();
     return;
@@ -101,6 +103,22 @@ void SceneRenderer::SetSelection(std::span<const std::uint64_t> ids) {
   auto selection = std::make_unique<SelectionSet>(ids);
   selection->Upload();
   selection_ = std::move(selection);
+  if (dataset_.has_id_index()) selected_ids_ = std::make_shared<const std::vector<std::uint64_t>>(ids.begin(), ids.end());
+}
+
+SelectionOverlay* SceneRenderer::Overlay(std::uint32_t epoch) {
+  if (!selected_ids_) return nullptr;
+  for (const auto& overlay : overlays_) {
+    if (overlay->epoch() == epoch && overlay->columns() == columns_) return overlay.get();
+  }
+  overlays_.push_back(std::make_unique<SelectionOverlay>(dataset_, epoch, selected_ids_, columns_));
+  return overlays_.back().get();
+}
+
+void SceneRenderer::KeepOverlays(std::span<const std::uint32_t> epochs) {
+  std::erase_if(overlays_, [&](const std::unique_ptr<SelectionOverlay>& overlay) {
+    return overlay->columns() != columns_ || std::find(epochs.begin(), epochs.end(), overlay->epoch()) == epochs.end();
+  });
 }
 
 void SceneRenderer::SetColorMode(ColorMode color) { options_.color = color; }
@@ -194,15 +212,20 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     }
   }
   wanted = needed;
+  std::vector<std::uint32_t> overlay_epochs;
+  for (const Copy& c : copies) overlay_epochs.push_back(c.epoch);
   if (look_ahead && !complete) {
     const std::uint32_t ahead = copies.back().epoch + 1;
     if (ahead < dataset_.epoch_count()) {
+      overlay_epochs.push_back(ahead);
       LodOptions lod = options_.lod;
       const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, lod);
       for (std::int32_t node : next.load_order) wanted.push_back({ahead, hierarchy(ahead).node(node).key.value()});
     }
   }
   prefetcher_->Submit(wanted);
+  KeepOverlays(overlay_epochs);
+  for (const std::uint32_t epoch : overlay_epochs) Overlay(epoch);  // started early: the look-up reads leaves
   stats.select_ms = Milliseconds(clock);
 
   // Upload what has arrived (or, for a complete frame, wait for it).
@@ -234,6 +257,25 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     ++stats.blocks_uploaded;
     stats.bytes_uploaded += gpu_.at(Key(id)).block.gpu_bytes();
   }
+  // The selected particles at full detail, once looked up for every epoch drawn.
+  std::vector<const SelectionOverlay*> overlays;
+  if (selected_ids_) {
+    for (const Copy& c : copies) {
+      SelectionOverlay* overlay = Overlay(c.epoch);
+      bool ready = false;
+      if (complete) {
+        ready = overlay->Ready(true);
+      } else {
+        try {
+          ready = overlay->Ready(false);
+        } catch (const Error& e) {
+          last_error_ = e.what();
+        }
+      }
+      if (ready) overlays.push_back(overlay);
+    }
+    stats.highlight_exact = overlays.size() == copies.size();
+  }
   stats.upload_ms = Milliseconds(clock);
 
   // Draw.
@@ -249,8 +291,10 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     settings.box_size = box.size;
   }
   splat_.BeginFrame(view, settings);
-  splat_.SetSelection((columns_ & ColumnBit(ColumnId::kId)) ? selection_.get() : nullptr);
-  for (const Copy& c : copies) {
+  const bool probe_ids = !stats.highlight_exact && (columns_ & ColumnBit(ColumnId::kId));
+  splat_.SetSelection(probe_ids ? selection_.get() : nullptr);
+  for (std::size_t copy = 0; copy < copies.size(); ++copy) {
+    const Copy& c = copies[copy];
     const NodeHierarchy& h = hierarchy(c.epoch);
     const auto resident = [&](std::int32_t node) -> const Resident* {
       const auto it = gpu_.find(Key(id_of(c, node)));
@@ -265,6 +309,13 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     stats.points_drawn += plan.points;
     stats.draws += plan.ranges.size();
     stats.stand_ins += plan.stand_ins;
+    if (stats.highlight_exact) {
+      splat_.SetHighlightOnly(true);
+      for (const GpuBlock& block : overlays[copy]->blocks()) splat_.Draw(block, 0, block.point_count());
+      splat_.SetHighlightOnly(false);
+      stats.points_highlighted += overlays[copy]->points();
+      stats.draws += overlays[copy]->blocks().size();
+    }
   }
   stats.draw_ms = Milliseconds(clock);
 
@@ -272,6 +323,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   ++frame_;
   stats.gpu_blocks = gpu_.size();
   stats.gpu_bytes = gpu_bytes_;
+  for (const auto& overlay : overlays_) stats.gpu_bytes += overlay->gpu_bytes();
   return stats;
 }
 

@@ -22,6 +22,13 @@
 // and in at the opposite one. The point budget is shared between the two in
 // proportion to their weights. Without links the nearest epoch is shown.
 //
+// Selections. The particles selected by ID are highlighted exactly at any
+// level of detail: they are looked up through the ID index and drawn at full
+// detail into the highlight channel (render/selection_overlay.h), while the
+// level of detail draws the density and attributes of everything. Until that
+// look-up has finished (streamed frames after a new selection or epoch) the
+// points of the level of detail whose ID is selected are highlighted instead.
+//
 // Two ways to render: Complete() waits for every block the frame selects
 // (headless pictures, tests, benchmarks); Stream() never waits for the disk
 // (the viewer), drawing what is loaded and queueing the rest.
@@ -41,6 +48,7 @@
 #include "index/node_hierarchy.h"
 #include "render/draw_plan.h"
 #include "render/gpu_block.h"
+#include "render/selection_overlay.h"
 #include "render/selection_set.h"
 #include "render/splat_renderer.h"
 #include "storage/block_cache.h"
@@ -73,6 +81,10 @@ struct FrameStats {
   std::uint64_t gpu_blocks = 0;       // resident on the GPU after the frame
   std::uint64_t gpu_bytes = 0;
   bool budget_reached = false;
+  // The selected particles drawn at full detail over the level of detail
+  // (highlight_exact), or false while they are looked up.
+  bool highlight_exact = false;
+  std::uint64_t points_highlighted = 0;
   Interpolation interpolation = Interpolation::kNone;
   double select_ms = 0, upload_ms = 0, draw_ms = 0;
 };
@@ -93,6 +105,8 @@ class SceneRenderer {
   FrameStats Stream(const RenderView& view, double time, bool look_ahead);
 
   // Highlights these particle IDs (empty: none). Throws like SelectionSet.
+  // The exact highlight needs the store's ID index; without it only points
+  // of the level of detail can be highlighted.
   void SetSelection(std::span<const std::uint64_t> ids);
   std::size_t selection_size() const { return selection_ ? selection_->size() : 0; }
   void SetColorMode(ColorMode color);
@@ -128,6 +142,11 @@ class SceneRenderer {
   const Resident* Upload(const BlockId& id, const Bytes& bytes);
   static std::uint64_t Key(const BlockId& id) { return id.key ^ (std::uint64_t{id.epoch} << 58); }
   void EvictGpuBlocks();
+  // The selection overlay of `epoch` in the current columns, started if
+  // need be; null when there is no selection to draw that way.
+  SelectionOverlay* Overlay(std::uint32_t epoch);
+  // Drops the overlays of epochs other than these.
+  void KeepOverlays(std::span<const std::uint32_t> epochs);
 
   const Dataset& dataset_;
   SplatRenderer& splat_;
@@ -135,6 +154,8 @@ class SceneRenderer {
   double mass_unit_ = 1;
   std::vector<std::unique_ptr<NodeHierarchy>> hierarchies_;
   std::unique_ptr<SelectionSet> selection_;
+  std::shared_ptr<const std::vector<std::uint64_t>> selected_ids_;
+  std::vector<std::unique_ptr<SelectionOverlay>> overlays_;
 
   ColumnSet columns_ = 0;
   std::unique_ptr<ColumnSubsetSource> source_;

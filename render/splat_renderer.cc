@@ -150,6 +150,7 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   uniforms_.time[0] = static_cast<float>(settings.t);
   uniforms_.time[2] = static_cast<float>(settings.hermite_scale);
   uniforms_.wrap[0] = settings.box_size > 0 && settings.interpolation != Interpolation::kNone ? 1 : 0;
+  highlight_only_ = false;
   SetSelection(nullptr);
   SetCopy(1, 1);
 
@@ -161,7 +162,7 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
 
 void SplatRenderer::UploadFrameUniforms() {
   draw_state_set_ = false;
-  uniforms_.modes[2] = selection_on_ ? 1 : 0;
+  uniforms_.modes[2] = highlight_only_ ? 2 : selection_on_ ? 1 : 0;
   uniforms_.modes[3] = copy_direction_;
   uniforms_.time[1] = static_cast<float>(copy_weight_);
   glNamedBufferSubData(frame_uniforms_.get(), 0, sizeof uniforms_, &uniforms_);
@@ -176,6 +177,11 @@ void SplatRenderer::SetCopy(int direction, double weight) {
 void SplatRenderer::SetSelection(const SelectionSet* selection) {
   selection_on_ = selection != nullptr && selection->size() > 0 && selection->buffer() != 0;
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, selection_on_ ? selection->buffer() : no_selection_.get());
+  UploadFrameUniforms();
+}
+
+void SplatRenderer::SetHighlightOnly(bool on) {
+  highlight_only_ = on;
   UploadFrameUniforms();
 }
 

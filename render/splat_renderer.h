@@ -63,6 +63,11 @@ class SplatRenderer {
   // Highlights the points whose ID is in `selection` (null: none). The
   // selection must be uploaded and outlive the frame's draws.
   void SetSelection(const SelectionSet* selection);
+  // While on, the points drawn are selected particles drawn over the frame:
+  // they add their mass to the highlight channel only (the density and
+  // attribute channels already hold them, in whatever level of detail drew
+  // the rest). Off at BeginFrame.
+  void SetHighlightOnly(bool on);
   // Draws points [first, first + count) of `block`.
   void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count);
 
@@ -110,6 +115,7 @@ class SplatRenderer {
   int copy_direction_ = 1;
   double copy_weight_ = 1;
   bool selection_on_ = false;
+  bool highlight_only_ = false;
   bool draw_state_set_ = false;  // the splat pass's GL state is bound (reset by anything else)
   struct FrameUniforms {
     float right[4], up[4], forward[4], viewport[4], limits[4];

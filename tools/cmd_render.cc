@@ -39,11 +39,14 @@ struct RenderFlags {
 void PrintSummary(const RenderFlags& f, const std::string& what, const Picture& p) {
   if (f.quiet) return;
   std::fprintf(stderr,
-               "render: %s %dx%d: %llu points in %llu nodes%s, %.3f s; exposure %.4g%s\n", what.c_str(), p.rgb.width,
+               "render: %s %dx%d: %llu points in %llu nodes%s, %.3f s; exposure %.4g%s%s\n", what.c_str(), p.rgb.width,
                p.rgb.height, static_cast<unsigned long long>(p.stats.points_drawn),
                static_cast<unsigned long long>(p.stats.nodes_selected),
                p.stats.budget_reached ? " (point budget reached)" : "", p.seconds, p.tone.exposure,
-               f.scene.exposure > 0 ? "" : " (automatic)");
+               f.scene.exposure > 0 ? "" : " (automatic)",
+               p.stats.highlight_exact
+                   ? ("; " + std::to_string(p.stats.points_highlighted) + " selected particles highlighted at full detail").c_str()
+                   : "");
 }
 
 void RunRender(RenderFlags f) {  // a copy: the time flags resolve into it

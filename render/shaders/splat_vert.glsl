@@ -18,7 +18,7 @@ layout(std140, binding = 0) uniform Frame {
   vec4 u_forward;
   vec4 u_viewport;  // image width, height (pixels), guard margin (pixels), focal length (pixels)
   vec4 u_limits;    // near, far, largest blob radius, 1 / mass unit
-  ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), selection on, copy direction (+1 / -1)
+  ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), highlight (0 none, 1 selected IDs, 2 every point, alone), copy direction (+1 / -1)
   vec4 u_time;      // t in [0, 1], weight of this copy, Hermite velocity scale, unused
   ivec4 u_wrap;     // 1: moved points are wrapped into the periodic box (u_box_*), 0: not; unused x 3
 };
@@ -173,12 +173,13 @@ void main() {
   else if (mode == 2 || mode == 3) a = dot(velocity, u_forward.xyz);
   else if (mode == 4) a = float(a_type);
   float selected = 0.0;
-  if (u_modes.z != 0 && b_columns1.y >= 0) selected = IsSelected(ParticleId()) ? 1.0 : 0.0;
+  if (u_modes.z == 1 && b_columns1.y >= 0) selected = IsSelected(ParticleId()) ? 1.0 : 0.0;
 
   vec2 framebuffer = image + 2.0 * margin;
   v_center = center + margin;
   v_radius = radius;
-  v_value = (weight / normalization) * vec4(1.0, a, a * a, selected);
+  v_value = u_modes.z == 2 ? vec4(0.0, 0.0, 0.0, weight / normalization)
+                           : (weight / normalization) * vec4(1.0, a, a * a, selected);
   gl_Position = vec4(v_center / framebuffer * 2.0 - 1.0, 0.0, 1.0);
   gl_PointSize = 2.0 * radius + kSpriteGuard;
 }

@@ -240,6 +240,49 @@ TEST_F(GlRenderTest, HighlightingAMillionIdsMarksExactlyTheSelectedParticles) {
   EXPECT_EQ(Total(*renderer.Render(view, 0, {}, true).hdr, 3), 0.0);
 }
 
+// Highlighting is exact at any level of detail: the selected particles are
+// drawn at full detail into the highlight channel, so its mass image equals
+// the reference's however few points draw the rest (same tolerances as the
+// full-detail selection above), while the density channel is the level of
+// detail's own, unchanged by the selection. A streamed frame highlights
+// exactly once the look-up has finished.
+TEST_F(GlRenderTest, HighlightingIsExactAtACoarseLevelOfDetail) {
+  const Dataset d = Dataset::Open(scene->store);
+  std::vector<std::uint64_t> ids;
+  for (std::uint64_t id = 1; id <= scene->particles; id += 7) ids.push_back(id);
+  SceneOptions coarse;
+  coarse.lod.point_budget = scene->particles / 20;
+  OffscreenRenderer renderer(d, HeadlessBackend::kOsMesa, coarse);
+  for (const bool outside : {true, false}) {
+    SCOPED_TRACE(outside ? "overview" : "inside");
+    const RenderView view = outside ? Overview(d) : Inside(d);
+    renderer.scene().SetSelection({});
+    const Picture plain = renderer.Render(view, 0, {}, true);
+    renderer.scene().SetSelection(ids);
+    const Picture lod = renderer.Render(view, 0, {}, true);
+    ASSERT_LE(lod.stats.points_drawn, scene->particles / 20);
+    EXPECT_TRUE(lod.stats.highlight_exact);
+    EXPECT_EQ(lod.stats.points_highlighted, ids.size());
+    const SelectionSet selection(ids);
+    const HdrImage reference = Reference(view, &selection);
+    ASSERT_GT(Total(reference, 3), 0.05 * Total(reference, 0));
+    EXPECT_NEAR(Total(*lod.hdr, 3) / Total(reference, 3), 1, 1e-4);
+    EXPECT_LT(RelativeL1(*lod.hdr, reference, 3), 1e-3);
+    EXPECT_EQ(RelativeL1(*lod.hdr, *plain.hdr, 0), 0.0);
+  }
+
+  // Streamed: a new selection is looked up in the background.
+  renderer.scene().SetSelection(ids);
+  const RenderView view = Overview(d);
+  FrameStats streamed;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  do {
+    streamed = renderer.scene().Stream(view, 0, false);
+  } while ((!streamed.highlight_exact || streamed.blocks_missing > 0) && std::chrono::steady_clock::now() < deadline);
+  EXPECT_TRUE(streamed.highlight_exact) << renderer.scene().last_error();
+  EXPECT_EQ(streamed.points_highlighted, ids.size());
+}
+
 // The viewer's path: frames never wait for the disk. Once the root has
 // arrived every frame carries the whole mass (parents stand in for children
 // on their way: their octant ranges are a sample of the same subtree, so

@@ -37,8 +37,12 @@ void Statistics(const OverlayReport& r) {
   const FrameStats& f = r.frame;
   ImGui::Text("%.1f fps, %.1f ms a frame (select %.1f, upload %.1f, draw %.1f)", r.fps, r.frame_ms, f.select_ms,
               f.upload_ms, f.draw_ms);
-  ImGui::Text("points drawn %llu of %llu selected%s, highlighted IDs %zu", U(f.points_drawn), U(f.points_selected),
-              f.budget_reached ? " (budget reached)" : "", r.selected);
+  ImGui::Text("points drawn %llu of %llu selected%s", U(f.points_drawn), U(f.points_selected),
+              f.budget_reached ? " (budget reached)" : "");
+  if (r.selected > 0) {
+    ImGui::Text("highlighted IDs %zu: %s", r.selected,
+                f.highlight_exact ? "each particle at full detail" : "points of the level of detail (looking them up)");
+  }
   ImGui::Text("nodes %llu, stand-ins %llu, epochs drawn %u", U(f.nodes_selected), U(f.stand_ins), f.epochs_drawn);
   ImGui::Text("blocks missing %llu, uploaded %llu (%s)", U(f.blocks_missing), U(f.blocks_uploaded),
               HumanBytes(static_cast<double>(f.bytes_uploaded)).c_str());
