@@ -145,7 +145,8 @@ Manifest Manifest::Parse(std::string_view text, const std::string& path) {
   nlohmann::json json;
   try {
     json = nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& error) {
+  } catch (const nlohmann::json::exception& error) {
+    // A syntax error, or a number beyond a double's range (1e400).
     throw Error::Corruption(path, std::string("bad manifest: not valid JSON: ") + error.what());
   }
   return FromJson(json, path);

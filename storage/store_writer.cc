@@ -1,5 +1,12 @@
 #include "storage/store_writer.h"
 
+#include <fcntl.h>
+#include <stdio.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
 #include <random>
 
@@ -20,7 +27,54 @@ bool IsStoreFileName(const std::string& name) {
   return name.rfind(kManifestFileName, 0) == 0 || name.rfind("epoch-", 0) == 0;
 }
 
+// The lock file, and the file it is made under before it is renamed into
+// place.
+bool IsWriterLockFileName(const std::string& name) { return name.rfind(kWriterLockFileName, 0) == 0; }
+
+// A directory holding writer files and nothing else: a nested store.
+bool HoldsOnlyStoreFiles(const std::string& directory) {
+  const std::vector<std::string> names = ListDirectory(directory);
+  if (names.empty()) return false;  // nothing says it is ours
+  for (const std::string& name : names) {
+    if (!IsStoreFileName(name) && !IsWriterLockFileName(name)) return false;
+    if (IsDirectory(JoinPath(directory, name))) return false;
+  }
+  return true;
+}
+
+// "pid 1234", as the writer wrote it into its lock file; "" if unreadable.
+std::string LockOwner(int fd) {
+  char text[64] = {};
+  const ssize_t got = ::pread(fd, text, sizeof text - 1, 0);
+  std::string owner(text, got > 0 ? static_cast<std::size_t>(got) : 0);
+  while (!owner.empty() && (owner.back() == '\n' || owner.back() == ' ')) owner.pop_back();
+  return owner;
+}
+
 }  // namespace
+
+void RemoveUnfinishedStore(const std::string& directory) noexcept {
+  try {
+    if (PathExists(JoinPath(directory, kManifestFileName))) return;
+    std::vector<std::string> locks;
+    for (const std::string& name : ListDirectory(directory)) {
+      const std::string path = JoinPath(directory, name);
+      if (IsDirectory(path)) {
+        if (!HoldsOnlyStoreFiles(path)) continue;
+        for (const std::string& inner : ListDirectory(path)) RemoveFileQuietly(JoinPath(path, inner));
+        ::rmdir(path.c_str());
+      } else if (IsWriterLockFileName(name)) {
+        locks.push_back(path);
+      } else if (IsStoreFileName(name)) {
+        RemoveFileQuietly(path);
+      }
+    }
+    // Last, so that whatever remains after a failure still reads as abandoned.
+    for (const std::string& path : locks) RemoveFileQuietly(path);
+  } catch (...) {
+    // Best effort: a later writer finds whatever remains.
+  }
+}
 
 StoreWriter::StoreWriter(std::string directory, nlohmann::json dataset, nlohmann::json attribute_schema,
                          StoreWriterOptions options)
@@ -30,15 +84,19 @@ StoreWriter::StoreWriter(std::string directory, nlohmann::json dataset, nlohmann
                                  " is not a power of two in [4096, 16777216]");
   }
   if (!dataset.is_object()) throw Error::InvalidArgument("store dataset metadata must be a JSON object");
+  created_directory_ = !IsDirectory(directory_);
   CreateDirectories(directory_);
+  RemoveAbandonedWrite();
   // Never write over another store, finished or not: its manifest would
-  // otherwise describe files this writer is replacing.
+  // otherwise describe files this writer is replacing. Files without the
+  // lock file may be anyone's: not this writer's to remove.
   for (const std::string& name : ListDirectory(directory_)) {
     if (IsStoreFileName(name)) {
       throw Error::InvalidArgument(directory_ + " already holds store file " + name +
                                    "; remove the old store (or its leftovers) first");
     }
   }
+  LockDirectory();
   manifest_.store_id = options.store_id != 0 ? options.store_id : RandomStoreId();
   manifest_.page_size = options.page_size;
   manifest_.dataset = std::move(dataset);
@@ -46,7 +104,91 @@ StoreWriter::StoreWriter(std::string directory, nlohmann::json dataset, nlohmann
 }
 
 StoreWriter::~StoreWriter() {
-  if (!finished_) RemoveCreatedFiles();
+  if (finished_) return;
+  RemoveCreatedFiles();
+  UnlockDirectory();
+  if (created_directory_) ::rmdir(directory_.c_str());  // only if nothing else is in it
+}
+
+void StoreWriter::RemoveAbandonedWrite() {
+  const std::string lock_path = JoinPath(directory_, kWriterLockFileName);
+  for (;;) {
+    const int fd = ::open(lock_path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+      if (errno == ENOENT) return;
+      throw IoErrorFromErrno(lock_path, "opening the lock file of an earlier store writer", errno);
+    }
+    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int error = errno;
+      const std::string owner = LockOwner(fd);
+      ::close(fd);
+      if (error == EWOULDBLOCK) {
+        throw Error::InvalidArgument(directory_ + " is being written by another process" +
+                                     (owner.empty() ? std::string() : " (" + owner + ")") +
+                                     "; wait for it to finish, or stop it first");
+      }
+      throw IoErrorFromErrno(lock_path, "locking the lock file of an earlier store writer", error);
+    }
+    // Between the open and the lock another writer may have cleared this
+    // lock file away and made its own: then look again.
+    struct stat held {}, current {};
+    if (::fstat(fd, &held) != 0 || ::stat(lock_path.c_str(), &current) != 0 || held.st_ino != current.st_ino ||
+        held.st_dev != current.st_dev) {
+      ::close(fd);
+      continue;
+    }
+    // Its writer is dead. A finished store (killed after the commit, before
+    // the lock file went) keeps everything but that file.
+    if (PathExists(JoinPath(directory_, kManifestFileName))) {
+      RemoveFileQuietly(lock_path);
+    } else {
+      RemoveUnfinishedStore(directory_);
+    }
+    ::close(fd);
+    return;
+  }
+}
+
+void StoreWriter::LockDirectory() {
+  const std::string lock_path = JoinPath(directory_, kWriterLockFileName);
+  // Made and locked under another name, then linked into place: whoever
+  // finds the lock file finds it locked while its writer lives, and link
+  // fails, rather than replaces, if another writer got there first.
+  std::string unlocked_path = lock_path + ".XXXXXX";
+  const int fd = ::mkostemp(unlocked_path.data(), O_CLOEXEC);
+  if (fd < 0) throw IoErrorFromErrno(unlocked_path, "creating the store writer's lock file", errno);
+  const std::string owner = "pid " + std::to_string(::getpid()) + "\n";
+  int error = 0;
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0 ||
+      ::write(fd, owner.data(), owner.size()) != static_cast<ssize_t>(owner.size())) {
+    error = errno;
+  } else if (::link(unlocked_path.c_str(), lock_path.c_str()) != 0) {
+    error = errno;
+    // File systems without hard links: a rename that refuses to replace.
+    if ((error == EPERM || error == EOPNOTSUPP) &&
+        ::renameat2(AT_FDCWD, unlocked_path.c_str(), AT_FDCWD, lock_path.c_str(), RENAME_NOREPLACE) == 0) {
+      error = 0;
+    }
+  }
+  ::unlink(unlocked_path.c_str());
+  if (error != 0) {
+    ::close(fd);
+    if (error == EEXIST) {
+      throw Error::InvalidArgument(directory_ + " is being written by another process (its " + kWriterLockFileName +
+                                   " appeared just now)");
+    }
+    throw IoErrorFromErrno(lock_path, "creating the store writer's lock file", error);
+  }
+  lock_fd_ = fd;
+}
+
+void StoreWriter::UnlockDirectory() noexcept {
+  if (lock_fd_ < 0) return;
+  // Removed before it is unlocked, so that nobody takes a lock file that is
+  // about to go for an abandoned one.
+  RemoveFileQuietly(JoinPath(directory_, kWriterLockFileName));
+  ::close(lock_fd_);
+  lock_fd_ = -1;
 }
 
 void StoreWriter::RemoveCreatedFiles() noexcept {
@@ -125,6 +267,7 @@ void StoreWriter::Finish() {
   SyncDirectory(directory_);
   finished_bytes_ += text.size();
   finished_ = true;
+  UnlockDirectory();
 }
 
 std::uint64_t StoreWriter::bytes_written() const {

@@ -4,6 +4,13 @@
 // created (temporary ones and finished page files), so an interrupted ingest
 // leaves nothing that could be mistaken for a store.
 //
+// A writer killed outright removes nothing. So while it writes, the directory
+// holds a lock file (kWriterLockFileName) that the writer keeps locked
+// (flock; the kernel releases it when the process dies, however it dies). A
+// later writer into the same directory that finds the lock file unlocked
+// knows the store as abandoned and removes what it left (RemoveUnfinishedStore)
+// before it starts.
+//
 //   StoreWriter writer(dir, dataset_json, schema_json);
 //   writer.BeginEpoch(/*time=*/0.5, /*redshift=*/1.0);
 //   writer.AddBlock(key, bytes, point_count);   // any key order
@@ -26,6 +33,17 @@
 
 namespace octocosm {
 
+// Present while a writer works on the directory (docs/FORMAT.md 1.1).
+inline constexpr char kWriterLockFileName[] = "incomplete.lock";
+
+// Removes what an unfinished writer leaves in `directory`: page files and
+// temporary files, subdirectories that hold nothing but those (a nested store
+// such as the ID index's, finished or not), and last the writer's lock file.
+// Leaves every other file alone, and does nothing where manifest.json exists
+// (a finished store). Does not look at the lock: for a caller that knows the
+// writer is gone, or is the writer. Never throws.
+void RemoveUnfinishedStore(const std::string& directory) noexcept;
+
 struct StoreWriterOptions {
   std::uint32_t page_size = kDefaultPageSize;
   // 0: draw a random id (the normal case). Tests fix it to build two stores
@@ -35,9 +53,11 @@ struct StoreWriterOptions {
 
 class StoreWriter {
  public:
-  // Creates `directory` if needed. kInvalidArgument if it already holds store
-  // files (manifest.json or epoch page files, finished or temporary), if the
-  // page size is invalid, or if `dataset` is not a JSON object.
+  // Creates `directory` if needed. If it holds an abandoned unfinished store
+  // (its lock file unlocked), removes that first. kInvalidArgument if another
+  // writer is at work there, if it holds store files without that lock file
+  // (manifest.json or epoch page files, finished or temporary), if the page
+  // size is invalid, or if `dataset` is not a JSON object.
   StoreWriter(std::string directory, nlohmann::json dataset, nlohmann::json attribute_schema,
               StoreWriterOptions options = {});
   StoreWriter(const StoreWriter&) = delete;
@@ -67,6 +87,9 @@ class StoreWriter {
  private:
   void RequireUnfinished(const char* operation) const;
   void RemoveCreatedFiles() noexcept;
+  void RemoveAbandonedWrite();
+  void LockDirectory();
+  void UnlockDirectory() noexcept;
 
   const std::string directory_;
   Manifest manifest_;
@@ -75,6 +98,8 @@ class StoreWriter {
   std::vector<std::string> created_files_;  // finished page files, removed if never committed
   std::uint64_t finished_bytes_ = 0;
   bool finished_ = false;
+  bool created_directory_ = false;
+  int lock_fd_ = -1;  // holds the flock on kWriterLockFileName
 };
 
 }  // namespace octocosm

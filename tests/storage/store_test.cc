@@ -1,8 +1,13 @@
 // Stores: multi-epoch round trips, the manifest, interrupted writes, a
 // manifest that disagrees with its page files, and concurrent readers.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <atomic>
+#include <filesystem>
+#include <fstream>
 #include <chrono>
 #include <map>
 #include <random>
@@ -299,6 +304,9 @@ TEST(StoreManifest, MalformedManifests) {
   WriteStore(dir.path(), 4096, 1, 5, 5);
   std::ofstream(dir.File(kManifestFileName), std::ios::trunc) << "{\"format\": ";
   expect_mentions(ExpectError(ErrorKind::kCorruption, [&] { StoreReader::Open(dir.path()); }), "not valid JSON");
+  // Valid JSON syntax, but a number no double holds: still the manifest's fault, named.
+  std::ofstream(dir.File(kManifestFileName), std::ios::trunc) << "{\"page_size\": 1e400}";
+  expect_mentions(ExpectError(ErrorKind::kCorruption, [&] { StoreReader::Open(dir.path()); }), "1e400");
 }
 
 TEST(StoreManifest, PageFileFromAnotherStore) {
@@ -379,6 +387,134 @@ TEST(StoreConcurrency, EightThreadsReadExactData) {
   ReaderStats stats = store.stats();
   EXPECT_GT(stats.index_page_reads, 0u);
   EXPECT_GT(stats.index_cache_hits, 0u);
+}
+
+// The files directly in `directory`, sorted.
+std::vector<std::string> Entries(const std::string& directory) {
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(directory)) names.push_back(entry.path().filename());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+void WriteText(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
+
+TEST(StoreWriter, HoldsALockFileWhileWritingAndRemovesItWhenDone) {
+  ScratchDirectory dir;
+  const std::string lock = dir.File(kWriterLockFileName);
+  {
+    StoreWriter writer(dir.path(), kDataset, kSchema);
+    EXPECT_TRUE(std::filesystem::exists(lock));
+    writer.BeginEpoch(0, 0);
+    writer.EndEpoch();
+    writer.Finish();
+    EXPECT_FALSE(std::filesystem::exists(lock));
+  }
+  EXPECT_EQ(Entries(dir.path()), (std::vector<std::string>{"epoch-00000.pages", "manifest.json"}));
+
+  ScratchDirectory abandoned;
+  {
+    StoreWriter writer(abandoned.path() + "/store", kDataset, kSchema);
+    writer.BeginEpoch(0, 0);
+  }
+  EXPECT_FALSE(std::filesystem::exists(abandoned.path() + "/store")) << "a directory the writer made goes with it";
+}
+
+TEST(StoreWriter, RefusesADirectoryAnotherWriterIsWriting) {
+  ScratchDirectory dir;
+  StoreWriter first(dir.path(), kDataset, kSchema);
+  first.BeginEpoch(0, 0);
+  first.EndEpoch();
+  const std::string message = ExpectError(ErrorKind::kInvalidArgument, [&] { StoreWriter(dir.path(), kDataset, kSchema); });
+  EXPECT_NE(message.find("is being written by another process (pid " + std::to_string(::getpid()) + ")"),
+            std::string::npos)
+      << message;
+  first.Finish();  // the refused writer touched nothing of the first's
+  EXPECT_EQ(StoreReader::Open(dir.path()).epoch_count(), 1u);
+}
+
+// A writer killed outright (as by kill -9) leaves its files; the next writer
+// into the directory finds its lock file unlocked and removes them, and
+// nothing else.
+TEST(StoreWriter, RemovesWhatAKilledWriterLeft) {
+  ScratchDirectory dir;
+  const std::string store = dir.File("store");
+  std::filesystem::create_directories(store);
+  WriteText(store + "/notes.txt", "not the writer's");
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    StoreWriter writer(store, kDataset, kSchema);
+    StoreWriter nested(store + "/ids", kDataset, kSchema);
+    nested.BeginEpoch(0, 0);
+    nested.EndEpoch();
+    nested.Finish();
+    writer.BeginEpoch(0, 0);
+    writer.EndEpoch();
+    writer.BeginEpoch(1, 0);  // its page file still under the temporary name
+    ::kill(::getpid(), SIGKILL);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+  EXPECT_EQ(Entries(store), (std::vector<std::string>{"epoch-00000.pages", "epoch-00001.pages.tmp", "ids",
+                                                      kWriterLockFileName, "notes.txt"}));
+  ExpectError(ErrorKind::kCorruption, [&] { StoreReader::Open(store); });
+
+  {
+    StoreWriter writer(store, kDataset, kSchema);
+    EXPECT_EQ(Entries(store), (std::vector<std::string>{kWriterLockFileName, "notes.txt"}));
+    writer.BeginEpoch(0, 0);
+    writer.EndEpoch();
+    writer.Finish();
+  }
+  EXPECT_EQ(StoreReader::Open(store).epoch_count(), 1u);
+  EXPECT_EQ(Entries(store), (std::vector<std::string>{"epoch-00000.pages", "manifest.json", "notes.txt"}));
+}
+
+TEST(StoreWriter, LeavesStoreFilesAloneThatNoLockFileClaims) {
+  ScratchDirectory dir;
+  WriteText(dir.File("epoch-00000.pages"), "someone's");
+  const std::string message = ExpectError(ErrorKind::kInvalidArgument, [&] { StoreWriter(dir.path(), kDataset, kSchema); });
+  EXPECT_NE(message.find("already holds store file epoch-00000.pages"), std::string::npos) << message;
+  EXPECT_EQ(Entries(dir.path()), std::vector<std::string>{"epoch-00000.pages"});
+
+  // A finished store whose writer died before removing its lock file: the
+  // store stays; only the lock file goes.
+  ScratchDirectory finished;
+  {
+    StoreWriter writer(finished.path(), kDataset, kSchema);
+    writer.Finish();
+  }
+  WriteText(finished.File(kWriterLockFileName), "pid 1\n");
+  ExpectError(ErrorKind::kInvalidArgument, [&] { StoreWriter(finished.path(), kDataset, kSchema); });
+  EXPECT_EQ(Entries(finished.path()), std::vector<std::string>{"manifest.json"});
+  StoreReader::Open(finished.path());
+}
+
+TEST(StoreWriter, RemoveUnfinishedStoreKeepsOtherFilesAndFinishedStores) {
+  ScratchDirectory dir;
+  WriteText(dir.File("epoch-00000.pages"), "x");
+  WriteText(dir.File("manifest.json.tmp"), "x");
+  WriteText(dir.File(kWriterLockFileName), "pid 1\n");
+  WriteText(dir.File("notes.txt"), "x");
+  std::filesystem::create_directories(dir.File("ids"));
+  WriteText(dir.File("ids/epoch-00000.pages"), "x");
+  std::filesystem::create_directories(dir.File("mine"));
+  WriteText(dir.File("mine/epoch-00000.pages"), "x");
+  WriteText(dir.File("mine/photo.jpg"), "x");
+  std::filesystem::create_directories(dir.File("empty"));
+  RemoveUnfinishedStore(dir.path());
+  EXPECT_EQ(Entries(dir.path()), (std::vector<std::string>{"empty", "mine", "notes.txt"}));
+  EXPECT_EQ(Entries(dir.File("mine")), (std::vector<std::string>{"epoch-00000.pages", "photo.jpg"}));
+
+  ScratchDirectory finished;
+  {
+    StoreWriter writer(finished.path(), kDataset, kSchema);
+    writer.Finish();
+  }
+  RemoveUnfinishedStore(finished.path());
+  StoreReader::Open(finished.path());
 }
 
 }  // namespace
