@@ -61,10 +61,12 @@ Interpolation SceneRenderer::InterpolationAvailable(std::uint32_t epoch) const {
   return Interpolation::kLinear;
 }
 
-ColumnSet SceneRenderer::ColumnsFor(Interpolation interpolation) const {
+ColumnSet SceneRenderer::ColumnsFor(Interpolation interpolation, bool complete) const {
   ColumnSet c = kCoreColumns;
   if (ColorModeNeedsVelocity(options_.color)) c |= ColumnBit(ColumnId::kVelocity);
-  if (selection_ && selection_->size() > 0) c |= ColumnBit(ColumnId::kId);
+  // The level of detail needs IDs only to highlight its own points, which a
+  // complete frame never does when the selection can be looked up.
+  if (selection_ && selection_->size() > 0 && !(complete && selected_ids_)) c |= ColumnBit(ColumnId::kId);
   if (interpolation != Interpolation::kNone) c |= ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kPrevDisplacement);
   if (interpolation == Interpolation::kHermite) {
     c |= ColumnBit(ColumnId::kVelocity) | ColumnBit(ColumnId::kNextVelocity) | ColumnBit(ColumnId::kPrevVelocity);
@@ -197,7 +199,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
 
   // Blocks wanted, most important first: coarse before fine, the two copies
   // interleaved; then, when playing, the next interval's.
-  UseColumns(ColumnsFor(stats.interpolation));
+  UseColumns(ColumnsFor(stats.interpolation, complete));
   std::vector<BlockId> wanted;
   std::vector<BlockId> needed;  // what this frame draws
   const auto id_of = [&](const Copy& c, std::int32_t node) {

@@ -137,7 +137,7 @@ class SceneRenderer {
 
   FrameStats Render(const RenderView& view, double time, bool complete, bool look_ahead);
   std::vector<Copy> PlanCopies(double time, FrameStats& stats) const;
-  ColumnSet ColumnsFor(Interpolation interpolation) const;
+  ColumnSet ColumnsFor(Interpolation interpolation, bool complete) const;
   void UseColumns(ColumnSet columns);
   const Resident* Upload(const BlockId& id, const Bytes& bytes);
   static std::uint64_t Key(const BlockId& id) { return id.key ^ (std::uint64_t{id.epoch} << 58); }
