@@ -1,7 +1,7 @@
 // The snapshot-reading flags shared by `octocosm ingest` and
 // `octocosm render --reference` (which must read a snapshot exactly as ingest
-// did): --format, --types, --box-size, --raw-layout, --no-velocity, --no-ids,
-// --no-snapshot-smoothing, --chunk-particles.
+// did): --format, --types, --box-size, --ignore-box, --raw-layout,
+// --no-velocity, --no-ids, --no-snapshot-smoothing, --chunk-particles.
 #pragma once
 
 #include <cstddef>
@@ -17,7 +17,8 @@ namespace octocosm {
 
 struct ReadFlags {
   std::string format = "auto", raw_layout, types;
-  double box_size = -1;
+  double box_size = -1;  // negative: not given
+  bool ignore_box = false;
   bool no_velocity = false, no_ids = false, no_snapshot_smoothing = false;
   std::size_t chunk_particles = std::size_t{1} << 16;
 };

@@ -21,6 +21,7 @@
 #include "index/subtree_builder.h"
 #include "storage/error.h"
 #include "storage/store_reader.h"
+#include "tools/read_flags.h"
 #include "tools/snapshot/snapshot_source.h"
 #include "tools/store_verify.h"
 #include "tests/tools/gadget_test_file.h"
@@ -519,11 +520,12 @@ std::string WriteGadgetSet(const fs::path& dir, const std::string& name, const s
 // A GADGET snapshot in this machine's byte order is mapped, not copied
 // (ResidentEpoch::Map); its other-endian twin is read through the source.
 // Both give the same store, and so does a mapped snapshot with a point the
-// read must wrap into the box, which makes ingest read it instead.
+// read must wrap into the box (a little outside it), which makes ingest read
+// it instead.
 TEST_F(IngestTest, MappedAndReadGadgetSnapshotsGiveTheSameStore) {
   static_assert(std::endian::native == std::endian::little, "the mapped files are written little-endian");
   auto particles = Clustered(30000, 12, 100.0);
-  particles[20000].x[2] = 37.5;  // a float, and one box over (below) exactly too
+  particles[20000].x[2] = 0.5;  // a float, and one box over (below) exactly too
   IngestOptions mapped = Options({WriteGadgetSet(dir_, "little", particles, false)}, "mapped");
   mapped.tree.capacity = 500;
   mapped.neighbours = 0;  // a neighbour pass hands out the lengths with copied chunks
@@ -543,7 +545,7 @@ TEST_F(IngestTest, MappedAndReadGadgetSnapshotsGiveTheSameStore) {
   EXPECT_EQ(reference.leaf_points.size(), particles.size());
   EXPECT_EQ(FirstDifference(CheckTree(Dataset::Open(mapped.output), 0), reference), "");
 
-  particles[20000].x[2] = 137.5;
+  particles[20000].x[2] = 100.5;  // outside the box, within kPeriodicBoxTolerance of it
   IngestOptions outside = mapped;
   outside.inputs = {WriteGadgetSet(dir_, "outside", particles, false)};
   outside.output = (dir_ / "outside").string();
@@ -786,6 +788,126 @@ TEST_F(IngestTest, MalformedInputLeavesNoStoreAndNoTemporaryFiles) {
   Ingest(o);
   EXPECT_THROW(Ingest(o), Error);
   EXPECT_NO_THROW(Dataset::Open(o.output));
+}
+
+// Expects `run` to throw BadInput whose message holds each of `parts`.
+template <typename Run>
+void ExpectBadInputFrom(Run run, const std::vector<std::string>& parts) {
+  try {
+    run();
+    ADD_FAILURE() << "no error (expected \"" << parts.back() << "\")";
+  } catch (const Error& error) {
+    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
+    for (const std::string& part : parts) EXPECT_NE(std::string(error.what()).find(part), std::string::npos) << error.what();
+  }
+}
+
+// Particle IDs must be unique, whichever way ingest gathers them: the ID
+// table (IDs in a compact range), sorted ID pairs (IDs far apart) or the
+// sorted epochs of a series. The error names the file and a repeated ID, and
+// nothing is left behind; --no-ids ingests the particles without them.
+TEST_F(IngestTest, DuplicateIdsAreRefusedNamingTheFileAndAnId) {
+  auto particles = Clustered(6000, 31, 50.0);
+  particles[4000].id = particles[17].id;
+  const std::string repeated = "ID " + std::to_string(particles[17].id) + " is given to more than one particle";
+  const std::string dense = WriteRaw(dir_ / "dense.raw", particles);
+  auto wide_particles = particles;
+  for (std::size_t i = 0; i < wide_particles.size(); ++i) wide_particles[i].id = (std::uint64_t{1} << 50) + (i << 30);
+  wide_particles[4000].id = wide_particles[17].id;
+  const std::string wide = WriteRaw(dir_ / "wide.raw", wide_particles);
+  const std::string wide_repeated = "ID " + std::to_string(wide_particles[17].id) + " is given to more than one";
+  const std::string clean = WriteRaw(dir_ / "clean.raw", Clustered(6000, 32, 50.0));
+  struct Case {
+    std::vector<std::string> inputs;
+    std::vector<std::string> message;
+  };
+  const Case cases[] = {{{dense}, {dense, repeated}},
+                        {{wide}, {wide, wide_repeated}},
+                        {{clean, dense}, {dense, repeated, "(1 repeats in all)", "--no-ids"}}};
+  for (const Case& c : cases) {
+    IngestOptions o = RawOptions(c.inputs, "store");
+    o.neighbours = 0;
+    SCOPED_TRACE(c.inputs.back());
+    ExpectBadInputFrom([&] { Ingest(o); }, c.message);
+    EXPECT_FALSE(fs::exists(o.output));
+    EXPECT_TRUE(TempIsEmpty());
+  }
+  IngestOptions without = RawOptions({dense}, "without_ids");
+  without.read.read_id = false;
+  without.neighbours = 0;
+  EXPECT_EQ(Ingest(without).input_points, particles.size());
+  EXPECT_TRUE(VerifyStore(without.output).faults.empty());
+}
+
+// A periodic box that does not hold the particles (beyond 1% of it) stops
+// the ingest before a store is made, naming the file, the box and a
+// particle; --ignore-box takes the particles' bounds instead and --box-size
+// the box given.
+TEST_F(IngestTest, ParticlesOutsideThePeriodicBoxAreAnErrorUnlessTheBoxIsOverridden) {
+  auto particles = Clustered(8000, 33, 100.0);
+  particles[5000].x[0] = 150;
+  const std::string input = WriteGadgetSet(dir_, "outside", particles, false);
+  IngestOptions o = Options({input}, "store");
+  o.tree.capacity = 500;
+  ExpectBadInputFrom([&] { Ingest(o); }, {input + ".1", "lies at (150, ", "periodic box [0, 100)^3"});
+  EXPECT_FALSE(fs::exists(o.output));
+  EXPECT_TRUE(TempIsEmpty());
+
+  IngestOptions ignoring = o;
+  ignoring.read.ignore_box = true;
+  Ingest(ignoring);
+  const Dataset unboxed = Dataset::Open(ignoring.output);
+  EXPECT_FALSE(unboxed.cube(0).periodic);
+  EXPECT_EQ(CheckTree(unboxed, 0).leaf_points.size(), particles.size());
+
+  IngestOptions boxed = o;
+  boxed.output = (dir_ / "boxed").string();
+  boxed.read.box_size_override = 200;
+  Ingest(boxed);
+  const Dataset big_box = Dataset::Open(boxed.output);
+  EXPECT_TRUE(big_box.cube(0).periodic);
+  EXPECT_EQ(big_box.cube(0).size, 200);
+  EXPECT_EQ(CheckTree(big_box, 0).leaf_points.size(), particles.size());
+}
+
+// An epoch refused after others were written leaves no store behind, even
+// in an output directory that was there before.
+TEST_F(IngestTest, AnEpochRefusedLateLeavesNoStore) {
+  const auto good = Clustered(5000, 34, 100.0);
+  auto bad = Clustered(5000, 35, 100.0);
+  bad[100].x[1] = -20;
+  IngestOptions o = Options({WriteGadgetSet(dir_, "good", good, false), WriteGadgetSet(dir_, "bad", bad, false)}, "store");
+  o.read.read_id = false;  // epochs one after the other: epoch 0 is written before epoch 1 is read
+  o.neighbours = 0;
+  fs::create_directories(o.output);
+  ExpectBadInputFrom([&] { Ingest(o); }, {(dir_ / "bad.0").string(), "lies at ("});
+  EXPECT_THROW(Dataset::Open(o.output), Error);
+  EXPECT_TRUE(fs::is_empty(o.output)) << fs::directory_iterator(o.output)->path();
+  EXPECT_TRUE(TempIsEmpty());
+}
+
+// --box-size and --ignore-box as ingest and render --reference read them.
+TEST(ReadFlags, BoxFlagsBecomeReadOptionsOrAnError) {
+  ReadFlags flags;
+  EXPECT_LT(ReadOptionsFrom(flags).box_size_override, 0);
+  EXPECT_FALSE(ReadOptionsFrom(flags).ignore_box);
+  flags.box_size = 250;
+  EXPECT_EQ(ReadOptionsFrom(flags).box_size_override, 250);
+  flags.ignore_box = true;
+  EXPECT_THROW(ReadOptionsFrom(flags), Error) << "both";
+  flags.box_size = -1;
+  EXPECT_TRUE(ReadOptionsFrom(flags).ignore_box);
+  flags.ignore_box = false;
+  for (const double bad : {std::nan(""), HUGE_VAL, -5.0}) {
+    flags.box_size = bad;
+    try {
+      ReadOptionsFrom(flags);
+      ADD_FAILURE() << bad;
+    } catch (const Error& error) {
+      EXPECT_EQ(error.kind(), ErrorKind::kInvalidArgument);
+      EXPECT_NE(std::string(error.what()).find("--box-size"), std::string::npos) << error.what();
+    }
+  }
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 // BadInput error naming the file and the problem.
 #include <hdf5.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -366,6 +367,200 @@ TEST(Hdf5Reader, CorruptFileIsBadInputNotACrash) {
     WriteFile(dir.File("cut.hdf5"), bytes.substr(0, n));
     ExpectBadInput(dir.File("cut.hdf5"), "");
   }
+}
+
+// ---- Numbers from an untrusted header, and datasets bounded before they are read ----
+
+// A file of `n` type-1 particles: header attributes as given, then the
+// datasets the caller writes.
+void WriteHdf5Header(Hdf5Writer& w, std::uint64_t n, double box = 250, double time = 0.25) {
+  w.Attribute<std::uint64_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT64, {0, n});
+  w.Attribute<std::uint64_t>("Header", "NumPart_Total", H5T_NATIVE_UINT64, {0, n});
+  w.Attribute<double>("Header", "MassTable", H5T_NATIVE_DOUBLE, {0.0, 4.0});
+  w.Attribute<double>("Header", "BoxSize", H5T_NATIVE_DOUBLE, {box});
+  w.Attribute<double>("Header", "Time", H5T_NATIVE_DOUBLE, {time});
+}
+
+TEST(Hdf5Reader, HeaderNumbersMustBeFinite) {
+  ScratchDir dir;
+  const double nan = std::nan("");
+  struct Case {
+    const char* name;
+    const char* attribute;
+    std::vector<double> value;
+    const char* message;
+  };
+  const Case cases[] = {
+      {"box_nan", "BoxSize", {nan}, "BoxSize is nan"},
+      {"box_negative", "BoxSize", {-250}, "BoxSize is -250"},
+      {"box_vector_nan", "BoxSize", {250, nan, 250}, "BoxSize is nan"},
+      {"time_nan", "Time", {nan}, "Time is nan"},
+      {"redshift_inf", "Redshift", {HUGE_VAL}, "Redshift is inf"},
+      {"omega_nan", "Omega0", {nan}, "Omega0 is nan"},
+      {"table_nan", "MassTable", {0, nan}, "MassTable holds nan"},
+  };
+  for (const Case& c : cases) {
+    const std::string path = dir.File(std::string(c.name) + ".hdf5");
+    {
+      Hdf5Writer w(path);
+      w.Attribute<std::uint64_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT64, {0, 2});
+      for (const char* name : {"BoxSize", "Time", "Redshift", "Omega0", "MassTable"}) {
+        if (std::strcmp(name, c.attribute) == 0) {
+          w.Attribute<double>("Header", name, H5T_NATIVE_DOUBLE, c.value);
+        } else {
+          w.Attribute<double>("Header", name, H5T_NATIVE_DOUBLE, std::strcmp(name, "MassTable") == 0
+                                                                      ? std::vector<double>{0, 4}
+                                                                      : std::vector<double>{0.5});
+        }
+      }
+      w.Dataset<double>("PartType1/Coordinates", H5T_NATIVE_DOUBLE, {0.25, 0.25, 0.25, 0.3, 0.3, 0.3}, 3);
+    }
+    SCOPED_TRACE(c.name);
+    ExpectBadInput(path, c.message);
+  }
+}
+
+TEST(Hdf5Reader, ParticlesFarOutsideThePeriodicBoxAreAnError) {
+  ScratchDir dir;
+  {
+    Hdf5Writer w(dir.File("snap.hdf5"));
+    WriteHdf5Header(w, 2, 1000);
+    w.Dataset<double>("PartType1/Coordinates", H5T_NATIVE_DOUBLE, {10, 20, 30, 40000, 50000, 20}, 3);
+  }
+  ExpectBadInput(dir.File("snap.hdf5"), "PartType1 particle 1 lies at (40000, 50000, 20), more than 1% of the box "
+                                        "outside the periodic box [0, 1000)^3 of header field BoxSize");
+  ReadOptions ignoring;
+  ignoring.ignore_box = true;
+  EXPECT_EQ(ReadAll(*OpenSnapshot(dir.File("snap.hdf5"), ignoring)).size(), 2u);
+  ReadOptions boxed;
+  boxed.box_size_override = 50000;
+  EXPECT_EQ(ReadAll(*OpenSnapshot(dir.File("snap.hdf5"), boxed)).size(), 2u);
+}
+
+TEST(Hdf5Reader, SignedIdsAreReadAndNegativeOnesRefused) {
+  ScratchDir dir;
+  for (const bool negative : {false, true}) {
+    const std::string path = dir.File(negative ? "negative.hdf5" : "signed.hdf5");
+    {
+      Hdf5Writer w(path);
+      WriteHdf5Header(w, 3);
+      w.Dataset<double>("PartType1/Coordinates", H5T_NATIVE_DOUBLE, {1, 1, 1, 2, 2, 2, 3, 3, 3}, 3);
+      w.Dataset<std::int64_t>("PartType1/ParticleIDs", H5T_NATIVE_INT64,
+                              {5, negative ? -7 : (std::int64_t{1} << 40), 9}, 1);
+    }
+    if (negative) {
+      ExpectBadInput(path, "PartType1 particle 1 has a negative ID (-7) in dataset /PartType1/ParticleIDs");
+    } else {
+      EXPECT_EQ(ReadAll(*OpenSnapshot(path, {})).id, (std::vector<std::uint64_t>{5, std::uint64_t{1} << 40, 9}));
+    }
+  }
+}
+
+TEST(Hdf5Reader, CountsMustBeWholeNumbersAtLeastZero) {
+  ScratchDir dir;
+  {
+    Hdf5Writer w(dir.File("snap.hdf5"));
+    w.Attribute<std::int32_t>("Header", "NumPart_ThisFile", H5T_NATIVE_INT32, {0, -3});
+    w.Attribute<double>("Header", "MassTable", H5T_NATIVE_DOUBLE, {0.0, 4.0});
+  }
+  ExpectBadInput(dir.File("snap.hdf5"), "attribute /Header/NumPart_ThisFile holds -3");
+  {
+    Hdf5Writer w(dir.File("float.hdf5"));
+    w.Attribute<double>("Header", "NumPart_ThisFile", H5T_NATIVE_DOUBLE, {0, 2.5});
+  }
+  ExpectBadInput(dir.File("float.hdf5"), "a count must be a whole number");
+}
+
+// Writes dataset PartType1/Coordinates of `rows` x 3 doubles with the
+// creation properties `dcpl`, and the first `written` rows of values.
+void WriteCoordinates(const std::string& path, std::uint64_t rows, hid_t dcpl, std::uint64_t written) {
+  {
+    Hdf5Writer w(path);
+    WriteHdf5Header(w, rows);
+    w.Attribute<double>("PartType1", "unused", H5T_NATIVE_DOUBLE, {0});  // makes the group
+  }
+  hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  hsize_t dims[2] = {rows, 3};
+  hid_t space = H5Screate_simple(2, dims, nullptr);
+  hid_t dataset = H5Dcreate2(file, "PartType1/Coordinates", H5T_NATIVE_DOUBLE, space, H5P_DEFAULT, dcpl, H5P_DEFAULT);
+  ASSERT_GE(dataset, 0);
+  if (written > 0) {
+    std::vector<double> values(3 * written, 1.0);
+    hsize_t start[2] = {0, 0}, count[2] = {written, 3};
+    H5Sselect_hyperslab(space, H5S_SELECT_SET, start, nullptr, count, nullptr);
+    hid_t memory = H5Screate_simple(2, count, nullptr);
+    EXPECT_GE(H5Dwrite(dataset, H5T_NATIVE_DOUBLE, memory, space, H5P_DEFAULT, values.data()), 0);
+    H5Sclose(memory);
+  }
+  H5Dclose(dataset);
+  H5Sclose(space);
+  H5Fclose(file);
+}
+
+// A small file declaring 2^33 particles is refused at open, before libhdf5
+// reads (or makes up) a value: a dataset holds no more bytes than the file,
+// nor, compressed, more than 2048 times what it stores.
+TEST(Hdf5Reader, DeclaredCountsTheFileCannotHoldAreRefusedAtOnce) {
+  ScratchDir dir;
+  const std::uint64_t huge = std::uint64_t{1} << 33;
+  const auto start = std::chrono::steady_clock::now();
+  {
+    // Contiguous, never written: no storage at all.
+    WriteCoordinates(dir.File("contiguous.hdf5"), huge, H5P_DEFAULT, 0);
+    ExpectBadInput(dir.File("contiguous.hdf5"), "stores none of them (never written)");
+  }
+  hid_t chunked = H5Pcreate(H5P_DATASET_CREATE);
+  hsize_t chunk[2] = {1024, 3};
+  H5Pset_chunk(chunked, 2, chunk);
+  WriteCoordinates(dir.File("chunked.hdf5"), huge, chunked, 0);
+  ExpectBadInput(dir.File("chunked.hdf5"), "stores none of them (never written)");
+  WriteCoordinates(dir.File("one_chunk.hdf5"), huge, chunked, 1024);
+  ExpectBadInput(dir.File("one_chunk.hdf5"), "stores only 24576 bytes");
+  // A small chunked dataset partly written: the unwritten rows would be fill values.
+  WriteCoordinates(dir.File("partly.hdf5"), 4096, chunked, 1024);
+  ExpectBadInput(dir.File("partly.hdf5"), "stores only 24576 bytes");
+  // Chunks of more than 256 MiB are not allocated for libhdf5.
+  hid_t big_chunks = H5Pcreate(H5P_DATASET_CREATE);
+  hsize_t big_chunk[2] = {std::uint64_t{1} << 24, 3};
+  H5Pset_chunk(big_chunks, 2, big_chunk);
+  WriteCoordinates(dir.File("big_chunks.hdf5"), huge, big_chunks, 0);
+  ExpectBadInput(dir.File("big_chunks.hdf5"), "stored in chunks of");
+  H5Pclose(big_chunks);
+  // Compressed, one chunk written: far beyond what deflate can do.
+  H5Pset_shuffle(chunked);
+  H5Pset_deflate(chunked, 6);
+  WriteCoordinates(dir.File("deflated_chunk.hdf5"), huge, chunked, 1024);
+  ExpectBadInput(dir.File("deflated_chunk.hdf5"), "2048:1 compressed");
+  // Compressed, fully written data reads back.
+  WriteCoordinates(dir.File("deflated.hdf5"), 5000, chunked, 5000);
+  EXPECT_EQ(ReadAll(*OpenSnapshot(dir.File("deflated.hdf5"), {})).size(), 5000u);
+  H5Pclose(chunked);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 30.0);
+}
+
+// A filter not built into libhdf5 (one it would look for among plugins) is
+// not used: here LZ4's registered number, set optional so that the writer
+// may skip it.
+TEST(Hdf5Reader, FiltersOutsideTheBuiltInOnesAreRefused) {
+  ScratchDir dir;
+  hid_t plugin = H5Pcreate(H5P_DATASET_CREATE);
+  hsize_t chunk[2] = {2, 3};
+  H5Pset_chunk(plugin, 2, chunk);
+  ASSERT_GE(H5Pset_filter(plugin, 32004, H5Z_FLAG_OPTIONAL, 0, nullptr), 0);
+  WriteCoordinates(dir.File("plugin.hdf5"), 2, plugin, 2);
+  H5Pclose(plugin);
+  ExpectBadInput(dir.File("plugin.hdf5"), "uses filter 32004");
+}
+
+// Values that would come from outside the file are not read.
+TEST(Hdf5Reader, ExternalStorageIsRefused) {
+  ScratchDir dir;
+  hid_t external = H5Pcreate(H5P_DATASET_CREATE);
+  ASSERT_GE(H5Pset_external(external, "/dev/zero", 0, 2 * 3 * sizeof(double)), 0);
+  WriteCoordinates(dir.File("external.hdf5"), 2, external, 0);
+  H5Pclose(external);
+  ExpectBadInput(dir.File("external.hdf5"), "keeps its values in external files");
 }
 
 // ----------------------------------------------------------------- raw ----

@@ -1,10 +1,13 @@
 // GADGET reader tests on files written here: round trips of every variant the
 // reader supports (format 1/2, both byte orders, 4/8-byte reals and IDs, mass
 // table vs MASS block, multi-file) and the malformed inputs it must reject.
+#include <sys/stat.h>
+
 #include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 
@@ -162,8 +165,9 @@ TEST(GadgetReader, NoMappableSegmentsWhereAColumnIsNotAPlainFloatArray) {
   spec.real_bytes = 8;
   EXPECT_EQ(mappable(spec, dark_matter), 0u) << "double positions";
   spec.real_bytes = 4;
-  spec.mass_table[1] = -2.5;
-  EXPECT_EQ(mappable(spec, dark_matter), 0u) << "a negative table mass (which Next() reports)";
+  spec.mass_table[1] = -2.5;  // refused at open: no segment is given out
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
+  ExpectBadInput(dir.File("snap"), "header field mass[1] (the mass table) is -2.5", dark_matter);
 }
 
 // A format 2 file's HSML block holds one smoothing length per gas (type 0)
@@ -464,6 +468,128 @@ TEST(GadgetReader, MissingSnapshotIsNotFound) {
   } catch (const Error& error) {
     EXPECT_EQ(error.kind(), ErrorKind::kNotFound);
     EXPECT_NE(std::string(error.what()).find("nothing.0"), std::string::npos) << error.what();
+  }
+}
+
+// ---- Numbers from an untrusted header, and particles outside its box ----
+
+TEST(GadgetReader, HeaderNumbersMustBeFinite) {
+  ScratchDir dir;
+  const double nan = std::nan(""), inf = HUGE_VAL;
+  struct Case {
+    const char* name;
+    void (*spoil)(GadgetSpec&, double);
+    double value;
+    const char* field;
+  };
+  const Case cases[] = {
+      {"box_nan", [](GadgetSpec& s, double v) { s.box = v; }, nan, "BoxSize is nan"},
+      {"box_inf", [](GadgetSpec& s, double v) { s.box = v; }, inf, "BoxSize is inf"},
+      {"box_negative", [](GadgetSpec& s, double v) { s.box = v; }, -100, "BoxSize is -100"},
+      {"time_nan", [](GadgetSpec& s, double v) { s.time = v; }, nan, "time is nan"},
+      {"redshift_inf", [](GadgetSpec& s, double v) { s.redshift = v; }, inf, "redshift is inf"},
+      {"table_nan", [](GadgetSpec& s, double v) { s.mass_table[1] = v; }, nan, "mass[1]"},
+      {"table_negative", [](GadgetSpec& s, double v) { s.mass_table[1] = v; }, -2.5, "mass[1]"},
+  };
+  for (const Case& c : cases) {
+    GadgetSpec spec = SmallSpec();
+    c.spoil(spec, c.value);
+    WriteBytes(dir.File(c.name), EncodeGadget(spec));
+    ExpectBadInput(dir.File(c.name), c.field);
+  }
+  // A junk table entry of a type the file does not hold is not used.
+  GadgetSpec spec = SmallSpec();
+  spec.mass_table[4] = nan;
+  WriteBytes(dir.File("junk"), EncodeGadget(spec));
+  EXPECT_EQ(ReadAll(*OpenSnapshot(dir.File("junk"), {})).size(), 7u);
+}
+
+TEST(GadgetReader, ParticlesFarOutsideThePeriodicBoxAreAnError) {
+  ScratchDir dir;
+  GadgetSpec spec = SmallSpec();  // positions up to 62.25
+  spec.box = 50;
+  WriteBytes(dir.File("small_box"), EncodeGadget(spec));
+  ExpectBadInput(dir.File("small_box"), "outside the periodic box [0, 50)^3 of header field BoxSize");
+  ExpectBadInput(dir.File("small_box"), "particle type 1 particle 2 (ID 105) lies at (50.25, 51.25, 52.25)");
+  // The user's box replaces it; --ignore-box makes the data non-periodic.
+  ReadOptions boxed;
+  boxed.box_size_override = 100;
+  auto source = OpenSnapshot(dir.File("small_box"), boxed);
+  EXPECT_EQ(source->header().box_size, 100);
+  EXPECT_EQ(source->header().extra["box_size_in_header"], 50);
+  EXPECT_EQ(ReadAll(*source).size(), 7u);
+  ReadOptions ignoring;
+  ignoring.ignore_box = true;
+  source = OpenSnapshot(dir.File("small_box"), ignoring);
+  EXPECT_EQ(source->header().box_size, 0);
+  EXPECT_EQ(ReadAll(*source).size(), 7u);
+  // A user's box is held to the same tolerance.
+  ReadOptions too_small;
+  too_small.box_size_override = 20;
+  ExpectBadInput(dir.File("small_box"), "the box size given (--box-size)", too_small);
+  // Within 1% of the box outside, particles are taken (ingest wraps them).
+  spec.box = 62;  // 62.25 is 0.4% over
+  spec.position[0] = -0.5;  // 0.8% under
+  WriteBytes(dir.File("near"), EncodeGadget(spec));
+  EXPECT_EQ(ReadAll(*OpenSnapshot(dir.File("near"), {})).size(), 7u);
+  spec.position[0] = -0.7;  // 1.1% under
+  WriteBytes(dir.File("under"), EncodeGadget(spec));
+  ExpectBadInput(dir.File("under"), "lies at (-0.7, 1.25, 2.25)");
+}
+
+TEST(GadgetReader, BoxOptionsThatContradictEachOther) {
+  ScratchDir dir;
+  WriteBytes(dir.File("snap"), EncodeGadget(SmallSpec()));
+  ReadOptions both;
+  both.box_size_override = 10;
+  both.ignore_box = true;
+  ReadOptions nan_box;
+  nan_box.box_size_override = std::nan("");
+  for (const ReadOptions& options : {both, nan_box}) {
+    try {
+      OpenSnapshot(dir.File("snap"), options);
+      ADD_FAILURE();
+    } catch (const Error& error) {
+      EXPECT_EQ(error.kind(), ErrorKind::kInvalidArgument) << error.what();
+    }
+  }
+}
+
+// A directory, a device or a FIFO is said to be what it is, for every format,
+// and a FIFO is never opened (the open would wait for a writer).
+TEST(SnapshotFiles, NonRegularFilesAreNamedForWhatTheyAre) {
+  ScratchDir dir;
+  std::filesystem::create_directories(dir.File("a_directory"));
+  const std::string fifo = dir.File("a_fifo");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  struct Case {
+    std::string path;
+    const char* kind;
+  };
+  const Case cases[] = {{dir.File("a_directory"), "is a directory, not a snapshot file"},
+                        {"/dev/null", "is a character device, not a snapshot file"},
+                        {"/dev/zero", "is a character device, not a snapshot file"},
+                        {fifo, "is a FIFO (named pipe), not a snapshot file"}};
+  for (const Case& c : cases) {
+    for (const char* format : {"auto", "gadget", "hdf5", "raw", "csv"}) {
+      ReadOptions options;
+      options.format = format;
+      options.raw = RawLayout::Parse("xyz:f32");
+      SCOPED_TRACE(c.path + " as " + format);
+      ExpectBadInput(c.path, c.kind, options);
+    }
+  }
+  // A member of a multi-file set too.
+  GadgetSpec spec = SmallSpec();
+  spec.num_files = 2;
+  WriteBytes(dir.File("set.0"), EncodeGadget(spec));
+  std::filesystem::create_directories(dir.File("set.1"));
+  try {
+    OpenSnapshot(dir.File("set.0"), {});
+    ADD_FAILURE() << "a directory taken as set.1";
+  } catch (const Error& error) {
+    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
+    EXPECT_NE(std::string(error.what()).find(dir.File("set.1") + ": is a directory"), std::string::npos) << error.what();
   }
 }
 

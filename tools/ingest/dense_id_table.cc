@@ -24,7 +24,10 @@ void IdCensus::Add(std::span<const std::uint64_t> ids) {
     }
     std::uint64_t& word = words_[bit >> 6];
     const std::uint64_t mask = std::uint64_t{1} << (bit & 63);
-    if ((word & mask) != 0) return GiveUp();  // a duplicate: pairs must be sorted
+    if ((word & mask) != 0) {  // a duplicate
+      repeated_id_ = id;
+      return GiveUp();
+    }
     word |= mask;
     min_ = std::min(min_, id);
     max_ = std::max(max_, id);

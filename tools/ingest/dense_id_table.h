@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <shared_mutex>
 #include <span>
 #include <vector>
@@ -37,6 +38,9 @@ class IdCensus {
   std::uint64_t first() const { return min_; }
   std::uint64_t span() const { return count_ == 0 ? 0 : max_ - min_ + 1; }
   std::uint64_t count() const { return count_; }
+  // An ID seen twice, when that is what made dense() false; IDs repeated
+  // after the census gave up for the span are not seen.
+  std::optional<std::uint64_t> repeated_id() const { return repeated_id_; }
 
  private:
   void GiveUp();
@@ -50,6 +54,7 @@ class IdCensus {
   bool dense_ = true;
   std::uint64_t count_ = 0;
   std::uint64_t min_ = 0, max_ = 0;
+  std::optional<std::uint64_t> repeated_id_;
   std::uint64_t base_ = 0;  // the ID of bit 0 of words_[0]; a multiple of 64
   std::vector<std::uint64_t> words_;
 };

@@ -80,7 +80,7 @@ SortedEpoch::SortedEpoch(ParticleSource& source, const std::string& temp_prefix,
   bool first = true;
   std::uint64_t previous = 0;
   while (reader.Next(r)) {
-    if (!first && r.key == previous) ++duplicate_ids_;
+    if (!first && r.key == previous && duplicate_ids_++ == 0) first_duplicate_id_ = r.key;
     previous = r.key;
     first = false;
   }

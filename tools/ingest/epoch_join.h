@@ -68,6 +68,8 @@ class SortedEpoch {
   bool has_velocity() const { return has_velocity_; }
   bool has_smoothing() const { return smoothing_sorter_ != nullptr; }
   std::uint64_t duplicate_ids() const { return duplicate_ids_; }
+  // The first repeated ID in ID order, for messages; meaningful when duplicate_ids() > 0.
+  std::uint64_t first_duplicate_id() const { return first_duplicate_id_; }
   const ExternalSorter<ParticleRecord>& sorter() const { return sorter_; }
   // The particles' smoothing lengths, in the order of sorter()'s records;
   // only when has_smoothing().
@@ -79,6 +81,7 @@ class SortedEpoch {
   Bounds bounds_;
   bool has_velocity_ = false;
   std::uint64_t duplicate_ids_ = 0;
+  std::uint64_t first_duplicate_id_ = 0;
 };
 
 // The Hermite velocity scale of an epoch pair. A renderer draws a particle

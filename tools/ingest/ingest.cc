@@ -135,6 +135,18 @@ std::string LinkFilePath(const std::string& temp_dir, std::size_t epoch) {
   return temp_dir + "/links-" + std::to_string(epoch);
 }
 
+// Particle IDs must be unique: the ID index and the links between epochs find
+// a particle by its ID. `repeats` is how many repeat, 0 when not known.
+[[noreturn]] void RefuseDuplicateIds(const SnapshotHeader& header, std::uint64_t id, std::uint64_t repeats) {
+  const std::size_t files = header.files.size();
+  const std::string where = files > 1 ? " (in the snapshot's " + std::to_string(files) + " files)" : "";
+  const std::string count = repeats > 0 ? " (" + std::to_string(repeats) + " repeats in all)" : "";
+  throw Error::BadInput(header.files.front(),
+                        "ID " + std::to_string(id) + " is given to more than one particle" + where + count +
+                            "; particle IDs must be unique, since the ID index and the links between epochs find a "
+                            "particle by its ID: ingest with --no-ids to leave the IDs out");
+}
+
 bool InsideBox(const ParticleChunk& chunk, const Cube& cube) {
   for (std::size_t i = 0; i < chunk.position.size(); ++i) {
     const double t = chunk.position[i] - cube.origin[i % 3];
@@ -420,6 +432,7 @@ IngestReport Ingest(const IngestOptions& options) {
     Progress progress("epoch " + std::to_string(e) + ": sort by ID", s.header().total_count, "points");
     auto sorted = std::make_unique<SortedEpoch>(s, temp.path() + "/sorted-" + std::to_string(e), sort_run_records,
                                                 [&](std::uint64_t n) { progress.Add(n); });
+    if (sorted->duplicate_ids() > 0) RefuseDuplicateIds(s.header(), sorted->first_duplicate_id(), sorted->duplicate_ids());
     progress.Finish();
     return sorted;
   };
@@ -560,6 +573,7 @@ IngestReport Ingest(const IngestOptions& options) {
       epoch_report.mapped = resident_points.mapped();
     }
     clock.Lap("read+chunk");
+    if (has_id && id_census.repeated_id()) RefuseDuplicateIds(header, *id_census.repeated_id(), 0);
     for (const Chunk& c : chunks) epoch_report.points += c.point_count;
     epoch_report.chunks = chunks.size();
     if (!links_from_previous.empty()) std::remove(links_from_previous.c_str());
@@ -611,7 +625,11 @@ IngestReport Ingest(const IngestOptions& options) {
       } else {
         auto reader = id_pairs->Open();
         IdLeafRecord r{};
-        while (reader.Next(r)) ids.Add(r.key, NodeKey::FromValue(r.leaf));
+        for (std::uint64_t n = 0, previous = 0; reader.Next(r); ++n, previous = r.key) {
+          // What the census could not see: a repeat among IDs too far apart for its table.
+          if (n > 0 && r.key == previous) RefuseDuplicateIds(header, r.key, 0);
+          ids.Add(r.key, NodeKey::FromValue(r.leaf));
+        }
       }
       ids.Finish();
       id_store->EndEpoch();

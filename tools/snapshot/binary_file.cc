@@ -10,11 +10,16 @@
 #include <utility>
 
 #include "storage/error.h"
+#include "tools/snapshot/file_set.h"
 
 namespace octocosm {
 
 BinaryFile::BinaryFile(std::string path) : path_(std::move(path)) {
-  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  // Says what a directory, device or FIFO is before opening it (an open of a
+  // FIFO would wait for a writer); O_NONBLOCK keeps that so should one be put
+  // there meanwhile, and changes nothing for a regular file.
+  RequireRegularFile(path_);
+  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd_ < 0) {
     int error = errno;
     if (error == ENOENT) throw Error::NotFound("snapshot file " + path_);
@@ -28,7 +33,7 @@ BinaryFile::BinaryFile(std::string path) : path_(std::move(path)) {
   }
   if (!S_ISREG(info.st_mode)) {
     ::close(fd_);
-    throw Error::BadInput(path_, "not a regular file");
+    throw Error::BadInput(path_, "is not a regular file (it changed while it was opened), not a snapshot file");
   }
   size_ = static_cast<std::uint64_t>(info.st_size);
 }

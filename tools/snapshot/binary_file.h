@@ -13,7 +13,8 @@ namespace octocosm {
 
 class BinaryFile {
  public:
-  // Throws Error::NotFound when the file does not exist, Error::Io otherwise.
+  // Throws Error::NotFound when the file does not exist, Error::BadInput when
+  // it is not a regular file (RequireRegularFile), Error::Io otherwise.
   explicit BinaryFile(std::string path);
   ~BinaryFile();
   BinaryFile(BinaryFile&& other) noexcept;

@@ -9,6 +9,7 @@
 #include <map>
 
 #include "storage/error.h"
+#include "tools/snapshot/file_set.h"
 #include "tools/snapshot/segmented_source.h"
 
 namespace octocosm {
@@ -56,6 +57,7 @@ class CsvSource final : public SegmentedSource {
     if (delimiter_ != 0 && delimiter_ != ',' && delimiter_ != ' ') {
       throw Error::InvalidArgument("CSV delimiter must be ',' or ' ' (whitespace)");
     }
+    RequireRegularFile(path);
     stream_.open(path, std::ios::binary);
     if (!stream_) {
       int error = errno;
@@ -67,7 +69,7 @@ class CsvSource final : public SegmentedSource {
     header_.files = {path};
     header_.has_velocity = options.read_velocity && index_[kVx] >= 0;
     header_.has_id = options.read_id && index_[kId] >= 0;
-    header_.box_size = options.box_size_override >= 0 ? options.box_size_override : 0;
+    SetBoxSize(path, "BoxSize", 0, options);  // no header: periodic only when given
     header_.extra["csv_columns"] = names_;
 
     // Validate every row and count them, so that the header is exact before

@@ -3,6 +3,7 @@
 #include <sys/stat.h>
 
 #include <cctype>
+#include <cerrno>
 
 #include "storage/error.h"
 
@@ -12,6 +13,21 @@ namespace {
 bool IsRegularFile(const std::string& path) {
   struct stat info;
   return ::stat(path.c_str(), &info) == 0 && S_ISREG(info.st_mode);
+}
+
+bool Exists(const std::string& path) {
+  struct stat info;
+  return ::stat(path.c_str(), &info) == 0;
+}
+
+// What a non-regular file is, for messages.
+std::string KindOfFile(mode_t mode) {
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISFIFO(mode)) return "a FIFO (named pipe)";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "not a regular file";
 }
 
 bool EndsWith(const std::string& text, const std::string& tail) {
@@ -52,6 +68,17 @@ std::optional<NumberedName> ParseNumberedName(const std::string& path) {
   return name;
 }
 
+void RequireRegularFile(const std::string& path) {
+  struct stat info;
+  if (::stat(path.c_str(), &info) != 0) {
+    const int error = errno;
+    if (error == ENOENT || error == ENOTDIR) throw Error::NotFound("snapshot file " + path);
+    throw IoErrorFromErrno(path, "stat", error);
+  }
+  if (S_ISREG(info.st_mode)) return;
+  throw Error::BadInput(path, "is " + KindOfFile(info.st_mode) + ", not a snapshot file");
+}
+
 std::string LocateSnapshotFile(const std::string& path) {
   if (IsRegularFile(path)) return path;
   std::string tried = path;
@@ -60,6 +87,8 @@ std::string LocateSnapshotFile(const std::string& path) {
     if (IsRegularFile(candidate)) return candidate;
     tried += ", " + candidate;
   }
+  // Something is there, but not a file: say what rather than "not found".
+  if (Exists(path)) RequireRegularFile(path);
   throw Error::NotFound("snapshot " + path + " (tried " + tried + ")");
 }
 
@@ -83,6 +112,7 @@ std::vector<std::string> ExpandFileSet(const std::string& file, long long declar
   for (long long i = 0; i < declared; ++i) {
     std::string member = name->WithIndex(static_cast<std::size_t>(i));
     if (!IsRegularFile(member)) {
+      if (Exists(member)) RequireRegularFile(member);
       throw Error::NotFound("file " + member + " of the " + std::to_string(declared) + "-file snapshot " + file);
     }
     files.push_back(member);

@@ -26,17 +26,26 @@ struct NumberedName {
 
 std::optional<NumberedName> ParseNumberedName(const std::string& path);
 
+// Throws Error::NotFound when nothing is at `path`, and Error::BadInput
+// saying what is there ("is a directory, not a snapshot file") when it is not
+// a regular file: a directory, a device such as /dev/zero (endless bytes) or
+// a FIFO (which cannot be read twice, and blocks an open until a writer
+// comes) is never a snapshot.
+void RequireRegularFile(const std::string& path);
+
 // Returns `path` when it is an existing file, else the first existing of
 // path.0, path.0.hdf5, path.0.h5, path.hdf5. Throws Error::NotFound naming
-// every name tried.
+// every name tried, or, when nothing of those exists but `path` is a
+// directory, device or FIFO, Error::BadInput saying so.
 std::string LocateSnapshotFile(const std::string& path);
 
 // Returns every file of the set that `file` belongs to, in order. `declared`
 // is the file count its header declares; a count <= 0 (GADGET ICs often
 // leave it 0) means: every consecutively numbered file that exists, or just
 // `file` when it is not numbered. Throws Error::BadInput when the header
-// declares several files but the name is not numbered, and Error::NotFound
-// when a declared file is missing.
+// declares several files but the name is not numbered, Error::NotFound when
+// a declared file is missing, and Error::BadInput when one is not a regular
+// file.
 std::vector<std::string> ExpandFileSet(const std::string& file, long long declared);
 
 }  // namespace octocosm

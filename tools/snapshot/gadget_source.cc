@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <optional>
+#include <sstream>
 
 #include "storage/error.h"
 #include "tools/snapshot/binary_file.h"
@@ -78,6 +79,19 @@ GadgetFile DescribeFile(const std::string& path) {
   const std::uint64_t gas = static_cast<std::uint64_t>(header.npart[0]);
   if (hsml != nullptr && gas > 0 && (hsml->payload_bytes == 4 * gas || hsml->payload_bytes == 8 * gas)) {
     file.smoothing = Column{hsml->payload_offset, static_cast<std::size_t>(hsml->payload_bytes / gas)};
+  }
+  // A type's table mass is every one of its particles' mass: checked here
+  // once, for the types this file holds (the others' entries may be junk).
+  for (int t = 0; t < kGadgetTypes; ++t) {
+    const double mass = header.mass_table[t];
+    if (header.npart[t] > 0 && !(std::isfinite(mass) && mass >= 0)) {
+      std::ostringstream value;
+      value << mass;
+      throw Error::BadInput(path, "header field mass[" + std::to_string(t) + "] (the mass table) is " + value.str() +
+                                      " for the " + std::to_string(header.npart[t]) +
+                                      " particles of type " + std::to_string(t) +
+                                      "; it must be finite and > 0, or 0 for masses in the MASS block");
+    }
   }
   std::uint64_t start = 0, mass_start = 0;
   for (int t = 0; t < kGadgetTypes; ++t) {
@@ -209,16 +223,19 @@ class GadgetSource final : public SegmentedSource {
       header_.extra["smoothing_lengths_not_read"] =
           "an HSML block is missing from a file with gas, or does not hold one value per gas particle";
     }
-    header_.time = first.time;
-    header_.redshift = first.redshift;
-    header_.box_size = options.box_size_override >= 0 ? options.box_size_override : first.box_size;
-    header_.omega0 = first.omega0;
-    header_.omega_lambda = first.omega_lambda;
-    header_.hubble_param = first.hubble_param;
+    const std::string& path = files_.front().path;
+    header_.time = RequireFinite(path, "time", first.time);
+    header_.redshift = RequireFinite(path, "redshift", first.redshift);
+    SetBoxSize(path, "BoxSize", first.box_size, options);
+    header_.omega0 = RequireFinite(path, "Omega0", first.omega0);
+    header_.omega_lambda = RequireFinite(path, "OmegaLambda", first.omega_lambda);
+    header_.hubble_param = RequireFinite(path, "HubbleParam", first.hubble_param);
     // GADGET has no comoving flag in the header; a redshift or a matter density
     // is only written by cosmological runs.
     header_.cosmological = first.redshift != 0 || first.omega0 != 0;
-    if (header_.cosmological && header_.redshift == 0 && first.time > 0) header_.redshift = 1 / first.time - 1;
+    if (header_.cosmological && header_.redshift == 0 && first.time > 0) {
+      header_.redshift = RequireFinite(path, "time (1/a - 1 as the redshift)", 1 / first.time - 1);
+    }
 
     nlohmann::json& extra = header_.extra;
     extra["mass_table"] = first.mass_table;

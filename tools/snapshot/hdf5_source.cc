@@ -7,10 +7,12 @@
 #include <cstring>
 #include <numbers>
 #include <optional>
+#include <sstream>
 #include <utility>
 #include <vector>
 
 #include "storage/error.h"
+#include "tools/snapshot/binary_file.h"
 #include "tools/snapshot/file_set.h"
 #include "tools/snapshot/segmented_source.h"
 
@@ -120,9 +122,49 @@ std::optional<std::vector<double>> ReadDoubles(hid_t object, const char* name, c
   return ReadAttribute<double>(object, name, H5T_NATIVE_DOUBLE, path, group);
 }
 
+// Reads a count attribute (particle and file counts) as unsigned integers.
+// Stored as signed integers or floats (as some writers do), each value must be
+// a whole number >= 0: HDF5's conversion would otherwise make -1 a 0 and 2.5
+// a 2 without a word.
 std::optional<std::vector<std::uint64_t>> ReadCounts(hid_t object, const char* name, const std::string& path,
                                                      const std::string& group) {
-  return ReadAttribute<std::uint64_t>(object, name, H5T_NATIVE_UINT64, path, group);
+  htri_t exists = H5Aexists(object, name);
+  if (exists < 0) ThrowHdf5(path, "cannot look up attribute " + group + "/" + name);
+  if (exists == 0) return std::nullopt;
+  const std::string where = "attribute " + group + "/" + name;
+  H5T_class_t type_class = H5T_NO_CLASS;
+  H5T_sign_t sign = H5T_SGN_NONE;
+  {
+    Handle attribute(H5Aopen(object, name, H5P_DEFAULT), H5Aclose);
+    if (!attribute.valid()) ThrowHdf5(path, "cannot open " + where);
+    Handle type(H5Aget_type(attribute.get()), H5Tclose);
+    type_class = H5Tget_class(type.get());
+    if (type_class == H5T_INTEGER) sign = H5Tget_sign(type.get());
+  }
+  if (type_class == H5T_INTEGER && sign == H5T_SGN_NONE) {
+    return ReadAttribute<std::uint64_t>(object, name, H5T_NATIVE_UINT64, path, group);
+  }
+  std::optional<std::vector<double>> values;
+  std::optional<std::vector<std::int64_t>> signed_values;
+  if (type_class == H5T_INTEGER) {
+    signed_values = ReadAttribute<std::int64_t>(object, name, H5T_NATIVE_INT64, path, group);
+  } else {
+    values = ReadAttribute<double>(object, name, H5T_NATIVE_DOUBLE, path, group);
+  }
+  std::vector<std::uint64_t> counts;
+  const std::size_t n = signed_values ? signed_values->size() : values->size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double value = signed_values ? static_cast<double>((*signed_values)[i]) : (*values)[i];
+    if (!(value >= 0 && value < 0x1p63 && value == std::floor(value))) {
+      std::ostringstream text;
+      text << value;
+      throw Error::BadInput(path, where + " holds " + text.str() + " at index " + std::to_string(i) +
+                                      "; a count must be a whole number >= 0");
+    }
+    counts.push_back(signed_values ? static_cast<std::uint64_t>((*signed_values)[i])
+                                   : static_cast<std::uint64_t>(value));
+  }
+  return counts;
 }
 
 // First element of an optional attribute; `fallback` when absent or empty.
@@ -130,24 +172,43 @@ double FirstOr(const std::optional<std::vector<double>>& values, double fallback
   return values && !values->empty() ? values->front() : fallback;
 }
 
-// Shape and element class of one dataset, checked against what we expect.
+// An HDF5 file's declared shapes are checked against its size before
+// libhdf5 reads a value (docs/INPUT_FORMATS.md): a dataset cannot hold more
+// bytes than the file, and a compressed one no more than this many times the
+// bytes it has stored. Deflate's own limit is about 1032:1, so no real
+// dataset comes near; a dataset declaring more has chunks that were never
+// written (HDF5 would hand out fill values) or a count that is not true, and
+// reading it could take hours.
+constexpr double kMaxCompressionRatio = 2048;
+// The largest chunk libhdf5 may allocate for one read of a chunked dataset
+// (real files use a few MiB).
+constexpr std::uint64_t kMaxChunkBytes = std::uint64_t{256} << 20;
+
+// Shape and element type of one dataset, checked against what we expect.
 struct DatasetShape {
   bool present = false;
   int rank = 0;
   hsize_t rows = 0, columns = 1;
+  bool is_signed = false;  // a signed integer type
 };
 
-DatasetShape InspectDataset(hid_t file, const std::string& name, const std::string& path, bool integer_only) {
-  DatasetShape shape;
-  if (!LinkExists(file, name)) return shape;
+// Opens dataset `name` and checks its element type (integers of 1 to 8
+// bytes, or, unless `integer_only`, floats of 4 or 8) and rank (1 or 2).
+Handle OpenDatasetChecked(hid_t file, const std::string& name, const std::string& path, bool integer_only,
+                          DatasetShape& shape) {
   Handle dataset(H5Dopen2(file, name.c_str(), H5P_DEFAULT), H5Dclose);
   if (!dataset.valid()) ThrowHdf5(path, "cannot open dataset /" + name);
   Handle type(H5Dget_type(dataset.get()), H5Tclose);
-  H5T_class_t type_class = H5Tget_class(type.get());
-  if (type_class != H5T_INTEGER && (integer_only || type_class != H5T_FLOAT)) {
-    throw Error::BadInput(path, "dataset /" + name + " has element class " + std::to_string(type_class) +
-                                    "; expected " + (integer_only ? "integers" : "numbers"));
+  const H5T_class_t type_class = H5Tget_class(type.get());
+  const std::size_t size = H5Tget_size(type.get());
+  const bool integer = type_class == H5T_INTEGER && (size == 1 || size == 2 || size == 4 || size == 8);
+  const bool real = type_class == H5T_FLOAT && (size == 4 || size == 8);
+  if (!integer && (integer_only || !real)) {
+    throw Error::BadInput(path, "dataset /" + name + " has elements of class " + std::to_string(type_class) + ", " +
+                                    std::to_string(size) + " bytes; expected " +
+                                    (integer_only ? "integers of 1 to 8 bytes" : "integers of 1 to 8 bytes or floats of 4 or 8"));
   }
+  shape.is_signed = integer && H5Tget_sign(type.get()) == H5T_SGN_2;
   Handle space(H5Dget_space(dataset.get()), H5Sclose);
   int rank = H5Sget_simple_extent_ndims(space.get());
   if (rank < 1 || rank > 2) {
@@ -159,20 +220,98 @@ DatasetShape InspectDataset(hid_t file, const std::string& name, const std::stri
   shape.rank = rank;
   shape.rows = dims[0];
   shape.columns = rank == 2 ? dims[1] : 1;
-  return shape;
+  return dataset;
 }
 
-// Checks that dataset `name` has `rows` x `columns` values; false when absent.
-bool CheckDataset(hid_t file, const std::string& name, const std::string& path, std::uint64_t rows,
-                  hsize_t columns, bool integer_only) {
-  DatasetShape shape = InspectDataset(file, name, path, integer_only);
-  if (!shape.present) return false;
+// Checks where an opened dataset keeps its values, before anything reads
+// them: in this file (not a virtual dataset, not external raw files, whose
+// names the file could point anywhere), with only the filters built into
+// libhdf5 that particle data use, in chunks of at most kMaxChunkBytes, and
+// in no more bytes than the file has (file_bytes), and, compressed, no more
+// than kMaxCompressionRatio times what it stores.
+void CheckDatasetStorage(const Handle& dataset, const std::string& name, const std::string& path,
+                         std::uint64_t file_bytes, const DatasetShape& shape) {
+  const std::string where = "dataset /" + name;
+  Handle type(H5Dget_type(dataset.get()), H5Tclose);
+  const double element_bytes = static_cast<double>(H5Tget_size(type.get()));
+  const double values_bytes = static_cast<double>(shape.rows) * static_cast<double>(shape.columns) * element_bytes;
+  Handle plist(H5Dget_create_plist(dataset.get()), H5Pclose);
+  if (!plist.valid()) ThrowHdf5(path, "cannot read the storage properties of " + where);
+  const H5D_layout_t layout = H5Pget_layout(plist.get());
+  if (layout != H5D_COMPACT && layout != H5D_CONTIGUOUS && layout != H5D_CHUNKED) {
+    throw Error::BadInput(path, where + " is not stored in this file (layout " + std::to_string(layout) +
+                                    ", e.g. a virtual dataset); only compact, contiguous and chunked datasets are read");
+  }
+  if (H5Pget_external_count(plist.get()) != 0) {
+    throw Error::BadInput(path, where + " keeps its values in external files; only values stored in the snapshot "
+                                        "file itself are read");
+  }
+  bool compressed = false;
+  const int filters = H5Pget_nfilters(plist.get());
+  if (filters < 0) ThrowHdf5(path, "cannot list the filters of " + where);
+  for (int f = 0; f < filters; ++f) {
+    unsigned flags = 0;
+    std::size_t parameters = 0;
+    char filter_name[64] = {};
+    unsigned config = 0;
+    const H5Z_filter_t filter = H5Pget_filter2(plist.get(), static_cast<unsigned>(f), &flags, &parameters, nullptr,
+                                               sizeof filter_name, filter_name, &config);
+    if (filter == H5Z_FILTER_DEFLATE || filter == H5Z_FILTER_NBIT || filter == H5Z_FILTER_SCALEOFFSET) {
+      compressed = true;
+    } else if (filter != H5Z_FILTER_SHUFFLE && filter != H5Z_FILTER_FLETCHER32) {
+      throw Error::BadInput(path, where + " uses filter " + std::to_string(filter) + " (" + filter_name +
+                                      "); only deflate, shuffle, fletcher32, nbit and scaleoffset are read");
+    }
+  }
+  if (layout == H5D_CHUNKED) {
+    hsize_t chunk[2] = {0, 0};
+    const int rank = H5Pget_chunk(plist.get(), 2, chunk);
+    double chunk_bytes = element_bytes;
+    for (int a = 0; a < rank && a < 2; ++a) chunk_bytes *= static_cast<double>(chunk[a]);
+    if (rank < 1 || chunk_bytes > static_cast<double>(kMaxChunkBytes)) {
+      throw Error::BadInput(path, where + " is stored in chunks of " + std::to_string(chunk_bytes) +
+                                      " bytes; at most " + std::to_string(kMaxChunkBytes) + " are read");
+    }
+  }
+  if (values_bytes == 0) return;
+  const double stored = static_cast<double>(H5Dget_storage_size(dataset.get()));
+  H5Eclear2(H5E_DEFAULT);
+  auto refuse = [&](const std::string& why) {
+    throw Error::BadInput(path, "counts do not add up: " + where + " declares " + std::to_string(shape.rows) +
+                                    " x " + std::to_string(shape.columns) + " values (" +
+                                    std::to_string(static_cast<std::uint64_t>(values_bytes)) + " bytes) but " + why);
+  };
+  if (stored == 0) refuse("stores none of them (never written)");
+  if (stored > static_cast<double>(file_bytes)) {
+    refuse("claims " + std::to_string(static_cast<std::uint64_t>(stored)) + " bytes of storage in a file of " +
+           std::to_string(file_bytes) + " bytes");
+  }
+  if (!compressed && stored < values_bytes) {
+    refuse("stores only " + std::to_string(static_cast<std::uint64_t>(stored)) + " bytes");
+  }
+  if (values_bytes > kMaxCompressionRatio * stored) {
+    refuse("stores only " + std::to_string(static_cast<std::uint64_t>(stored)) + " bytes, more than " +
+           std::to_string(static_cast<int>(kMaxCompressionRatio)) +
+           ":1 compressed (chunks never written, or a false count)");
+  }
+}
+
+// Checks that dataset `name` has `rows` x `columns` values stored in the
+// file (CheckDatasetStorage); false when absent. `is_signed`, when given,
+// is set to whether its elements are signed integers.
+bool CheckDataset(hid_t file, const std::string& name, const std::string& path, std::uint64_t file_bytes,
+                  std::uint64_t rows, hsize_t columns, bool integer_only, bool* is_signed = nullptr) {
+  if (!LinkExists(file, name)) return false;
+  DatasetShape shape;
+  Handle dataset = OpenDatasetChecked(file, name, path, integer_only, shape);
   if (shape.rows != rows || shape.columns != columns) {
     throw Error::BadInput(path, "counts do not add up: dataset /" + name + " has " + std::to_string(shape.rows) +
                                     " x " + std::to_string(shape.columns) + " values; the header's NumPart_ThisFile "
                                     "declares " + std::to_string(rows) + " particles, so expected " +
                                     std::to_string(rows) + " x " + std::to_string(columns));
   }
+  CheckDatasetStorage(dataset, name, path, file_bytes, shape);
+  if (is_signed != nullptr) *is_signed = shape.is_signed;
   return true;
 }
 
@@ -181,6 +320,7 @@ struct Hdf5File {
   std::vector<std::uint64_t> this_file;  // NumPart_ThisFile
   std::vector<double> mass_table;        // MassTable, zeros when absent
   std::vector<bool> has_masses;          // per type: a Masses dataset is present
+  std::vector<bool> signed_ids;          // per type: ParticleIDs holds signed integers (negatives are refused)
   // The name of PartType0's smoothing length dataset ("SmoothingLength" in
   // GADGET-4 and AREPO, "SmoothingLengths" in SWIFT); empty when it has none
   // or none is read.
@@ -249,11 +389,25 @@ class Hdf5Source final : public SegmentedSource {
       ReadRows(velocities_, group + "/Velocities", H5T_NATIVE_FLOAT, begin, count, 3,
                chunk.velocity.data() + 3 * old);
     }
+    const Hdf5File& file = files_[segment.file];
     if (header_.has_id) {
       chunk.id.resize(old + count);
-      ReadRows(ids_, group + "/ParticleIDs", H5T_NATIVE_UINT64, begin, count, 1, chunk.id.data() + old);
+      std::uint64_t* ids = chunk.id.data() + old;
+      // Signed IDs are read as such, so that a negative one is seen (HDF5's
+      // conversion to unsigned would make it 0), and then taken as they are.
+      const bool is_signed = file.signed_ids[static_cast<std::size_t>(segment.type)];
+      ReadRows(ids_, group + "/ParticleIDs", is_signed ? H5T_NATIVE_INT64 : H5T_NATIVE_UINT64, begin, count, 1, ids);
+      if (is_signed) {
+        for (std::size_t i = 0; i < count; ++i) {
+          const auto id = static_cast<std::int64_t>(ids[i]);
+          if (id < 0) {
+            throw Error::BadInput(file.path, DescribeParticle(segment, begin + i) + " has a negative ID (" +
+                                                 std::to_string(id) + ") in dataset /" + group +
+                                                 "/ParticleIDs; IDs must be >= 0");
+          }
+        }
+      }
     }
-    const Hdf5File& file = files_[segment.file];
     if (header_.has_smoothing) {
       chunk.smoothing.resize(old + count);  // 0, not given, for the types without
       if (segment.type == 0) {
@@ -295,6 +449,7 @@ class Hdf5Source final : public SegmentedSource {
                         bool& all_id) {
     Hdf5File description;
     description.path = path;
+    const std::uint64_t file_bytes = BinaryFile(path).size();
     Handle file = OpenFile(path);
     Handle header = RequireHeader(file.get(), path);
     auto this_file = ReadCounts(header.get(), "NumPart_ThisFile", path, "/Header");
@@ -312,24 +467,39 @@ class Hdf5Source final : public SegmentedSource {
       for (std::size_t t = 0; t < std::min(ntypes, table->size()); ++t) description.mass_table[t] = (*table)[t];
     }
     description.has_masses.assign(ntypes, false);
+    description.signed_ids.assign(ntypes, false);
     for (std::size_t t = 0; t < ntypes; ++t) {
       const std::uint64_t n = description.this_file[t];
       if (n == 0 || !IsTypeSelected(types, static_cast<int>(t))) continue;
+      const double table_mass = description.mass_table[t];
+      if (!(std::isfinite(table_mass) && table_mass >= 0)) {
+        std::ostringstream value;
+        value << table_mass;
+        throw Error::BadInput(path, "attribute /Header/MassTable holds " + value.str() + " for the " +
+                                        std::to_string(n) + " particles of type " + std::to_string(t) +
+                                        "; it must be finite and > 0, or 0 for masses in a Masses dataset");
+      }
       const std::string group = GroupName(static_cast<int>(t));
       if (!LinkExists(file.get(), group)) {
         throw Error::BadInput(path, "missing group /" + group + ": NumPart_ThisFile declares " + std::to_string(n) +
                                         " particles of type " + std::to_string(t));
       }
-      if (!CheckDataset(file.get(), group + "/Coordinates", path, n, 3, false)) {
+      if (!CheckDataset(file.get(), group + "/Coordinates", path, file_bytes, n, 3, false)) {
         throw Error::BadInput(path, "missing dataset /" + group + "/Coordinates for the " + std::to_string(n) +
                                         " particles NumPart_ThisFile declares");
       }
-      if (read_velocity_) all_velocity = CheckDataset(file.get(), group + "/Velocities", path, n, 3, false) && all_velocity;
-      if (read_id_) all_id = CheckDataset(file.get(), group + "/ParticleIDs", path, n, 1, true) && all_id;
-      description.has_masses[t] = CheckDataset(file.get(), group + "/Masses", path, n, 1, false);
+      if (read_velocity_) {
+        all_velocity = CheckDataset(file.get(), group + "/Velocities", path, file_bytes, n, 3, false) && all_velocity;
+      }
+      if (read_id_) {
+        bool is_signed = false;
+        all_id = CheckDataset(file.get(), group + "/ParticleIDs", path, file_bytes, n, 1, true, &is_signed) && all_id;
+        description.signed_ids[t] = is_signed;
+      }
+      description.has_masses[t] = CheckDataset(file.get(), group + "/Masses", path, file_bytes, n, 1, false);
       if (t == 0 && read_smoothing_) {
         for (const char* name : {"SmoothingLength", "SmoothingLengths"}) {
-          if (CheckDataset(file.get(), group + "/" + name, path, n, 1, false)) {
+          if (CheckDataset(file.get(), group + "/" + name, path, file_bytes, n, 1, false)) {
             description.smoothing_dataset = name;
             break;
           }
@@ -388,11 +558,17 @@ class Hdf5Source final : public SegmentedSource {
       }
       return std::nullopt;
     };
-    header_.time = lookup("Time", nullptr, "Scale-factor").value_or(0);
-    header_.omega0 = lookup("Omega0", "Omega0", "Omega_m").value_or(0);
-    header_.omega_lambda = lookup("OmegaLambda", "OmegaLambda", "Omega_lambda").value_or(0);
-    header_.hubble_param = lookup("HubbleParam", "HubbleParam", "h").value_or(0);
-    std::optional<double> redshift = lookup("Redshift", nullptr, "Redshift");
+    // Every number is checked where it is taken; the field named is the
+    // /Header one (or its first stand-in).
+    auto finite = [&](const char* field, std::optional<double> value) -> std::optional<double> {
+      if (value) RequireFinite(path, field, *value);
+      return value;
+    };
+    header_.time = finite("Time", lookup("Time", nullptr, "Scale-factor")).value_or(0);
+    header_.omega0 = finite("Omega0", lookup("Omega0", "Omega0", "Omega_m")).value_or(0);
+    header_.omega_lambda = finite("OmegaLambda", lookup("OmegaLambda", "OmegaLambda", "Omega_lambda")).value_or(0);
+    header_.hubble_param = finite("HubbleParam", lookup("HubbleParam", "HubbleParam", "h")).value_or(0);
+    std::optional<double> redshift = finite("Redshift", lookup("Redshift", nullptr, "Redshift"));
     std::optional<double> comoving;
     if (parameters.valid()) comoving = FirstOr(ReadDoubles(parameters.get(), "ComovingIntegrationOn", path, "/Parameters"), -1);
     if (cosmology.valid()) comoving = FirstOr(ReadDoubles(cosmology.get(), "Cosmological run", path, "/Cosmology"), -1);
@@ -403,21 +579,26 @@ class Hdf5Source final : public SegmentedSource {
     }
     if (swift && header_.cosmological) {
       // SWIFT's Header/Time is cosmic time; the manifest wants the scale factor.
-      header_.time = lookup("Scale-factor", nullptr, "Scale-factor").value_or(header_.time);
+      header_.time = finite("Scale-factor", lookup("Scale-factor", nullptr, "Scale-factor")).value_or(header_.time);
     }
     if (redshift) {
       header_.redshift = *redshift;
     } else if (header_.cosmological && header_.time > 0) {
-      header_.redshift = 1 / header_.time - 1;
+      header_.redshift = RequireFinite(path, "Time (1/a - 1 as the redshift)", 1 / header_.time - 1);
     }
 
     // SWIFT writes BoxSize as a 3-vector; a cubic box is its one length, and
     // a non-cubic one keeps all three in extra with box_size the largest.
+    double declared_box = 0;
     if (auto box = ReadDoubles(h, "BoxSize", path, "/Header"); box && !box->empty()) {
-      header_.box_size = *std::max_element(box->begin(), box->end());
-      if (box->size() > 1) header_.extra["box_size_vector"] = *box;
+      // A NaN anywhere is the box's (std::max_element would pass it over).
+      declared_box = *std::max_element(box->begin(), box->end());
+      for (double length : *box) {
+        if (!(std::isfinite(length) && length >= 0)) declared_box = length;
+      }
+      if (box->size() > 1 && std::isfinite(declared_box)) header_.extra["box_size_vector"] = *box;
     }
-    if (options.box_size_override >= 0) header_.box_size = options.box_size_override;
+    SetBoxSize(path, "BoxSize", declared_box, options);
 
     header_.extra["mass_table"] = files_.front().mass_table;
     header_.extra["ntypes"] = ntypes;

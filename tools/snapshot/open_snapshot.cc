@@ -1,4 +1,5 @@
 // OpenSnapshot: format detection and dispatch to the readers.
+#include <cmath>
 #include <cstring>
 
 #include "storage/error.h"
@@ -50,6 +51,12 @@ std::unique_ptr<ParticleSource> OpenSnapshot(const std::string& path, const Read
   if (options.chunk_particles == 0) throw Error::InvalidArgument("chunk_particles must be at least 1");
   for (int type : options.types) {
     if (type < 0 || type > 255) throw Error::InvalidArgument("particle type " + std::to_string(type) + " is not in 0..255");
+  }
+  if (!std::isfinite(options.box_size_override)) {
+    throw Error::InvalidArgument("box_size_override must be a finite number (>= 0 for a box, negative for the header's)");
+  }
+  if (options.ignore_box && options.box_size_override >= 0) {
+    throw Error::InvalidArgument("ignore_box and box_size_override contradict each other: give one");
   }
   std::string format = options.format;
   if (format == "raw" || format == "csv") {

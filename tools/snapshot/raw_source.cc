@@ -53,7 +53,7 @@ class RawSource final : public SegmentedSource {
     header_.files = {path};
     header_.has_velocity = options.read_velocity && layout_.has(Field::kVx);
     header_.has_id = options.read_id && layout_.has(Field::kId);
-    header_.box_size = options.box_size_override >= 0 ? options.box_size_override : 0;
+    SetBoxSize(path, "BoxSize", 0, options);  // no header: periodic only when given
     header_.extra["raw_layout"] = layout_.text;
     header_.extra["record_bytes"] = layout_.record_bytes;
     if (IsTypeSelected(options.types, 0)) segments_.push_back(Segment{0, 0, file_.size() / layout_.record_bytes});

@@ -62,9 +62,37 @@ void SegmentedSource::CountSegments(std::size_t type_count) {
   }
 }
 
+void SegmentedSource::SetBoxSize(const std::string& path, const std::string& field, double declared,
+                                 const ReadOptions& options) {
+  if (options.ignore_box) {
+    header_.box_size = 0;
+    box_from_.clear();
+  } else if (options.box_size_override >= 0) {
+    header_.box_size = options.box_size_override;
+    box_from_ = "the box size given (--box-size)";
+  } else {
+    if (!std::isfinite(declared) || declared < 0) {
+      std::ostringstream message;
+      message << "header field " << field << " is " << declared
+              << "; a box size must be finite and >= 0 (0 = not periodic). Give the right one with --box-size, "
+                 "or --ignore-box to index the particles' bounding cube";
+      throw Error::BadInput(path, message.str());
+    }
+    header_.box_size = declared;
+    box_from_ = "header field " + field;
+    return;
+  }
+  // The header's value is not used; kept for the record when it is a number.
+  if (std::isfinite(declared) && declared != header_.box_size) header_.extra["box_size_in_header"] = declared;
+}
+
 void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
                                   std::size_t first) const {
   const float* smoothing = chunk.has_smoothing() ? chunk.smoothing.data() : nullptr;
+  // A periodic box takes [lo, hi] (every position when not periodic).
+  const double box = header_.box_size;
+  const double lo = box > 0 ? -kPeriodicBoxTolerance * box : -HUGE_VAL;
+  const double hi = box > 0 ? (1 + kPeriodicBoxTolerance) * box : HUGE_VAL;
   for (std::size_t i = first; i < chunk.size(); ++i) {
     const double* p = &chunk.position[3 * i];
     const float* v = chunk.has_velocity() ? &chunk.velocity[3 * i] : nullptr;
@@ -73,7 +101,8 @@ void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, c
     const bool mass_ok = std::isfinite(chunk.mass[i]) && chunk.mass[i] > 0;
     // 0 is a length not given; NaN fails the comparison.
     const bool smoothing_ok = smoothing == nullptr || (smoothing[i] >= 0 && std::isfinite(smoothing[i]));
-    if (position_ok && velocity_ok && mass_ok && smoothing_ok) continue;
+    const bool inside_ok = (p[0] >= lo && p[0] <= hi) && (p[1] >= lo && p[1] <= hi) && (p[2] >= lo && p[2] <= hi);
+    if (position_ok && velocity_ok && mass_ok && smoothing_ok && inside_ok) continue;
     std::ostringstream message;
     message << DescribeParticle(segment, begin + (i - first));
     if (chunk.has_id()) message << " (ID " << chunk.id[i] << ")";
@@ -83,6 +112,11 @@ void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, c
     } else if (!velocity_ok) {
       message << " has a non-finite velocity (" << v[0] << ", " << v[1] << ", " << v[2]
               << "); velocities must be finite numbers";
+    } else if (!inside_ok) {
+      message << " lies at (" << p[0] << ", " << p[1] << ", " << p[2] << "), more than "
+              << 100 * kPeriodicBoxTolerance << "% of the box outside the periodic box [0, " << box << ")^3 of "
+              << box_from_
+              << "; give the right box with --box-size, or --ignore-box to index the particles' bounding cube";
     } else if (!mass_ok) {
       message << " has mass " << chunk.mass[i] << "; masses must be finite and > 0";
     } else {
@@ -91,6 +125,13 @@ void SegmentedSource::CheckValues(const Segment& segment, std::uint64_t begin, c
     }
     throw Error::BadInput(header_.files.at(segment.file), message.str());
   }
+}
+
+double RequireFinite(const std::string& path, const std::string& field, double value) {
+  if (std::isfinite(value)) return value;
+  std::ostringstream message;
+  message << "header field " << field << " is " << value << "; it must be a finite number";
+  throw Error::BadInput(path, message.str());
 }
 
 bool IsTypeSelected(const std::vector<int>& selected, int type) {

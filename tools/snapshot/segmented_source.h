@@ -2,13 +2,15 @@
 // contiguous runs of particles ("segments": one particle type in one file) in
 // chunk-sized steps, and rejecting values the octree cannot take (non-finite
 // coordinates or velocities, masses that are not finite and > 0, smoothing
-// lengths that are not finite and >= 0), naming the file and the particle
+// lengths that are not finite and >= 0, positions outside the periodic box
+// by more than kPeriodicBoxTolerance), naming the file and the particle
 // rather than failing deep in the build. A format supplies only
 // AppendRange(), which reads part of one segment.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "tools/snapshot/snapshot_source.h"
@@ -46,6 +48,11 @@ class SegmentedSource : public ParticleSource {
 
   // Fills header_.count_per_type / total_count from segments_ (call once at open).
   void CountSegments(std::size_t type_count);
+  // Sets header_.box_size: the options' box (box_size_override, ignore_box)
+  // when they give one, else `declared`, the header's `field` of file
+  // `path`, which must be finite and >= 0 (BadInput otherwise). Next() then
+  // refuses particles outside the box by more than kPeriodicBoxTolerance.
+  void SetBoxSize(const std::string& path, const std::string& field, double declared, const ReadOptions& options);
 
   SnapshotHeader header_;
   std::vector<Segment> segments_;
@@ -54,10 +61,15 @@ class SegmentedSource : public ParticleSource {
   void CheckValues(const Segment& segment, std::uint64_t begin, const ParticleChunk& chunk,
                    std::size_t first) const;
 
+  std::string box_from_;  // where header_.box_size came from, for messages
   std::size_t chunk_particles_;
   std::size_t segment_index_ = 0;
   std::uint64_t segment_offset_ = 0;
 };
+
+// Returns `value` when it is finite; else throws Error::BadInput naming
+// `path` and the header field `field` ("header field time").
+double RequireFinite(const std::string& path, const std::string& field, double value);
 
 // True when `type` is among `selected` (an empty selection takes every type).
 bool IsTypeSelected(const std::vector<int>& selected, int type);

@@ -13,7 +13,8 @@
 // quirk of real files is handled.
 //
 // Errors: malformed input throws Error::BadInput naming the file, the block or
-// dataset, and what was expected; a file that cannot be opened or read throws
+// dataset, and what was expected; every number taken from a header is checked
+// before it is used (finite; box size >= 0; counts the file can hold); a file that cannot be opened or read throws
 // Error::Io or Error::NotFound; impossible options throw
 // Error::InvalidArgument. Nothing here exits or aborts.
 #pragma once
@@ -37,7 +38,9 @@ struct SnapshotHeader {
   std::vector<std::string> files;  // every file read, in reading order
   double time = 0;                 // scale factor a in cosmological runs, else simulation time
   double redshift = 0;             // from the header, or 1/a - 1 when cosmological and absent
-  double box_size = 0;             // 0 = not periodic / unknown
+  // 0 = not periodic / unknown. Every particle lies within it, give or take
+  // kPeriodicBoxTolerance of it.
+  double box_size = 0;
   // Particles per type over all files, after type selection (unselected types
   // count 0). Its length is the number of types of the format (6 for GADGET,
   // NTYPES for HDF5, 1 for raw and CSV).
@@ -100,8 +103,21 @@ struct ReadOptions {
   bool read_smoothing = true;  // the file's smoothing lengths, where it has them (docs/INPUT_FORMATS.md)
   RawLayout raw;
   CsvOptions csv;
-  double box_size_override = -1;  // >= 0 replaces the header's box size (e.g. 0-box ICs)
+  // The periodic box, where the header's is wrong or missing: >= 0 replaces
+  // the header's box size (0 = not periodic; e.g. ICs that leave it 0);
+  // negative = the header's. Finite, else OpenSnapshot throws.
+  double box_size_override = -1;
+  // Treat the particles as not periodic whatever the header says (box_size
+  // 0): ingest then indexes their bounding cube. Not with box_size_override.
+  bool ignore_box = false;
 };
+
+// How far a particle may lie outside a periodic box [0, box_size)^3, as a
+// fraction of box_size, and still be taken (ingest wraps it into the box):
+// codes write particles that crossed a face since the last wrap. A particle
+// further out means the box is wrong, and the read fails (BadInput naming the
+// file, the box and the particle) rather than wrap the data into it.
+inline constexpr double kPeriodicBoxTolerance = 0.01;
 
 // Where one segment of a snapshot (the particles of one type in one file)
 // lies in its file when every column is a plain array in this machine's byte
