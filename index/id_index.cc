@@ -174,31 +174,53 @@ IdIndexReader::Directory& IdIndexReader::DirectoryOf(std::uint32_t epoch) const 
 }
 
 std::optional<NodeKey> IdIndexReader::Find(std::uint32_t epoch, std::uint64_t id) const {
+  return FindAll(epoch, std::span<const std::uint64_t>(&id, 1))[0];
+}
+
+std::vector<std::optional<NodeKey>> IdIndexReader::FindAll(std::uint32_t epoch, std::span<const std::uint64_t> ids) const {
   if (epoch >= store_.epoch_count()) {
     throw Error::InvalidArgument("epoch " + std::to_string(epoch) + " (the ID index has " +
                                  std::to_string(store_.epoch_count()) + ")");
   }
   const Directory& directory = DirectoryOf(epoch);
-  // Duplicates may span buckets: start at the first bucket that can hold `id`.
-  auto it = std::lower_bound(directory.first_ids.begin(), directory.first_ids.end(), id);
-  if (it == directory.first_ids.end() || *it > id) {
-    if (it == directory.first_ids.begin()) return std::nullopt;
-    --it;
+  // (bucket, position in `ids`) for each ID some bucket can hold. Duplicates
+  // may span buckets: an ID's bucket is the first that can hold it.
+  std::vector<std::pair<std::uint64_t, std::size_t>> wanted;
+  wanted.reserve(ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    auto it = std::lower_bound(directory.first_ids.begin(), directory.first_ids.end(), ids[i]);
+    if (it == directory.first_ids.end() || *it > ids[i]) {
+      if (it == directory.first_ids.begin()) continue;
+      --it;
+    }
+    wanted.emplace_back(static_cast<std::uint64_t>(it - directory.first_ids.begin()), i);
   }
-  const auto bucket = static_cast<std::uint64_t>(it - directory.first_ids.begin());
-  const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID bucket " + std::to_string(bucket);
-  const Bytes block = store_.ReadBlock({epoch, bucket});
-  if (block.size() < 16 || GetU32(block, 0) != kBucketMagic) throw Error::Corruption(where, "wrong magic or short block");
-  switch (GetU32(block, 4)) {
-    case kPairsVersion:
-      return FindInPairs(block, id, where);
-    case kTableVersion:
-      return FindInTable(epoch, block, id, 4, where);
-    case kNarrowTableVersion:
-      return FindInTable(epoch, block, id, 2, where);
-    default:
-      throw Error::NotSupported(where, "version " + std::to_string(GetU32(block, 4)));
+  std::sort(wanted.begin(), wanted.end());
+  std::vector<std::optional<NodeKey>> found(ids.size());
+  for (std::size_t first = 0; first < wanted.size();) {
+    const std::uint64_t bucket = wanted[first].first;
+    const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID bucket " + std::to_string(bucket);
+    const Bytes block = store_.ReadBlock({epoch, bucket});  // once for all the IDs it holds
+    if (block.size() < 16 || GetU32(block, 0) != kBucketMagic) throw Error::Corruption(where, "wrong magic or short block");
+    const std::uint32_t version = GetU32(block, 4);
+    for (; first < wanted.size() && wanted[first].first == bucket; ++first) {
+      const std::size_t i = wanted[first].second;
+      switch (version) {
+        case kPairsVersion:
+          found[i] = FindInPairs(block, ids[i], where);
+          break;
+        case kTableVersion:
+          found[i] = FindInTable(epoch, block, ids[i], 4, where);
+          break;
+        case kNarrowTableVersion:
+          found[i] = FindInTable(epoch, block, ids[i], 2, where);
+          break;
+        default:
+          throw Error::NotSupported(where, "version " + std::to_string(version));
+      }
+    }
   }
+  return found;
 }
 
 std::optional<NodeKey> IdIndexReader::FindInPairs(const Bytes& block, std::uint64_t id, const std::string& where) const {

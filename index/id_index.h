@@ -106,6 +106,8 @@ class IdIndexReader {
   std::uint32_t epoch_count() const { return store_.epoch_count(); }
   // The leaf holding `id` in `epoch`, or nullopt when the epoch has no such ID.
   std::optional<NodeKey> Find(std::uint32_t epoch, std::uint64_t id) const;
+  // Find for each of `ids`, in their order, reading each bucket once.
+  std::vector<std::optional<NodeKey>> FindAll(std::uint32_t epoch, std::span<const std::uint64_t> ids) const;
 
  private:
   struct Directory {

@@ -31,8 +31,9 @@ void ParticleLocator::ForEachLeafHolding(std::uint32_t epoch, std::span<const st
                                  std::to_string(dataset_.epoch_count()) + " epoch(s)");
   }
   std::map<std::uint64_t, std::vector<std::size_t>> by_leaf;  // leaf key -> positions in `ids`
+  const std::vector<std::optional<NodeKey>> leaves = index_.FindAll(epoch, ids);
   for (std::size_t i = 0; i < ids.size(); ++i) {
-    if (const auto leaf = index_.Find(epoch, ids[i])) by_leaf[leaf->value()].push_back(i);
+    if (leaves[i]) by_leaf[leaves[i]->value()].push_back(i);
   }
   columns |= ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kId);
   std::vector<std::pair<std::size_t, std::uint32_t>> matches;  // (position in `ids`, row)

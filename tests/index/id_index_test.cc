@@ -82,6 +82,41 @@ std::vector<std::uint64_t> Leaves(std::size_t count) {
   return leaves;
 }
 
+// FindAll answers like Find for IDs in any order, repeated, absent or beyond
+// every bucket, in the order asked, in both bucket forms.
+TEST(IdIndex, FindAllAnswersLikeFindInTheOrderAsked) {
+  for (const bool table : {false, true}) {
+    SCOPED_TRACE(table ? "table" : "pairs");
+    TempDir dir("id-index-find-all");
+    WriteIndex(dir.path().string(), [&](StoreWriter& store) {
+      IdIndexEpochWriter ids(store, kSmallPage);
+      if (table) {
+        std::vector<std::uint32_t> slots(5000);
+        for (std::size_t i = 0; i < slots.size(); ++i) slots[i] = i % 5 == 0 ? 0 : static_cast<std::uint32_t>(1 + i % 64);
+        ids.AddTable(10, slots, Leaves(64));
+      } else {
+        for (std::uint64_t id = 10; id < 5010; id += 2) ids.Add(id, LeafNumber(static_cast<int>(id % 37)));
+      }
+      ids.Finish();
+    });
+    IdIndexReader reader(dir.path().string());
+    std::vector<std::uint64_t> asked;
+    for (std::uint64_t k = 0; k < 3000; ++k) asked.push_back((k * 7919) % 5100);  // scattered, some below and above
+    asked.push_back(asked[17]);
+    asked.push_back(std::numeric_limits<std::uint64_t>::max());
+    const std::vector<std::optional<NodeKey>> found = reader.FindAll(0, asked);
+    ASSERT_EQ(found.size(), asked.size());
+    std::size_t present = 0;
+    for (std::size_t i = 0; i < asked.size(); ++i) {
+      EXPECT_EQ(found[i], reader.Find(0, asked[i])) << asked[i];
+      present += found[i].has_value();
+    }
+    EXPECT_GT(present, asked.size() / 3);
+    EXPECT_LT(present, asked.size());
+    EXPECT_TRUE(reader.FindAll(0, {}).empty());
+  }
+}
+
 // The version field of bucket 0 of epoch 0.
 std::uint32_t FirstBucketVersion(const std::string& directory) {
   return GetU32(StoreReader::Open(directory).ReadBlock({0, 0}).data() + 4);
