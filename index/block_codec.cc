@@ -45,6 +45,7 @@ std::uint64_t BytesPerPoint(ColumnId id, std::uint8_t encoding) {
     case ColumnId::kNextVelocity:
     case ColumnId::kPrevDisplacement:
     case ColumnId::kPrevVelocity: return 6;
+    case ColumnId::kVelocityDispersion: return 2;
   }
   return 0;
 }
@@ -439,6 +440,31 @@ void EncodeRanged3(const char* name, const std::vector<float>& values, std::uint
   for (std::size_t i = whole; i < 3 * n; ++i) PutU16(out + 2 * i, NearestCode((v[i] - lane_offset[i % 3]) * lane_scale[i % 3]));
 }
 
+// Quantizes scalars that must be finite and >= 0 (velocity dispersions)
+// between their min and max; writes f32 min, f32 max to params. The range is
+// taken in float, as stored, so every value lies in [min, max].
+void EncodeNonNegativeRanged1(const char* name, const std::vector<float>& values, std::uint8_t* out,
+                              std::uint8_t* params) {
+  float lo = 0, hi = 0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const float x = values[i];
+    if (!std::isfinite(x) || !(x >= 0)) {
+      throw Error::InvalidArgument(std::string("EncodeBlock: ") + name + " of point " + std::to_string(i) + " is " +
+                                   std::to_string(x) + ", must be finite and >= 0");
+    }
+    if (i == 0 || x < lo) lo = x;
+    if (i == 0 || x > hi) hi = x;
+  }
+  // + 0.0f turns a -0 minimum into +0, so that a reader checking min >= 0
+  // by the sign bit agrees.
+  lo += 0.0f;
+  PutF32(params, lo);
+  PutF32(params + 4, hi);
+  const double range = static_cast<double>(hi) - lo;
+  const double scale = range > 0 ? 65535.0 / range : 0.0;  // a constant column codes as 0
+  for (std::size_t i = 0; i < values.size(); ++i) PutU16(out + 2 * i, NearestCode((values[i] - double{lo}) * scale));
+}
+
 // ---- Decoding ---------------------------------------------------------------
 
 void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
@@ -464,6 +490,24 @@ void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const s
   }
 }
 
+// The inverse of EncodeNonNegativeRanged1, checking its parameters.
+void DecodeNonNegativeRanged1(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
+                              const std::string& where, std::vector<float>& out) {
+  const float min = GetF32(column.params.data());
+  const float max = GetF32(column.params.data() + 4);
+  if (!std::isfinite(min) || !std::isfinite(max) || !(min >= 0) || !(min <= max)) {
+    throw Error::Corruption(where, ColumnWhat(column.id, "range is [" + std::to_string(min) + ", " +
+                                                             std::to_string(max) + "], expected finite 0 <= min <= max"));
+  }
+  const double lo = min, hi = max;
+  const double step = (hi - lo) / 65535.0;
+  out.resize(n);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    // Clamped so that rounding near FLT_MAX cannot leave the float range.
+    out[i] = static_cast<float>(std::min(lo + GetU16(bytes.data() + 2 * std::size_t{i}) * step, hi));
+  }
+}
+
 }  // namespace
 
 const char* ColumnName(ColumnId id) {
@@ -478,6 +522,7 @@ const char* ColumnName(ColumnId id) {
     case ColumnId::kNextVelocity: return "next_velocity";
     case ColumnId::kPrevDisplacement: return "prev_displacement";
     case ColumnId::kPrevVelocity: return "prev_velocity";
+    case ColumnId::kVelocityDispersion: return "velocity_dispersion";
   }
   return "unknown";
 }
@@ -518,6 +563,9 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
     const std::vector<float>& column = *VectorColumnOf(points, id);
     if (!column.empty()) CheckLength(ColumnName(id), column.size(), 3 * n);
   }
+  if (!points.velocity_dispersion.empty()) {
+    CheckLength(ColumnName(ColumnId::kVelocityDispersion), points.velocity_dispersion.size(), n);
+  }
   const auto& off = points.octant_offsets;
   if (off[0] != 0 || off[8] != n || !std::is_sorted(off.begin(), off.end())) {
     throw Error::InvalidArgument("EncodeBlock: octant_offsets of node " + key.Path() +
@@ -527,7 +575,10 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
   std::vector<ColumnId> ids;
   for (const ColumnId id : kColumnIds) {
     const std::vector<float>* vector = VectorColumnOf(points, id);
-    const bool present = vector != nullptr ? !vector->empty() : id == ColumnId::kId ? !points.id.empty() : IsRequired(id);
+    const bool present = vector != nullptr                         ? !vector->empty()
+                         : id == ColumnId::kId                     ? !points.id.empty()
+                         : id == ColumnId::kVelocityDispersion     ? !points.velocity_dispersion.empty()
+                                                                   : IsRequired(id);
     if (present) ids.push_back(id);
   }
 
@@ -598,6 +649,9 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
       case ColumnId::kNextVelocity:
       case ColumnId::kPrevDisplacement:
       case ColumnId::kPrevVelocity: EncodeRanged3(ColumnName(id), *VectorColumnOf(points, id), out, params); break;
+      case ColumnId::kVelocityDispersion:
+        EncodeNonNegativeRanged1(ColumnName(id), points.velocity_dispersion, out, params);
+        break;
     }
     entry[0] = static_cast<std::uint8_t>(id);
     entry[1] = encoding_of(id);
@@ -808,6 +862,9 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
     case ColumnId::kNextVelocity:
     case ColumnId::kPrevDisplacement:
     case ColumnId::kPrevVelocity: DecodeRanged3(*column, n, bytes, where, *VectorColumnOf(out, id)); break;
+    case ColumnId::kVelocityDispersion:
+      DecodeNonNegativeRanged1(*column, n, bytes, where, out.velocity_dispersion);
+      break;
   }
 }
 

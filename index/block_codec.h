@@ -65,8 +65,14 @@
 //   8  next_velocity 6n      no        like velocity: the particle's velocity at the next epoch.
 //   9  prev_displacement 6n  no        like velocity: the minimal-image offset to the previous epoch.
 //  10  prev_velocity 6n      no        like velocity: the particle's velocity at the previous epoch.
+//  11  velocity_dispersion 2n no    u16 per point; sigma = min + q * (max - min) / 65535.
+//                                      Params: f32 min, f32 max (finite, 0 <= min <= max).
+//                                      |error| <= (max - min) / 131070. The one-dimensional rms
+//                                      velocity dispersion of the particles a cluster stands for
+//                                      (inner nodes whose points are clusters, in a dataset with
+//                                      velocities; leaves and samples never carry it).
 //
-// Columns 8-10 were added to version 1 before any store left this project
+// Columns 8-11 were added to version 1 before any store left this project
 // (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
 // So was the id column's encoding 2: a reader from before reports such a
 // block as corrupt ("unknown encoding"); blocks with encoding 1 read as ever.
@@ -102,6 +108,7 @@ enum class ColumnId : std::uint8_t {
   kNextVelocity = 8,
   kPrevDisplacement = 9,
   kPrevVelocity = 10,
+  kVelocityDispersion = 11,
 };
 
 // The block column of each vector column (index/particle_chunk.h), indexed by VectorColumn.
@@ -116,13 +123,14 @@ inline constexpr ColumnSet kAllColumns = ColumnBit(ColumnId::kPosition) | Column
                                          ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kVelocity) |
                                          ColumnBit(ColumnId::kId) | ColumnBit(ColumnId::kType) |
                                          ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kNextVelocity) |
-                                         ColumnBit(ColumnId::kPrevDisplacement) | ColumnBit(ColumnId::kPrevVelocity);
+                                         ColumnBit(ColumnId::kPrevDisplacement) | ColumnBit(ColumnId::kPrevVelocity) |
+                                         ColumnBit(ColumnId::kVelocityDispersion);
 
 // Every column id, in the order blocks store them.
-inline constexpr std::array<ColumnId, 10> kColumnIds = {
+inline constexpr std::array<ColumnId, 11> kColumnIds = {
     ColumnId::kPosition, ColumnId::kWeight,       ColumnId::kSmoothing,        ColumnId::kVelocity,
     ColumnId::kId,       ColumnId::kType,         ColumnId::kDisplacement,     ColumnId::kNextVelocity,
-    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity};
+    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity, ColumnId::kVelocityDispersion};
 
 const char* ColumnName(ColumnId id);
 // The names of the columns in `columns`, comma-separated, in block order.
@@ -178,8 +186,8 @@ struct BlockHeader {
 // the contract: a column of the wrong length, a point outside the node cube,
 // points not grouped by child octant as octant_offsets says (see
 // OrderByOctant), a weight that is not finite and >= 0 (or all zero with
-// points present), a non-finite value in a vector column, or more than
-// 2^32 - 1 points.
+// points present), a non-finite value in a vector column, a velocity
+// dispersion that is not finite and >= 0, or more than 2^32 - 1 points.
 Bytes EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube);
 // The same into `block`, whose memory is reused (an encoder that keeps one
 // buffer neither zeroes nor first-touches a fresh block per node).

@@ -71,13 +71,21 @@ class Dataset {
   // The total mass of the epoch (the root's weights).
   double mass(std::uint32_t epoch) const { return masses_.at(epoch); }
   // The columns some block of some epoch carries.
-  ColumnSet columns() const { return every_epoch_columns_ | forward_columns_ | backward_columns_; }
+  ColumnSet columns() const {
+    return every_epoch_columns_ | forward_columns_ | backward_columns_ | cluster_columns_;
+  }
   std::size_t capacity() const { return capacity_; }
   // The subselection's settings the store was built with.
   const SamplerOptions& sampler() const { return sampler_; }
   int max_level() const { return max_level_; }
   // The columns every block of `epoch` carries, as the manifest declares them.
   ColumnSet columns(std::uint32_t epoch) const;
+  // The columns that the block of every inner node whose points are clusters
+  // (index/aggregator.h) carries besides columns(epoch), in every epoch: the
+  // velocity dispersion, in a dataset with velocities built with clusters
+  // (the manifest's has_velocity_dispersion). Leaves, and inner nodes whose
+  // points are a sample, lack them.
+  ColumnSet cluster_columns() const { return cluster_columns_; }
   // How `epoch` links to the next; empty for the last epoch and for a series
   // without IDs.
   const std::optional<EpochLink>& link_to_next(std::uint32_t epoch) const { return links_.at(epoch); }
@@ -104,6 +112,7 @@ class Dataset {
   ColumnSet every_epoch_columns_ = 0;  // the columns of every epoch
   ColumnSet forward_columns_ = 0;      // of every epoch but the last
   ColumnSet backward_columns_ = 0;     // of every epoch but the first
+  ColumnSet cluster_columns_ = 0;      // of every inner node of clusters, in every epoch
   std::size_t capacity_ = 0;
   SamplerOptions sampler_;
   int max_level_ = kMaxLevel;

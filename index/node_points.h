@@ -32,6 +32,11 @@ struct NodePoints {
   std::vector<float> next_velocity;
   std::vector<float> prev_displacement;
   std::vector<float> prev_velocity;
+  // size(), or empty: the one-dimensional rms velocity dispersion (>= 0, in
+  // velocity units) of the particles each point stands for. Only inner nodes
+  // whose points are clusters of a dataset with velocities carry it
+  // (index/aggregator.h); a single particle's is 0, so leaves leave it empty.
+  std::vector<float> velocity_dispersion;
   std::array<std::uint32_t, 9> octant_offsets{};
   // Empty, or each point's Cube::FinestGridCoords, kept beside the positions
   // by the octree builder so that sampling and encoding place each point

@@ -151,7 +151,10 @@ void AppendGridPoints(const NodePoints& node, const Cube& cube, std::vector<Grid
 }
 
 // The first non-empty child of `key` (-1 when all are empty), after checking
-// that every non-empty child's points carry the same optional columns.
+// that every non-empty child's points carry the same optional columns. The
+// velocity dispersion is the exception: clusters carry it and single
+// particles (leaves) or samples do not, so siblings may differ; where
+// present it must go with velocities and have one value per point.
 int FirstChildAgreeingOnColumns(NodeKey key, const std::array<NodePoints, 8>& children) {
   int first = -1;
   for (int o = 0; o < 8; ++o) {
@@ -162,6 +165,12 @@ int FirstChildAgreeingOnColumns(NodeKey key, const std::array<NodePoints, 8>& ch
     if (a.id.empty() != b.id.empty() || PresentVectorColumns(a) != PresentVectorColumns(b)) {
       throw Error::InvalidArgument("subtree builder: children of node " + key.Path() +
                                    " disagree on which columns their points carry");
+    }
+    if (!b.velocity_dispersion.empty() && (b.velocity_dispersion.size() != b.size() || b.velocity.empty())) {
+      throw Error::InvalidArgument("subtree builder: child " + key.Child(o).Path() + " has " +
+                                   std::to_string(b.velocity_dispersion.size()) + " velocity dispersions for " +
+                                   std::to_string(b.size()) + " points" +
+                                   (b.velocity.empty() ? " and no velocities" : ""));
     }
   }
   return first;
@@ -249,8 +258,9 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
 }
 
 // The node `key` as clusters of its children's points (index/aggregator.h):
-// each cluster's mass, centre of mass and spread in one point. Children's
-// columns must agree as for SampleParent.
+// each cluster's mass, centre of mass and spread in one point, and with
+// velocities its mass-weighted mean velocity and velocity dispersion.
+// Children's columns must agree as for SampleParent.
 NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
                            const SubtreeOptions& options) {
   const int first = FirstChildAgreeingOnColumns(key, children);
@@ -292,6 +302,11 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
       if (has_vector[v]) target[v]->resize(3 * n);
     }
   }
+  // A cluster of particles with velocities keeps how their velocities
+  // spread about its mean: clusters that are one particle each carry 0.
+  const std::size_t velocity = static_cast<std::size_t>(VectorColumn::kVelocity);
+  const bool has_dispersion = has_vector[velocity];
+  if (has_dispersion) node.velocity_dispersion.resize(n);
   const auto node_vectors = VectorColumns(node);
   const auto [min_h, max_h] = GivenSmoothingRange(cube.NodeSize(key.level()));
   int octant = 0;
@@ -299,19 +314,33 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
     const std::uint32_t* begin = clusters.member.data() + clusters.begin[c];
     const std::uint32_t* end = clusters.member.data() + clusters.begin[c + 1];
     double mass = 0, centre[3] = {0, 0, 0};
+    std::array<std::array<double, 3>, kVectorColumnCount> vector_mean{};
     std::uint32_t heaviest = *begin;
     for (const std::uint32_t* m = begin; m != end; ++m) {
       const auto [o, k] = from[*m];
-      const double w = children[o].weight[k];
+      const NodePoints& child = children[o];
+      const double w = child.weight[k];
       mass += w;
-      for (int a = 0; a < 3; ++a) centre[a] += w * children[o].position[3 * k + a];
+      for (int a = 0; a < 3; ++a) centre[a] += w * child.position[3 * k + a];
+      for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+        if (!has_vector[v]) continue;
+        const float* value = &(*VectorColumns(child)[v])[3 * k];
+        for (int a = 0; a < 3; ++a) vector_mean[v][a] += w * value[a];
+      }
       if (w > weight[heaviest]) heaviest = *m;
     }
+    // mass > 0: every weight is > 0 (ClusterPopulation's contract).
     for (double& x : centre) x /= mass;
+    for (auto& mean : vector_mean) {
+      for (double& x : mean) x /= mass;
+    }
     // The spread: each member's squared distance from the centre, a third per
-    // axis, and its own blob's variance, mass-weighted.
-    double variance = 0;
-    std::array<std::array<double, 3>, kVectorColumnCount> vector_sum{};
+    // axis, and its own blob's variance, mass-weighted. The velocity
+    // dispersion likewise: each member's squared offset from the mean
+    // velocity and its own three-dimensional variance 3 sigma^2 (the
+    // parallel-axis rule, so a cluster of clusters has the dispersion of all
+    // the particles below it).
+    double variance = 0, velocity_variance = 0;
     for (const std::uint32_t* m = begin; m != end; ++m) {
       const auto [o, k] = from[*m];
       const NodePoints& child = children[o];
@@ -319,10 +348,15 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
       double d2 = 0;
       for (int a = 0; a < 3; ++a) d2 += (child.position[3 * k + a] - centre[a]) * (child.position[3 * k + a] - centre[a]);
       variance += w * (d2 / 3 + KernelVariance(child.smoothing[k]));
-      for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-        if (!has_vector[v]) continue;
-        const float* value = &(*VectorColumns(child)[v])[3 * k];
-        for (int a = 0; a < 3; ++a) vector_sum[v][a] += w * value[a];
+      if (has_dispersion) {
+        const float* value = &child.velocity[3 * k];
+        double dv2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double dv = value[a] - vector_mean[velocity][a];
+          dv2 += dv * dv;
+        }
+        const double own = child.velocity_dispersion.empty() ? 0.0 : double{child.velocity_dispersion[k]};
+        velocity_variance += w * (dv2 + 3 * own * own);
       }
     }
     const auto [ho, hk] = from[heaviest];
@@ -343,7 +377,12 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
     if (has_id) node.id[c] = children[ho].id[hk];
     for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
       if (!has_vector[v]) continue;
-      for (int a = 0; a < 3; ++a) (*node_vectors[v])[3 * c + a] = static_cast<float>(vector_sum[v][a] / mass);
+      for (int a = 0; a < 3; ++a) (*node_vectors[v])[3 * c + a] = static_cast<float>(vector_mean[v][a]);
+    }
+    if (has_dispersion) {
+      // Held to the float range: members at +-FLT_MAX may spread by more.
+      const double sigma = std::sqrt(velocity_variance / (3 * mass));
+      node.velocity_dispersion[c] = static_cast<float>(std::min(sigma, double{std::numeric_limits<float>::max()}));
     }
   }
   while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(n);

@@ -100,22 +100,27 @@ struct Moments {
   std::array<double, 3> first{};     // sum of w x
   double second = 0;                 // sum of w (|x|^2 + 3 kernel variance)
   std::array<double, 3> momentum{};  // sum of w v
-  void Add(const double* x, double w, double h, const float* v, std::uint8_t type) {
+  double velocity_second = 0;        // sum of w (|v|^2 + 3 sigma^2): twice the kinetic energy
+  void Add(const double* x, double w, double h, const float* v, std::uint8_t type, double sigma = 0) {
     mass += w;
     type_mass[type] += w;
     for (int a = 0; a < 3; ++a) {
       first[a] += w * x[a];
       second += w * x[a] * x[a];
       momentum[a] += w * v[a];
+      velocity_second += w * double{v[a]} * v[a];
     }
     second += w * 3 * KernelVariance(h);
+    velocity_second += w * 3 * sigma * sigma;
   }
 };
 
 // Every inner node's clusters keep, in each octant, the mass (per particle
 // type too), the centre of mass, the second moment (the members' spread and their own blobs') and the
 // momentum of the particles below it: they move where the particles' mass
-// goes and blur it as much as the particles' blobs do together.
+// goes and blur it as much as the particles' blobs do together. With their
+// velocity dispersions they keep the second moment of the velocities too
+// (the kinetic energy), however many levels of clusters lie between.
 TEST(AggregateParent, ClustersKeepEachOctantsMassCentreSpreadAndMomentum) {
   const ParticleChunk input = Clumpy(3, 30000);
   SubtreeOptions options;
@@ -136,14 +141,20 @@ TEST(AggregateParent, ClustersKeepEachOctantsMassCentreSpreadAndMomentum) {
   for (const auto& [key, points] : nodes) {
     bool leaf = true;
     for (int o = 0; o < 8; ++o) leaf = leaf && !nodes.count(key.Child(o));
-    if (leaf) continue;
+    if (leaf) {
+      EXPECT_TRUE(points.velocity_dispersion.empty()) << key.Path() << ": a leaf's points are particles";
+      continue;
+    }
     ++inner;
     EXPECT_LE(points.size(), options.capacity) << key.Path();
+    ASSERT_EQ(points.velocity_dispersion.size(), points.size()) << key.Path();
     for (int o = 0; o < 8; ++o) {
       Moments got;
       for (std::uint32_t i = points.octant_offsets[o]; i < points.octant_offsets[o + 1]; ++i) {
         ASSERT_TRUE(kCube.Holds(key.Child(o), &points.position[3 * i])) << key.Path() << " octant " << o;
-        got.Add(&points.position[3 * i], points.weight[i], points.smoothing[i], &points.velocity[3 * i], points.type[i]);
+        ASSERT_GE(points.velocity_dispersion[i], 0.0f);
+        got.Add(&points.position[3 * i], points.weight[i], points.smoothing[i], &points.velocity[3 * i], points.type[i],
+                points.velocity_dispersion[i]);
       }
       const NodeKey child = key.Child(o);
       if (!truth.count(child)) {
@@ -159,9 +170,228 @@ TEST(AggregateParent, ClustersKeepEachOctantsMassCentreSpreadAndMomentum) {
         EXPECT_NEAR(got.momentum[a] / want.mass, want.momentum[a] / want.mass, 1e-3);  // float velocities
       }
       EXPECT_NEAR(got.second / want.second, 1, 1e-9);
+      EXPECT_NEAR(got.velocity_second / want.velocity_second, 1, 1e-5);  // float velocities and dispersions
     }
   }
   EXPECT_GT(inner, 5u);
+}
+
+// `count` particles at one place (a cluster that no split can part), with
+// the given masses and velocities, as a chunk of one type.
+ParticleChunk Coincident(const std::array<double, 3>& at, const std::vector<double>& mass,
+                         const std::vector<std::array<float, 3>>& velocity, std::uint64_t first_id) {
+  ParticleChunk c;
+  for (std::size_t i = 0; i < mass.size(); ++i) {
+    c.position.insert(c.position.end(), at.begin(), at.end());
+    c.mass.push_back(mass[i]);
+    c.type.push_back(0);
+    c.id.push_back(first_id + i);
+    c.velocity.insert(c.velocity.end(), velocity[i].begin(), velocity[i].end());
+  }
+  return c;
+}
+
+// sigma^2 = sum w |v - vbar|^2 / (3 W) over the particles, in double.
+double DirectDispersion(const std::vector<const ParticleChunk*>& chunks) {
+  double mass = 0, mean[3] = {0, 0, 0};
+  for (const ParticleChunk* c : chunks) {
+    for (std::size_t i = 0; i < c->size(); ++i) {
+      mass += c->mass[i];
+      for (int a = 0; a < 3; ++a) mean[a] += c->mass[i] * c->velocity[3 * i + a];
+    }
+  }
+  for (double& m : mean) m /= mass;
+  double sum = 0;
+  for (const ParticleChunk* c : chunks) {
+    for (std::size_t i = 0; i < c->size(); ++i) {
+      for (int a = 0; a < 3; ++a) sum += c->mass[i] * (c->velocity[3 * i + a] - mean[a]) * (c->velocity[3 * i + a] - mean[a]);
+    }
+  }
+  return std::sqrt(sum / (3 * mass));
+}
+
+// Two groups of coincident particles, each the only points of a leaf: the
+// root has one cluster of each, with the dispersion worked out by hand.
+TEST(AggregateParent, VelocityDispersionOfSmallClustersByHand) {
+  SubtreeOptions options;
+  options.capacity = 8;
+  // Masses 1, 1, 2 at velocities (1,0,0), (-1,0,0), (0,2,0): mean (0,1,0),
+  // squared offsets 2, 2, 1, so sigma^2 = (2 + 2 + 2 * 1) / (3 * 4) = 1/2.
+  const ParticleChunk slow = Coincident({-25, -25, -25}, {1, 1, 2}, {{1, 0, 0}, {-1, 0, 0}, {0, 2, 0}}, 1);
+  // Masses 3, 1 at (10,0,0), (-2,4,0): mean (7,1,0), squared offsets 10 and
+  // 90, so sigma^2 = (3 * 10 + 90) / (3 * 4) = 10.
+  const ParticleChunk fast = Coincident({25, 25, 25}, {3, 1}, {{10, 0, 0}, {-2, 4, 0}}, 10);
+  std::map<NodeKey, NodePoints> nodes;
+  const NodeSink sink = [&](NodeKey key, const NodePoints& p) { nodes[key] = p; };
+  const NodeKey r0 = NodeKey::Root().Child(0), r7 = NodeKey::Root().Child(7);
+  std::vector<RegionRoot> regions;
+  regions.push_back({r0, BuildSubtree(slow, r0, kCube, options, sink)});
+  regions.push_back({r7, BuildSubtree(fast, r7, kCube, options, sink)});
+  const NodePoints root = BuildTopLevels(std::move(regions), kCube, options, sink);
+  EXPECT_TRUE(nodes.at(r0).velocity_dispersion.empty()) << "a leaf's points are particles";
+  EXPECT_TRUE(nodes.at(r7).velocity_dispersion.empty());
+  ASSERT_EQ(root.size(), 2u);
+  ASSERT_EQ(root.velocity_dispersion.size(), 2u);
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[0], std::sqrt(0.5f));
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[1], std::sqrt(10.0f));
+  EXPECT_EQ(root.velocity, (std::vector<float>{0, 1, 0, 7, 1, 0}));
+  EXPECT_EQ(root.weight, (std::vector<double>{4, 4}));
+  // As the direct computation says.
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[0], static_cast<float>(DirectDispersion({&slow})));
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[1], static_cast<float>(DirectDispersion({&fast})));
+  // A single particle's cluster: 0.
+  const ParticleChunk one = Coincident({-25, -25, -25}, {2}, {{5, 6, 7}}, 20);
+  std::vector<RegionRoot> single;
+  single.push_back({r0, BuildSubtree(one, r0, kCube, options, sink)});
+  single.push_back({r7, BuildSubtree(fast, r7, kCube, options, sink)});
+  EXPECT_EQ(BuildTopLevels(std::move(single), kCube, options, sink).velocity_dispersion[0], 0.0f);
+}
+
+// Siblings may differ in carrying dispersions (a leaf beside a node of
+// clusters, above), but a child's dispersions must be one per point and go
+// with velocities.
+TEST(AggregateParent, ChildDispersionsThatDoNotFitTheirPointsAreRejected) {
+  SubtreeOptions options;
+  options.capacity = 8;
+  const NodeKey r0 = NodeKey::Root().Child(0), r7 = NodeKey::Root().Child(7);
+  const auto noop = [](NodeKey, const NodePoints&) {};
+  const NodePoints slow =
+      BuildSubtree(Coincident({-25, -25, -25}, {1, 1, 2}, {{1, 0, 0}, {-1, 0, 0}, {0, 2, 0}}, 1), r0, kCube, options, noop);
+  const NodePoints fast = BuildSubtree(Coincident({25, 25, 25}, {3, 1}, {{10, 0, 0}, {-2, 4, 0}}, 10), r7, kCube, options, noop);
+  const auto expect_rejected = [&](NodePoints child, const std::string& message) {
+    try {
+      BuildTopLevels({{r0, std::move(child)}, {r7, fast}}, kCube, options, noop);
+      ADD_FAILURE() << message;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument);
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  };
+  NodePoints wrong_size = slow;
+  wrong_size.velocity_dispersion = {1, 2};
+  expect_rejected(wrong_size, "child r0 has 2 velocity dispersions for 3 points");
+  NodePoints without_velocity = slow;
+  without_velocity.velocity.clear();
+  without_velocity.velocity_dispersion = {1, 2, 3};
+  NodePoints fast_without_velocity = fast;
+  fast_without_velocity.velocity.clear();
+  try {
+    BuildTopLevels({{r0, without_velocity}, {r7, fast_without_velocity}}, kCube, options, noop);
+    ADD_FAILURE() << "dispersions without velocities";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("and no velocities"), std::string::npos) << e.what();
+  }
+  // Members with dispersions 1, 2, 3 of their own (as if each were a
+  // cluster): sigma^2 = (6 + 3 * (1 * 1 + 1 * 4 + 2 * 9)) / (3 * 4) = 6.25.
+  NodePoints fitting = slow;
+  fitting.velocity_dispersion = {1, 2, 3};
+  const NodePoints root = BuildTopLevels({{r0, fitting}, {r7, fast}}, kCube, options, noop);
+  ASSERT_EQ(root.velocity_dispersion.size(), 2u);
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[0], 2.5f);
+}
+
+// A cluster of clusters: the root's cluster of octant 0 stands for the
+// eight clusters of r0, each a group of coincident particles with its own
+// dispersion (and a bulk flow the float velocities must carry). Its
+// dispersion, computed through theirs, is the one over all the particles.
+TEST(AggregateParent, DispersionThroughChildClustersIsTheDirectOneOverTheirParticles) {
+  SubtreeOptions options;
+  options.capacity = 8;
+  std::mt19937_64 rng(11);
+  std::lognormal_distribution<double> mass(0, 1);
+  std::normal_distribution<float> velocity(0, 80);
+  const NodeKey r0 = NodeKey::Root().Child(0), r7 = NodeKey::Root().Child(7);
+  std::vector<ParticleChunk> groups;
+  std::vector<NodeKey> group_keys;
+  for (int octant = 0; octant < 8; ++octant) {
+    const NodeKey key = r0.Child(octant);
+    const NodeCube cell = kCube.NodeCubeOf(key);
+    const std::size_t count = 2 + rng() % 6;  // at most the capacity: a leaf
+    std::vector<double> masses;
+    std::vector<std::array<float, 3>> velocities;
+    for (std::size_t i = 0; i < count; ++i) {
+      masses.push_back(mass(rng));
+      // Each group its own mean too, so the groups' offsets count.
+      velocities.push_back({300 + 20.0f * static_cast<float>(octant) + velocity(rng), -150 + velocity(rng), velocity(rng)});
+    }
+    const double h = cell.size / 2;
+    groups.push_back(Coincident({cell.origin[0] + h, cell.origin[1] + h, cell.origin[2] + h}, masses, velocities,
+                                100 * static_cast<std::uint64_t>(octant)));
+    group_keys.push_back(key);
+  }
+  const ParticleChunk far = Coincident({25, 25, 25}, {1, 2}, {{0, 0, 0}, {3, 3, 3}}, 5000);
+  std::map<NodeKey, NodePoints> nodes;
+  const NodeSink sink = [&](NodeKey key, const NodePoints& p) { nodes[key] = p; };
+  std::vector<RegionRoot> regions;
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    regions.push_back({group_keys[g], BuildSubtree(groups[g], group_keys[g], kCube, options, sink)});
+  }
+  regions.push_back({r7, BuildSubtree(far, r7, kCube, options, sink)});  // a leaf beside an inner node
+  const NodePoints root = BuildTopLevels(std::move(regions), kCube, options, sink);
+
+  // r0: one cluster per group.
+  const NodePoints& parent = nodes.at(r0);
+  ASSERT_EQ(parent.size(), 8u);
+  ASSERT_EQ(parent.velocity_dispersion.size(), 8u);
+  for (int octant = 0; octant < 8; ++octant) {
+    EXPECT_NEAR(parent.velocity_dispersion[octant], DirectDispersion({&groups[octant]}),
+                1e-6 * DirectDispersion({&groups[octant]}))
+        << octant;
+  }
+  // The root: all of r0 in one cluster (eight more would pass the capacity), r7's leaf in another.
+  ASSERT_EQ(root.size(), 2u);
+  ASSERT_EQ(root.octant_offsets[1], 1u);
+  std::vector<const ParticleChunk*> all;
+  for (const ParticleChunk& g : groups) all.push_back(&g);
+  const double direct = DirectDispersion(all);
+  EXPECT_NEAR(root.velocity_dispersion[0], direct, 1e-5 * direct);
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[1], static_cast<float>(DirectDispersion({&far})));
+  // The members' own dispersions matter: without them the root would see
+  // the spread between the groups' means only.
+  double between = 0, total_mass = 0, mean[3] = {0, 0, 0};
+  for (std::size_t k = 0; k < parent.size(); ++k) {
+    total_mass += parent.weight[k];
+    for (int a = 0; a < 3; ++a) mean[a] += parent.weight[k] * parent.velocity[3 * k + a];
+  }
+  for (double& m : mean) m /= total_mass;
+  for (std::size_t k = 0; k < parent.size(); ++k) {
+    for (int a = 0; a < 3; ++a) between += parent.weight[k] * std::pow(parent.velocity[3 * k + a] - mean[a], 2);
+  }
+  EXPECT_LT(std::sqrt(between / (3 * total_mass)), 0.9 * direct);
+}
+
+// Only clusters of particles with velocities carry a dispersion: not a
+// sample (--coarse sample, or a node whose capacity cannot give every octant
+// and type a cluster), not a dataset without velocities.
+TEST(AggregateParent, OnlyClustersOfParticlesWithVelocitiesCarryADispersion) {
+  const ParticleChunk input = Clumpy(13, 6000);  // three types
+  const auto carriers = [&](const ParticleChunk& particles, const SubtreeOptions& options) {
+    std::size_t inner = 0, with = 0;
+    std::map<NodeKey, NodePoints> nodes;
+    BuildSubtree(particles, NodeKey::Root(), kCube, options, [&](NodeKey key, const NodePoints& p) { nodes[key] = p; });
+    for (const auto& [key, points] : nodes) {
+      bool leaf = true;
+      for (int o = 0; o < 8; ++o) leaf = leaf && !nodes.count(key.Child(o));
+      if (leaf) continue;
+      ++inner;
+      with += points.velocity_dispersion.empty() ? 0 : 1;
+    }
+    EXPECT_GT(inner, 0u);
+    return std::pair{inner, with};
+  };
+  SubtreeOptions clusters;
+  clusters.capacity = 100;
+  const auto [inner, with] = carriers(input, clusters);
+  EXPECT_EQ(with, inner);
+  SubtreeOptions sample = clusters;
+  sample.coarse = CoarsePoints::kSample;
+  EXPECT_EQ(carriers(input, sample).second, 0u);
+  SubtreeOptions too_small = clusters;
+  too_small.capacity = 15;  // two types need 16, three 24
+  EXPECT_EQ(carriers(input, too_small).second, 0u);
+  ParticleChunk still = input;
+  still.velocity.clear();
+  EXPECT_EQ(carriers(still, clusters).second, 0u);
 }
 
 // Chunked as the out-of-core pipeline builds, the clusters come out the
@@ -187,10 +417,14 @@ TEST(AggregateParent, TopLevelsGiveTheBlocksOfOneBuild) {
   for (auto& [key, chunk] : chunks) roots.push_back({key, BuildSubtree(chunk, key, kCube, options, sink)});
   BuildTopLevels(std::move(roots), kCube, options, sink);
   ASSERT_EQ(pieces.size(), whole.size());
+  std::size_t with_dispersion = 0;
   for (const auto& [key, points] : whole) {
     ASSERT_TRUE(pieces.count(key)) << key.Path();
     EXPECT_EQ(EncodeBlock(pieces.at(key), key, kCube), EncodeBlock(points, key, kCube)) << key.Path();
+    EXPECT_EQ(pieces.at(key).velocity_dispersion, points.velocity_dispersion) << key.Path();
+    with_dispersion += points.velocity_dispersion.empty() ? 0 : 1;
   }
+  EXPECT_GT(with_dispersion, 5u) << "the inner nodes' clusters carry their velocity dispersion";
 }
 
 // Sampling keeps particles; clusters stand for many: at the same count the

@@ -16,6 +16,7 @@
 #include <random>
 
 #include "index/extended_sum.h"
+#include "index/query.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -24,10 +25,12 @@ namespace {
 constexpr ColumnSet kVelocityBit = ColumnBit(ColumnId::kVelocity);
 constexpr ColumnSet kIdBit = ColumnBit(ColumnId::kId);
 constexpr ColumnSet kDisplacementBit = ColumnBit(ColumnId::kDisplacement);
+constexpr ColumnSet kDispersionBit = ColumnBit(ColumnId::kVelocityDispersion);
 // The optional columns, in block order.
-constexpr std::array<ColumnId, 6> kOptionalColumns = {ColumnId::kVelocity,     ColumnId::kId,
+constexpr std::array<ColumnId, 7> kOptionalColumns = {ColumnId::kVelocity,     ColumnId::kId,
                                                       ColumnId::kDisplacement, ColumnId::kNextVelocity,
-                                                      ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity};
+                                                      ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity,
+                                                      ColumnId::kVelocityDispersion};
 
 // n random points inside node `key`, optional columns as `optional` says.
 NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const Cube& cube, ColumnSet optional) {
@@ -55,6 +58,8 @@ NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const 
         VectorColumnOf(p, id)->push_back(velocity ? vel(rng) : static_cast<float>(unit(rng) - 0.5) * 0.01f);
       }
     }
+    // Dispersions >= 0, a few exactly 0 (clusters of one particle).
+    if (optional & kDispersionBit) p.velocity_dispersion.push_back(rng() % 8 == 0 ? 0.0f : std::fabs(vel(rng)) / 3);
   }
   OrderByOctant(p, key, cube);
   return p;
@@ -111,13 +116,22 @@ void ExpectMatches(const NodePoints& original, const NodePoints& decoded, NodeKe
       for (std::size_t i = a; i < orig.size(); i += 3) ASSERT_LE(std::fabs(got[i] - orig[i]), bound);
     }
   }
+  ASSERT_EQ(decoded.velocity_dispersion.size(), original.velocity_dispersion.size());
+  if (!original.velocity_dispersion.empty()) {
+    const auto [lo, hi] = std::minmax_element(original.velocity_dispersion.begin(), original.velocity_dispersion.end());
+    const double bound = (static_cast<double>(*hi) - *lo) / 131070 * (1 + 1e-6) + 4.0 * *hi * 0x1p-23;
+    for (std::size_t i = 0; i < n; ++i) {
+      ASSERT_GE(decoded.velocity_dispersion[i], 0.0f) << i;
+      ASSERT_LE(std::fabs(decoded.velocity_dispersion[i] - original.velocity_dispersion[i]), bound) << i;
+    }
+  }
 }
 
 bool SamePoints(const NodePoints& a, const NodePoints& b) {
   bool same = a.position == b.position && a.weight == b.weight && a.smoothing == b.smoothing && a.id == b.id &&
               a.type == b.type && a.octant_offsets == b.octant_offsets;
   for (const ColumnId id : kVectorColumnIds) same &= *VectorColumnOf(a, id) == *VectorColumnOf(b, id);
-  return same;
+  return same && a.velocity_dispersion == b.velocity_dispersion;
 }
 
 const Cube kCube{{-3.25, 12.0, 1000.0}, 77.5, false};
@@ -351,10 +365,10 @@ TEST(BlockCodec, RangedDecodeEqualsFullDecode) {
   const std::size_t header_size = DecodeBlockHeaderSize(fixed, "ranged");
   const Bytes prefix(block.begin(), block.begin() + static_cast<std::ptrdiff_t>(header_size));
   const BlockHeader header = DecodeBlockHeader(prefix, key, "ranged");
-  EXPECT_EQ(header.columns.size(), 10u);
-  for (ColumnSet wanted = 1; wanted < (1u << 10); wanted += 5) {
+  EXPECT_EQ(header.columns.size(), kColumnIds.size());
+  for (ColumnSet wanted = 1; wanted < (1u << kColumnIds.size()); wanted += 5) {
     NodePoints ranged;
-    for (int raw = 1; raw <= 10; ++raw) {
+    for (int raw = 1; raw <= static_cast<int>(kColumnIds.size()); ++raw) {
       const auto id = static_cast<ColumnId>(raw);
       if (!(wanted & (1u << (raw - 1)))) continue;
       const BlockColumn* c = header.Find(id);
@@ -732,9 +746,9 @@ TEST(BlockCodec, EpochLinkColumnsAreCheckedLikeVelocity) {
   const NodePoints points = RandomPoints(rng, 30, key, kCube, kAllColumns);
   const Bytes block = EncodeBlock(points, key, kCube);
   const BlockHeader header = DecodeBlockHeader(block, key, "links");
-  // All ten columns, in id order, the links last.
-  ASSERT_EQ(header.columns.size(), 10u);
-  for (std::size_t c = 0; c < 10; ++c) EXPECT_EQ(static_cast<int>(header.columns[c].id), static_cast<int>(c + 1));
+  // All eleven columns, in id order.
+  ASSERT_EQ(header.columns.size(), 11u);
+  for (std::size_t c = 0; c < 11; ++c) EXPECT_EQ(static_cast<int>(header.columns[c].id), static_cast<int>(c + 1));
   auto expect_corrupt = [&](const Bytes& bad, ColumnSet wanted, const std::string& message) {
     try {
       DecodeBlock(bad, wanted, key, kCube, "links");
@@ -767,11 +781,168 @@ TEST(BlockCodec, EpochLinkColumnsAreCheckedLikeVelocity) {
     FixChecksums(bad);
     expect_corrupt(bad, kAllColumns, name);
   }
-  // Id 11 is not a column of version 1.
+  // Id 12 is not a column of version 1.
   Bytes bad = block;
-  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 9] = 11;
+  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 10] = 12;
   FixChecksums(bad);
-  expect_corrupt(bad, kAllColumns, "unknown column id 11");
+  expect_corrupt(bad, kAllColumns, "unknown column id 12");
+}
+
+// Column 11: u16 codes between the block's f32 min and max dispersion, as
+// docs/FORMAT.md section 4 says, each the nearest of the range; its own
+// checksum, length and range are checked; the encoder takes only finite
+// values >= 0; and a block without it is the block it was before.
+TEST(BlockCodec, VelocityDispersionFollowsTheDocumentedLayoutAndChecks) {
+  std::mt19937_64 rng(31);
+  const NodeKey key = NodeKey::FromPath("r16");
+  NodePoints points = RandomPoints(rng, 50, key, kCube, kVelocityBit | kIdBit | kDispersionBit);
+  points.velocity_dispersion[7] = 0.0f;  // the smallest, so min = 0
+  points.velocity_dispersion[11] = 250.0f;
+  for (float& s : points.velocity_dispersion) s = std::min(s, 250.0f);
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const BlockHeader header = DecodeBlockHeader(block, key, "dispersion");
+  ASSERT_EQ(header.columns.size(), 7u);
+  const BlockColumn& column = header.columns.back();
+  ASSERT_EQ(column.id, ColumnId::kVelocityDispersion);
+  EXPECT_EQ(column.encoding, 1);
+  EXPECT_EQ(column.length, 2u * points.size());
+  EXPECT_EQ(column.offset + column.length, block.size()) << "the last column, after type";
+  float min = -1, max = -1;
+  std::memcpy(&min, column.params.data(), 4);
+  std::memcpy(&max, column.params.data() + 4, 4);
+  EXPECT_EQ(min, 0.0f);
+  EXPECT_EQ(max, 250.0f);
+  EXPECT_TRUE(std::all_of(column.params.begin() + 8, column.params.end(), [](std::uint8_t b) { return b == 0; }));
+  const NodePoints decoded = DecodeBlock(block, kAllColumns, key, kCube, "dispersion").points;
+  ASSERT_EQ(decoded.velocity_dispersion.size(), points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const unsigned q = block[column.offset + 2 * i] | block[column.offset + 2 * i + 1] << 8;
+    EXPECT_LE(std::fabs(q - points.velocity_dispersion[i] / 250.0 * 65535), 0.5 + 1e-6) << i << ": the nearest code";
+    EXPECT_FLOAT_EQ(decoded.velocity_dispersion[i], static_cast<float>(q * (250.0 / 65535))) << i;
+  }
+  EXPECT_EQ(decoded.velocity_dispersion[7], 0.0f);
+  EXPECT_EQ(decoded.velocity_dispersion[11], 250.0f);
+
+  // Without the column the block is the same block less its directory entry
+  // and bytes: every other column byte for byte, its checksum and params too.
+  NodePoints without = points;
+  without.velocity_dispersion.clear();
+  const Bytes plain = EncodeBlock(without, key, kCube);
+  const BlockHeader plain_header = DecodeBlockHeader(plain, key, "plain");
+  ASSERT_EQ(plain_header.columns.size(), 6u);
+  EXPECT_EQ(plain.size(), block.size() - kBlockDirectoryEntrySize - column.length);
+  for (std::size_t c = 0; c < plain_header.columns.size(); ++c) {
+    const BlockColumn& a = plain_header.columns[c];
+    const BlockColumn& b = header.columns[c];
+    EXPECT_EQ(a.id, b.id);
+    EXPECT_EQ(a.checksum, b.checksum);
+    EXPECT_EQ(a.params, b.params);
+    EXPECT_TRUE(std::equal(plain.begin() + static_cast<std::ptrdiff_t>(a.offset),
+                           plain.begin() + static_cast<std::ptrdiff_t>(a.offset + a.length),
+                           block.begin() + static_cast<std::ptrdiff_t>(b.offset)))
+        << ColumnName(a.id);
+  }
+  EXPECT_TRUE(DecodeBlock(plain, kAllColumns, key, kCube, "plain").points.velocity_dispersion.empty());
+
+  // Damage behind valid checksums, and a flipped value byte.
+  auto expect_corrupt = [&](const Bytes& bad, ColumnSet wanted, const std::string& message) {
+    try {
+      DecodeBlock(bad, wanted, key, kCube, "store/epoch-00000.pages block r16");
+      ADD_FAILURE() << message;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << e.what();
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("block r16"), std::string::npos) << e.what();
+    }
+  };
+  const std::string name = "column 'velocity_dispersion': ";
+  const std::size_t entry = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 6;
+  Bytes bad = block;
+  bad[column.offset + 5] ^= 0x10;
+  expect_corrupt(bad, kDispersionBit, name + "checksum mismatch");
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  for (const auto& [lo, hi] : {std::pair{-1.0f, 250.0f}, std::pair{3.0f, 2.0f}, std::pair{nan, 250.0f},
+                               std::pair{0.0f, inf}, std::pair{0.0f, nan}}) {
+    SCOPED_TRACE(std::to_string(lo) + ", " + std::to_string(hi));
+    bad = block;
+    std::memcpy(&bad[entry + 32], &lo, 4);
+    std::memcpy(&bad[entry + 36], &hi, 4);
+    FixChecksums(bad);
+    expect_corrupt(bad, kDispersionBit, name + "range is [");
+  }
+  bad = block;
+  bad[entry + 16] = static_cast<std::uint8_t>(bad[entry + 16] + 2);
+  FixChecksums(bad);
+  expect_corrupt(bad, kAllColumns, name);
+  // A range whose codes could round past max: decoded values stay <= max.
+  bad = block;
+  const float big = std::numeric_limits<float>::max();
+  std::memcpy(&bad[entry + 36], &big, 4);
+  FixChecksums(bad);
+  for (const float s : DecodeBlock(bad, kDispersionBit, key, kCube, "big").points.velocity_dispersion) {
+    ASSERT_TRUE(std::isfinite(s));
+    ASSERT_GE(s, 0.0f);
+  }
+
+  // The encoder's contract.
+  for (const float value : {-1e-3f, nan, inf}) {
+    NodePoints p = points;
+    p.velocity_dispersion[13] = value;
+    try {
+      EncodeBlock(p, key, kCube);
+      ADD_FAILURE() << value;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidArgument);
+      EXPECT_NE(std::string(e.what()).find("velocity_dispersion of point 13"), std::string::npos) << e.what();
+    }
+  }
+  NodePoints short_column = points;
+  short_column.velocity_dispersion.pop_back();
+  EXPECT_THROW(EncodeBlock(short_column, key, kCube), Error);
+  // A constant column (all zero: clusters of one particle each) codes as 0 and decodes exactly.
+  NodePoints zeros = points;
+  std::fill(zeros.velocity_dispersion.begin(), zeros.velocity_dispersion.end(), 0.0f);
+  EXPECT_EQ(DecodeBlock(EncodeBlock(zeros, key, kCube), kAllColumns, key, kCube, "zeros").points.velocity_dispersion,
+            zeros.velocity_dispersion);
+}
+
+// Whatever reorders or selects a node's points moves each point's
+// dispersion with it.
+TEST(BlockCodec, ReorderingAndSelectingPointsKeepTheirDispersions) {
+  std::mt19937_64 rng(32);
+  const NodeKey key = NodeKey::FromPath("r43");
+  NodePoints p = RandomPoints(rng, 300, key, kCube, kVelocityBit | kDispersionBit);
+  // Each point's dispersion tied to its velocity, so a point can be recognised.
+  const auto tied = [](const NodePoints& q) {
+    if (q.velocity_dispersion.size() != q.size()) return false;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      if (q.velocity_dispersion[i] != std::fabs(q.velocity[3 * i])) return false;
+    }
+    return true;
+  };
+  for (std::size_t i = 0; i < p.size(); ++i) p.velocity_dispersion[i] = std::fabs(p.velocity[3 * i]);
+  // Reversed, the points are no longer grouped by octant.
+  NodePoints reversed;
+  for (std::size_t i = p.size(); i-- > 0;) {
+    reversed.position.insert(reversed.position.end(), &p.position[3 * i], &p.position[3 * i] + 3);
+    reversed.velocity.insert(reversed.velocity.end(), &p.velocity[3 * i], &p.velocity[3 * i] + 3);
+    reversed.weight.push_back(p.weight[i]);
+    reversed.smoothing.push_back(p.smoothing[i]);
+    reversed.type.push_back(p.type[i]);
+    reversed.velocity_dispersion.push_back(p.velocity_dispersion[i]);
+  }
+  OrderByOctant(reversed, key, kCube);
+  ASSERT_NE(reversed.position, p.position) << "the reversal must have moved points";
+  EXPECT_TRUE(tied(reversed));
+  std::vector<std::uint32_t> rows;
+  for (std::uint32_t i = 0; i < p.size(); i += 3) rows.push_back(i);
+  const NodePoints selected = SelectRows(reversed, rows);
+  EXPECT_EQ(selected.size(), rows.size());
+  EXPECT_TRUE(tied(selected));
+  NodePoints kept = reversed;
+  KeepPoints(kept, rows);
+  EXPECT_TRUE(tied(kept));
+  EXPECT_EQ(kept.velocity_dispersion, selected.velocity_dispersion);
 }
 
 TEST(BlockCodec, EncodeRejectsPointsThatBreakTheContract) {
