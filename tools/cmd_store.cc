@@ -46,6 +46,9 @@ void PrintInfo(const std::string& directory) {
     std::printf("  cube origin (%.9g, %.9g, %.9g) size %.9g%s, depth %d\n", cube.origin[0], cube.origin[1], cube.origin[2],
                 cube.size, cube.periodic ? " (periodic box)" : "", levels.empty() ? 0 : levels.rbegin()->first);
     std::printf("  columns %s\n", ColumnNames(dataset.columns(e)).c_str());
+    if (dataset.cluster_columns() != 0) {
+      std::printf("  inner nodes of clusters also %s\n", ColumnNames(dataset.cluster_columns()).c_str());
+    }
     if (const auto& link = dataset.link_to_next(e)) {
       std::printf("  to the next epoch: %llu particles in both, velocity scale %.6g (fit residual %.3g, agreed by %.0f%% "
                   "of the velocity weight; least squares over all %.6g)\n",

@@ -56,6 +56,8 @@ std::vector<Field> FieldsOf(ColumnSet columns) {
       fields.push_back({"id", "uint64"});  // see docs/QUERIES.md: a PLY extension
     } else if (id == ColumnId::kType) {
       fields.push_back({"type", "uchar"});
+    } else if (id == ColumnId::kVelocityDispersion) {
+      fields.push_back({ColumnName(id), "float"});
     }
   }
   return fields;
@@ -77,6 +79,8 @@ void ForEachExtraField(const NodePoints& p, std::size_t i, ColumnSet columns, co
       put(At(p.id, i));
     } else if (id == ColumnId::kType) {
       put(At(p.type, i));
+    } else if (id == ColumnId::kVelocityDispersion) {
+      put(At(p.velocity_dispersion, i));  // 0 for a leaf's particles, which carry none
     }
   }
 }

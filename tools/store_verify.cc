@@ -2,6 +2,7 @@
 #include "tools/store_verify.h"
 
 #include <algorithm>
+#include <bitset>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -50,6 +51,11 @@ void VerifyEpoch(const Dataset& dataset, std::uint32_t e, const IdIndexReader* i
   std::vector<std::pair<std::uint64_t, NodeKey>> id_samples;
   std::mt19937_64 rng(e);
   const ColumnSet declared = dataset.columns(e);
+  // Inner nodes of clusters carry these besides; whether a node's points are
+  // clusters follows from its children's particle types (below).
+  const ColumnSet cluster_columns = dataset.cluster_columns();
+  std::unordered_map<std::uint64_t, std::bitset<256>> children_types;  // of every node with children
+  std::unordered_map<std::uint64_t, bool> carries_cluster_columns;      // of every inner node
   for (std::size_t i = 0; i < entries.size(); ++i) {
     const NodeKey key = NodeKey::FromValue(entries[i].key);
     if (!key.IsValid()) {
@@ -73,11 +79,21 @@ void VerifyEpoch(const Dataset& dataset, std::uint32_t e, const IdIndexReader* i
       }
       ColumnSet carried = 0;
       for (const BlockColumn& column : block.header.columns) carried |= ColumnBit(column.id);
-      if (carried != declared) {
-        faults.Add(where + ": carries the columns " + ColumnNames(carried) + ", the manifest declares " +
-                   ColumnNames(declared));
-      }
       const bool leaf = !has_children.count(entry.key);
+      // An inner node may carry the cluster columns as well; which inner
+      // nodes must is checked once all their children are read.
+      const bool with_cluster_columns = !leaf && cluster_columns != 0 && carried == (declared | cluster_columns);
+      if (carried != declared && !with_cluster_columns) {
+        faults.Add(where + ": carries the columns " + ColumnNames(carried) + ", the manifest declares " +
+                   ColumnNames(declared) +
+                   (cluster_columns != 0 ? (leaf ? " for a leaf" : " (and " + ColumnNames(cluster_columns) + " for clusters)")
+                                         : ""));
+      }
+      if (!leaf) carries_cluster_columns[entry.key] = with_cluster_columns;
+      if (key.level() > 0 && cluster_columns != 0) {
+        std::bitset<256>& types = children_types[key.Parent().value()];
+        for (const std::uint8_t t : block.points.type) types.set(t);
+      }
       if (n > dataset.capacity() && !(leaf && key.level() == dataset.max_level())) {
         faults.Add(where + ": " + std::to_string(n) + " points exceed the node capacity " + std::to_string(dataset.capacity()));
       }
@@ -97,6 +113,21 @@ void VerifyEpoch(const Dataset& dataset, std::uint32_t e, const IdIndexReader* i
       }
     } catch (const Error& error) {
       faults.Add(error.what());
+    }
+  }
+  // A node's points are clusters exactly when the builder could give every
+  // child octant and particle type of its population a cluster of its own
+  // (index/subtree_builder.cc, AggregateParent); otherwise they are a sample.
+  for (const auto& [key, carries] : carries_cluster_columns) {
+    const auto types = children_types.find(key);
+    if (types == children_types.end()) continue;  // no child was read: faulted above
+    const std::size_t type_count = std::max<std::size_t>(1, types->second.count());
+    const bool clusters = dataset.capacity() >= 8 * type_count;
+    if (carries != clusters) {
+      faults.Add(dataset.Where(e, NodeKey::FromValue(key)) + (carries ? ": carries " : ": lacks ") +
+                 ColumnNames(cluster_columns) + ", but with capacity " + std::to_string(dataset.capacity()) + " and " +
+                 std::to_string(type_count) + " particle type(s) below it its points are " +
+                 (clusters ? "clusters" : "a sample"));
     }
   }
   for (const auto& [key, mass] : children_mass) {

@@ -278,5 +278,47 @@ TEST(QueryOutputTest, EpochLinkColumnsHaveTheirOwnFieldsInBlockOrder) {
   }
 }
 
+// The clusters' velocity dispersion is one float field after the vector
+// columns; a batch of a leaf, which carries none, gives 0.
+TEST(QueryOutputTest, VelocityDispersionIsOneFloatFieldLast) {
+  QueryBatch cluster = TwoPoints();
+  cluster.points.velocity_dispersion = {2.5f, 0.125f};
+  const QueryBatch leaf = TwoPoints();
+  const ColumnSet columns = ParseColumnList("velocity_dispersion,velocity");
+  EXPECT_EQ(ParseColumnList("all") & ColumnBit(ColumnId::kVelocityDispersion), ColumnBit(ColumnId::kVelocityDispersion));
+  std::ostringstream csv;
+  auto writer = MakePointWriter(PointFormat::kCsv, columns, csv);
+  writer->Write(cluster);
+  writer->Write(leaf);
+  writer->Finish();
+  EXPECT_EQ(csv.str(),
+            "x,y,z,vx,vy,vz,velocity_dispersion\n"
+            "1.5,2.5,3.5,1,2,3,2.5\n"
+            "-4,5,6.25,4,5,6,0.125\n"
+            "1.5,2.5,3.5,1,2,3,0\n"
+            "-4,5,6.25,4,5,6,0\n");
+
+  std::ostringstream bin;
+  writer = MakePointWriter(PointFormat::kBinary, columns, bin);
+  writer->Write(cluster);
+  writer->Finish();
+  const std::size_t record = 24 + 12 + 4;
+  ASSERT_EQ(BinaryRecordSize(columns), record);
+  const std::string bytes = bin.str();
+  ASSERT_EQ(bytes.size(), 16 + 2 * record);
+  std::uint32_t bits;
+  std::memcpy(&bits, bytes.data() + 4, 4);
+  EXPECT_EQ(bits, (1u << 1) | (1u << 4) | (1u << 11));
+  float sigma;
+  std::memcpy(&sigma, bytes.data() + 16 + record + 36, 4);
+  EXPECT_EQ(sigma, 0.125f);
+
+  std::ostringstream ply;
+  writer = MakePointWriter(PointFormat::kPly, columns, ply);
+  writer->Write(cluster);
+  writer->Finish();
+  EXPECT_NE(ply.str().find("property float vz\nproperty float velocity_dispersion\n"), std::string::npos) << ply.str();
+}
+
 }  // namespace
 }  // namespace octocosm

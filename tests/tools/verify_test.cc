@@ -74,10 +74,46 @@ class VerifyTest : public ::testing::Test {
     return o.output;
   }
 
+  // An ingested store of clustered points with velocities, with inner
+  // nodes of `coarse`, and the particles' velocities (x,y,z) and masses.
+  std::string IngestedStoreWithVelocities(CoarsePoints coarse, std::vector<float>* velocities = nullptr,
+                                          std::vector<double>* masses = nullptr) {
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> gauss(0.5, 0.1);
+    std::normal_distribution<float> velocity(0, 200);
+    std::lognormal_distribution<double> mass(0, 0.5);
+    const std::string name = coarse == CoarsePoints::kClusters ? "clusters" : "sample";
+    {
+      std::ofstream out(dir_ / (name + ".raw"), std::ios::binary);
+      for (std::uint64_t i = 1; i <= 20000; ++i) {
+        const double position[3] = {gauss(rng), gauss(rng), gauss(rng)};
+        const float v[3] = {100 + velocity(rng), velocity(rng), -50 + velocity(rng)};
+        const double m = mass(rng);
+        out.write(reinterpret_cast<const char*>(position), sizeof position);
+        out.write(reinterpret_cast<const char*>(v), sizeof v);
+        out.write(reinterpret_cast<const char*>(&m), sizeof m);
+        out.write(reinterpret_cast<const char*>(&i), sizeof i);
+        if (velocities != nullptr) velocities->insert(velocities->end(), v, v + 3);
+        if (masses != nullptr) masses->push_back(m);
+      }
+    }
+    IngestOptions o;
+    o.inputs = {(dir_ / (name + ".raw")).string()};
+    o.output = (dir_ / (name + "-store")).string();
+    o.read.format = "raw";
+    o.read.raw = RawLayout::Parse("xyz:f64,vel:f32,mass:f64,id:u64");
+    o.tree.capacity = 500;
+    o.tree.coarse = coarse;
+    o.page_size = 4096;
+    o.quiet = true;
+    Ingest(o);
+    return o.output;
+  }
+
   // A hand-built one-epoch store: `nodes` (key, points) with the dataset
-  // metadata ingest would write for them.
+  // metadata ingest would write for them (and `flags` besides).
   std::string CraftedStore(const std::vector<std::pair<NodeKey, NodePoints>>& nodes, std::size_t capacity,
-                           std::uint64_t leaf_points) {
+                           std::uint64_t leaf_points, const nlohmann::json& flags = nlohmann::json::object()) {
     const Cube cube{{0, 0, 0}, 1.0, false};
     nlohmann::json dataset = {{"capacity", capacity},
                               {"max_level", 21},
@@ -85,6 +121,7 @@ class VerifyTest : public ::testing::Test {
                               {"id_index", ""},
                               {"epochs", {{{"cube", {{"origin", cube.origin}, {"size", cube.size}, {"periodic", false}}},
                                            {"points", leaf_points}}}}};
+    dataset.update(flags);
     const std::string path = (dir_ / "crafted").string();
     StoreWriter writer(path, dataset, nlohmann::json::object());
     writer.BeginEpoch(0, 0);
@@ -161,6 +198,110 @@ TEST_F(VerifyTest, BlocksWithoutAColumnTheManifestDeclaresAreAFault) {
   EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,id,type, the manifest declares "
                                        "position,weight,smoothing,velocity,id,type"))
       << AllFaults(report);
+}
+
+// With velocities and clusters, every inner node carries its clusters'
+// velocity dispersions and no leaf does; together with the mean velocities
+// they keep the particles' second velocity moment (the kinetic energy)
+// through the codec's quantization.
+TEST_F(VerifyTest, ClusterNodesCarryVelocityDispersionsAndVerify) {
+  std::vector<float> velocities;
+  std::vector<double> masses;
+  const std::string store = IngestedStoreWithVelocities(CoarsePoints::kClusters, &velocities, &masses);
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(report.faults.empty()) << AllFaults(report);
+  const Dataset dataset = Dataset::Open(store);
+  const ColumnSet dispersion = ColumnBit(ColumnId::kVelocityDispersion);
+  EXPECT_EQ(dataset.cluster_columns(), dispersion);
+  EXPECT_EQ(dataset.columns(0) & dispersion, 0u) << "not in every block: leaves lack it";
+  EXPECT_EQ(dataset.columns() & dispersion, dispersion);
+  std::size_t inner = 0, leaves = 0;
+  double second_at_root = 0;
+  const StoreReader& reader = dataset.store();
+  reader.Scan(0, 0, ~std::uint64_t{0}, [&](const IndexEntry& entry) {
+    const NodeKey key = NodeKey::FromValue(entry.key);
+    bool leaf = true;
+    for (int o = 0; o < 8 && key.level() < kMaxLevel; ++o) leaf = leaf && !reader.Lookup({0, key.Child(o).value()});
+    const DecodedBlock block = DecodeBlock(reader.ReadBlock({0, entry.key}), kAllColumns, key, dataset.cube(0), "test");
+    (leaf ? leaves : inner) += 1;
+    EXPECT_EQ(block.points.velocity_dispersion.size(), leaf ? 0 : block.points.size()) << key.Path();
+    if (key == NodeKey::Root()) {
+      for (std::size_t i = 0; i < block.points.size(); ++i) {
+        const float* v = &block.points.velocity[3 * i];
+        const double sigma = block.points.velocity_dispersion[i];
+        double v2 = 0;
+        for (int a = 0; a < 3; ++a) v2 += double{v[a]} * v[a];
+        second_at_root += block.points.weight[i] * (v2 + 3 * sigma * sigma);
+      }
+    }
+    return true;
+  });
+  EXPECT_GT(inner, 5u);
+  EXPECT_GT(leaves, 20u);
+  double second = 0;
+  for (std::size_t i = 0; i < masses.size(); ++i) {
+    for (int a = 0; a < 3; ++a) second += masses[i] * double{velocities[3 * i + a]} * velocities[3 * i + a];
+  }
+  EXPECT_NEAR(second_at_root / second, 1, 2e-3);
+}
+
+TEST_F(VerifyTest, DispersionsTheManifestDoesNotDeclareAreAFault) {
+  const std::string store = IngestedStoreWithVelocities(CoarsePoints::kClusters);
+  const fs::path manifest = fs::path(store) / "manifest.json";
+  nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
+  ASSERT_TRUE(json["dataset"]["has_velocity_dispersion"].get<bool>());
+  json["dataset"]["has_velocity_dispersion"] = false;
+  std::ofstream(manifest) << json.dump();
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,velocity,id,type,"
+                                       "velocity_dispersion, the manifest declares position,weight,smoothing,velocity,id,type"))
+      << AllFaults(report);
+}
+
+TEST_F(VerifyTest, ClusterNodesWithoutTheDeclaredDispersionsAreAFault) {
+  // A sample's inner nodes carry none; the manifest is made to say otherwise.
+  const std::string store = IngestedStoreWithVelocities(CoarsePoints::kSample);
+  const VerifyReport sound = VerifyStore(store);
+  EXPECT_TRUE(sound.faults.empty()) << AllFaults(sound);
+  const fs::path manifest = fs::path(store) / "manifest.json";
+  nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
+  ASSERT_FALSE(json["dataset"]["has_velocity_dispersion"].get<bool>());
+  json["dataset"]["has_velocity_dispersion"] = true;
+  std::ofstream(manifest) << json.dump();
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "block r: lacks velocity_dispersion, but with capacity 500 and 1 particle "
+                                       "type(s) below it its points are clusters"))
+      << AllFaults(report);
+}
+
+// Which inner nodes hold clusters follows from the capacity and the particle
+// types below them: a node that must hold a sample carries no dispersions,
+// and a leaf never does.
+TEST_F(VerifyTest, DispersionsWhereThePointsCannotBeClustersAreAFault) {
+  const NodeKey root = NodeKey::Root();
+  const auto with_velocities = [](NodePoints p, std::uint8_t type, bool dispersion) {
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      p.type[i] = type;
+      p.velocity.insert(p.velocity.end(), {static_cast<float>(i), 2.0f, 3.0f});
+      if (dispersion) p.velocity_dispersion.push_back(0.5f);
+    }
+    return p;
+  };
+  const nlohmann::json flags = {{"has_velocity", true}, {"has_velocity_dispersion", true}};
+  // Two types below the root and a capacity of 8: the root's points are a sample.
+  const std::string store = CraftedStore({{root, with_velocities(PointsIn(root, 8, 10.0), 1, true)},
+                                          {root.Child(0), with_velocities(PointsIn(root.Child(0), 4, 5.0), 1, true)},
+                                          {root.Child(7), with_velocities(PointsIn(root.Child(7), 4, 5.0), 2, false)}},
+                                         8, 8, flags);
+  const VerifyReport report = VerifyStore(store);
+  EXPECT_TRUE(AnyFaultMentions(report, "block r: carries velocity_dispersion, but with capacity 8 and 2 particle "
+                                       "type(s) below it its points are a sample"))
+      << AllFaults(report);
+  EXPECT_TRUE(AnyFaultMentions(report, "block r0: carries the columns position,weight,smoothing,velocity,id,type,"
+                                       "velocity_dispersion, the manifest declares position,weight,smoothing,velocity,"
+                                       "id,type for a leaf"))
+      << AllFaults(report);
+  EXPECT_FALSE(AnyFaultMentions(report, "block r7")) << AllFaults(report);
 }
 
 TEST_F(VerifyTest, ADamagedIdIndexIsAFault) {

@@ -108,7 +108,14 @@ nlohmann::json HeaderJson(const SnapshotHeader& h) {
           {"extra", h.extra}};
 }
 
-nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links) {
+// Whether the inner nodes whose points are clusters carry the velocity
+// dispersion column: with velocities, when inner nodes are clusters at all
+// (a sample's points are particles, whose dispersion is 0).
+bool InnerNodesCarryVelocityDispersion(bool has_velocity, CoarsePoints coarse) {
+  return has_velocity && coarse == CoarsePoints::kClusters;
+}
+
+nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links, bool velocity_dispersion) {
   nlohmann::json columns = nlohmann::json::array();
   auto add = [&](ColumnId column, const char* encoding, const char* meaning) {
     columns.push_back({{"id", static_cast<int>(column)}, {"name", ColumnName(column)}, {"encoding", encoding},
@@ -126,6 +133,10 @@ nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links) {
     if (velocity) add(ColumnId::kNextVelocity, ranged, "velocity at the next epoch; every epoch but the last");
     add(ColumnId::kPrevDisplacement, ranged, "offset to the previous epoch (minimal image); every epoch but the first");
     if (velocity) add(ColumnId::kPrevVelocity, ranged, "velocity at the previous epoch; every epoch but the first");
+  }
+  if (velocity_dispersion) {
+    add(ColumnId::kVelocityDispersion, "u16 between per-block min and max",
+        "1-D rms velocity dispersion of the particles a cluster stands for; inner nodes of clusters only");
   }
   return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
 }
@@ -393,11 +404,15 @@ IngestReport Ingest(const IngestOptions& options) {
                             {"has_next_velocity", join_epochs && has_velocity},
                             {"has_prev_displacement", join_epochs},
                             {"has_prev_velocity", join_epochs && has_velocity},
+                            {"has_velocity_dispersion", InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse)},
                             {"id_index", has_id ? "ids" : ""},
                             {"epochs", nlohmann::json::array()}};
   StoreWriterOptions store_options;
   store_options.page_size = options.page_size;
-  StoreWriter store(options.output, dataset, AttributeSchema(has_velocity, has_id, join_epochs), store_options);
+  StoreWriter store(options.output, dataset,
+                    AttributeSchema(has_velocity, has_id, join_epochs,
+                                    InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse)),
+                    store_options);
   std::unique_ptr<StoreWriter> id_store;
   const std::uint32_t id_index_page_size = std::max(options.page_size, kIdIndexMinPageSize);
   if (has_id) {
