@@ -6,6 +6,7 @@
 #include <CLI/CLI.hpp>
 
 #include "storage/error.h"
+#include "storage/page_file_format.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
 #include "tools/ingest/ingest.h"
@@ -50,7 +51,7 @@ void AddIngestCommand(CLI::App& app) {
       ->default_val(kDefaultNeighbours)
       ->check(CLI::Range(0, 4096));
   cmd->add_option("--memory", flags->memory, "memory budget, e.g. 2G (default: half the physical memory)");
-  cmd->add_option("--temp-dir", o.temp_dir, "where temporary files go (default: beside the output)");
+  cmd->add_option("--temp-dir", o.temp_dir, "where the temporary directory goes (default: inside the output directory)");
   cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);
   cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M (its ID index: at least 64K)")->default_val("4K");
   cmd->add_option("--cube", flags->cube, "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube)");
@@ -62,7 +63,13 @@ void AddIngestCommand(CLI::App& app) {
   cmd->callback([flags] {
     IngestOptions& options = flags->options;
     if (!flags->memory.empty()) options.memory_budget = ParseByteSize(flags->memory, "--memory");
-    options.page_size = static_cast<std::uint32_t>(ParseByteSize(flags->page_size, "--page-size"));
+    const std::uint64_t page_size = ParseByteSize(flags->page_size, "--page-size");
+    // Checked here, before the narrowing below could turn 4G into 0.
+    if (!IsValidPageSize(page_size)) {
+      throw Error::InvalidArgument("--page-size '" + flags->page_size + "': " + std::to_string(page_size) +
+                                   " bytes is not a power of two from 4K to 16M");
+    }
+    options.page_size = static_cast<std::uint32_t>(page_size);
     options.read = ReadOptionsFrom(flags->read);
     options.tree.coarse = flags->coarse == "sample" ? CoarsePoints::kSample : CoarsePoints::kClusters;
     if (!flags->cube.empty()) {

@@ -18,6 +18,7 @@
 #include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
+#include "tools/output_file.h"
 #include "tools/query_output.h"
 
 namespace octocosm {
@@ -89,18 +90,23 @@ void RunQueryCommand(const QueryFlags& f) {
   const std::unique_ptr<Region> region = RegionFrom(f, cube, camera);
   const PointFormat format = ParsePointFormat(f.format);
 
+  // A query stopped by an error (a corrupt block, a full disk) leaves no
+  // truncated file, nor touches one already there.
+  std::optional<OutputFile> output;
   std::ofstream file;
   if (!f.output.empty()) {
-    file.open(f.output, std::ios::binary | std::ios::trunc);
+    output.emplace(f.output);
+    file.open(output->write_path(), std::ios::binary | std::ios::trunc);
     if (!file) throw IoErrorFromErrno(f.output, "open for writing", errno);
   }
   std::ostream& out = f.output.empty() ? std::cout : file;
   const std::unique_ptr<PointWriter> writer = MakePointWriter(format, options.columns, out);
   const QueryStats stats = RunQuery(dataset, *region, options, [&](const QueryBatch& batch) { writer->Write(batch); });
   writer->Finish();
-  if (!f.output.empty()) {
+  if (output) {
     file.close();
     if (!file) throw Error::Io(f.output, "write failed");
+    output->Commit();
   }
   if (!f.quiet) {
     std::fprintf(stderr,
@@ -232,15 +238,18 @@ void AddFollowCommand(CLI::App& app) {
   cmd->callback([f] {
     const std::vector<std::uint64_t> ids = ReadIdFile(f->ids);
     const Dataset dataset = Dataset::Open(f->store);
+    std::optional<OutputFile> output;  // whole or not at all, as query's
     std::ofstream file;
     if (!f->output.empty()) {
-      file.open(f->output, std::ios::trunc);
+      output.emplace(f->output);
+      file.open(output->write_path(), std::ios::trunc);
       if (!file) throw IoErrorFromErrno(f->output, "open for writing", errno);
     }
     const FollowReport report = WriteTrajectories(dataset, ids, f->output.empty() ? std::cout : file, std::cerr);
-    if (!f->output.empty()) {
+    if (output) {
       file.close();
       if (!file) throw Error::Io(f->output, "write failed");
+      output->Commit();
     }
     std::fprintf(stderr, "follow: %zu IDs, %llu rows, %llu (id, epoch) pairs not found\n", ids.size(),
                  static_cast<unsigned long long>(report.rows), static_cast<unsigned long long>(report.missing));

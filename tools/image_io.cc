@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "storage/error.h"
+#include "tools/output_file.h"
 
 namespace octocosm {
 namespace {
@@ -20,33 +21,19 @@ struct FileCloser {
 };
 using File = std::unique_ptr<std::FILE, FileCloser>;
 
-// Writes through `write(file)` into path + ".tmp", then renames it over path.
+// Writes through `write(file)` into a temporary file beside `path`, then
+// renames it over `path` (tools/output_file.h).
 template <typename Write>
 void WriteAtomically(const std::string& path, Write write) {
-  const std::string temporary = path + ".tmp";
-  File file(std::fopen(temporary.c_str(), "wb"));
+  OutputFile output(path);
+  File file(std::fopen(output.write_path().c_str(), "wb"));
   if (!file) throw IoErrorFromErrno(path, "creating the image", errno);
-  bool ok = false;
-  try {
-    ok = write(file.get());
-  } catch (...) {
-    file.reset();
-    std::remove(temporary.c_str());
-    throw;
-  }
+  bool ok = write(file.get());
   ok = ok && std::fflush(file.get()) == 0;
   const int error = errno;
-  file.reset();
-  if (!ok) {
-    std::remove(temporary.c_str());
-    throw IoErrorFromErrno(path, "writing the image", error);
-  }
-  std::error_code ec;
-  std::filesystem::rename(temporary, path, ec);
-  if (ec) {
-    std::remove(temporary.c_str());
-    throw Error::Io(path, "renaming the finished image failed: " + ec.message());
-  }
+  ok = std::fclose(file.release()) == 0 && ok;
+  if (!ok) throw IoErrorFromErrno(path, "writing the image", error != 0 ? error : errno);
+  output.Commit();
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // Writing pictures: PNG (8-bit sRGB, through libpng) and PFM (the mass per
 // pixel as 32-bit floats, for analysis). Files are written under a temporary
-// name and renamed, so a failed write leaves nothing behind.
+// name and renamed (tools/output_file.h), so a failed or interrupted write
+// leaves nothing behind.
 #pragma once
 
 #include <string>

@@ -3,12 +3,15 @@
 // only here does an error become a message and an exit status.
 #include <cstdio>
 #include <exception>
+#include <new>
+#include <system_error>
 
 #include <CLI/CLI.hpp>
 
 #include "storage/error.h"
 #include "tools/commands.h"
 #include "tools/huge_pages.h"
+#include "tools/interrupt_cleanup.h"
 
 namespace {
 
@@ -29,6 +32,9 @@ int ExitStatusFor(octocosm::ErrorKind kind) {
 
 int main(int argc, char** argv) {
   octocosm::ReexecuteIngestWithHugePages(argc, argv);
+  // Before any thread starts; after the re-execution, which would pass the
+  // blocked signals on to the new program.
+  octocosm::InstallInterruptCleanup();
   CLI::App app{"octocosm: an out-of-core level-of-detail octree store for N-body snapshots"};
   app.footer(
       "Exit status: 0 success, 1 other failure, 2 bad arguments, 3 corrupt store, 4 malformed input,\n"
@@ -51,6 +57,19 @@ int main(int argc, char** argv) {
   } catch (const octocosm::Error& e) {
     std::fprintf(stderr, "octocosm: %s\n", e.what());
     return ExitStatusFor(e.kind());
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "octocosm: error: out of memory (a memory limit such as ulimit -v, or --memory too large?)\n");
+    return 1;
+  } catch (const std::system_error& e) {
+    // What a thread that could not start throws: "Resource temporarily
+    // unavailable" alone would not say what ran out.
+    const bool resources = e.code() == std::errc::resource_unavailable_try_again ||
+                           e.code() == std::errc::not_enough_memory;
+    std::fprintf(stderr, "octocosm: error: %s%s\n", e.what(),
+                 resources ? " (could not start a thread or reserve memory: a memory or process limit such as "
+                             "ulimit -v or ulimit -u?)"
+                           : "");
+    return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "octocosm: error: %s\n", e.what());
     return 1;

@@ -32,6 +32,7 @@
 #include "tools/ingest/epoch_join.h"
 #include "tools/ingest/external_sorter.h"
 #include "tools/ingest/resident_epoch.h"
+#include "tools/interrupt_cleanup.h"
 #include "tools/progress.h"
 #include "tools/smoothing_pass.h"
 #include "tools/temp_directory.h"
@@ -71,22 +72,37 @@ struct IdLeafRecord {
   std::uint64_t leaf;
 };
 
-// Removes the output directory on failure, but only if this run created it.
+// Removes the output directory on failure, and when a signal ends the
+// program (tools/interrupt_cleanup.h), but only if this run created it; in
+// a directory that was there before, only the unfinished store's files.
 class OutputGuard {
  public:
-  explicit OutputGuard(const std::string& path) : path_(path), created_(!fs::exists(path)) {}
+  explicit OutputGuard(const std::string& path) : path_(path), created_(!fs::exists(path)) {
+    remove_on_interrupt_.emplace([path, created = created_] {
+      if (created) {
+        std::error_code ignored;
+        fs::remove_all(path, ignored);
+      } else {
+        RemoveUnfinishedStore(path);  // the ID index's store within it too
+      }
+    });
+  }
   ~OutputGuard() {
     if (!committed_ && created_) {
       std::error_code ignored;
       fs::remove_all(path_, ignored);
     }
   }
-  void Commit() { committed_ = true; }
+  void Commit() {
+    committed_ = true;
+    remove_on_interrupt_.reset();
+  }
 
  private:
   std::string path_;
   bool created_;
   bool committed_ = false;
+  std::optional<RemoveOnInterrupt> remove_on_interrupt_;
 };
 
 nlohmann::json CubeJson(const Cube& cube) {
@@ -384,10 +400,6 @@ IngestReport Ingest(const IngestOptions& options) {
   const bool join_epochs = has_id && options.inputs.size() > 1;
 
   OutputGuard output_guard(options.output);
-  const std::string temp_parent =
-      options.temp_dir.empty() ? fs::absolute(options.output).parent_path().string() : options.temp_dir;
-  fs::create_directories(temp_parent);
-  TempDirectory temp(temp_parent, "octocosm-ingest");
 
   nlohmann::json dataset = {{"generator", "octocosm ingest"},
                             {"capacity", options.tree.capacity},
@@ -422,6 +434,10 @@ IngestReport Ingest(const IngestOptions& options) {
                                              nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
                                              nlohmann::json::object(), id_store_options);
   }
+  // Inside the output by default: where this run may surely write, and where
+  // a rerun finds it if a kill leaves it behind (TempDirectory). Made after
+  // the store writers, which clear away an abandoned store first.
+  TempDirectory temp(options.temp_dir.empty() ? options.output : options.temp_dir, "octocosm-ingest");
 
   // The leaves' smoothing lengths from neighbours (or the snapshot's own),
   // computed before anything else reads the epoch, in the whole budget (the

@@ -50,7 +50,7 @@ struct IngestOptions {
   // no pass, faster, but not the standard.
   int neighbours = kDefaultNeighbours;
   std::uint64_t memory_budget = 0;  // bytes; 0 = DefaultMemoryBudget()
-  std::string temp_dir;             // parent of the temporary directory; "" = beside the output
+  std::string temp_dir;             // parent of the temporary directory; "" = inside the output
   std::optional<Cube> cube;         // overrides the periodic box / bounding cube
   unsigned threads = 0;             // 0 = all cores
   std::uint32_t page_size = kDefaultPageSize;
