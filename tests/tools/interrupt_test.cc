@@ -234,6 +234,18 @@ TEST_F(InterruptTest, AnIngestWhoseParentIsReadOnlyWritesOnlyInsideTheOutput) {
   EXPECT_EQ(run.exit_status, 0) << run.output;
 }
 
+TEST_F(InterruptTest, SigtermRemovesTheSnapshotFilesSynthWasWriting) {
+  const fs::path output = dir_.path() / "snapshot";
+  const pid_t pid = StartOctocosm({"synth", "scale", "-o", output.string(), "-n", "4000000", "-q"}, Log());
+  ASSERT_GT(pid, 0);
+  const bool started = WaitForEntry(output, "snap", pid);
+  ::kill(pid, SIGTERM);
+  const int status = WaitFor(pid);
+  ASSERT_TRUE(started) << "synth ended before it could be interrupted:\n" << ReadText(Log());
+  ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << status << "\n" << ReadText(Log());
+  EXPECT_TRUE(Entries(output).empty()) << ::testing::PrintToString(Entries(output));
+}
+
 TEST_F(InterruptTest, AnAbsurdPageSizeNamesTheFlagAndTheValue) {
   for (const std::string value : {"4G", "1e400", "3K"}) {
     const ProgramRun run = RunOctocosm({"ingest", Small(0), "-o", (dir_.path() / "store").string(), "--page-size", value}, Log());

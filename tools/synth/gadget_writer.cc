@@ -79,6 +79,7 @@ GadgetFileWriter::GadgetFileWriter(std::string path, const GadgetHeader& header,
                                  " particles overflow a GADGET record's int32 byte count; use more files");
   }
 
+  remove_on_interrupt_.emplace([temp_path = temp_path_] { ::unlink(temp_path.c_str()); });
   fd_ = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd_ < 0) throw IoErrorFromErrno(temp_path_, "open", errno);
 
@@ -180,6 +181,7 @@ void GadgetFileWriter::Commit() {
   if (committed_) return;
   if (std::rename(temp_path_.c_str(), path_.c_str()) != 0) throw IoErrorFromErrno(path_, "rename", errno);
   committed_ = true;
+  remove_on_interrupt_.reset();
 }
 
 GadgetSnapshotWriter::GadgetSnapshotWriter(std::string base, const GadgetSnapshotInfo& info, GadgetFormat format)

@@ -25,9 +25,12 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
+
+#include "tools/interrupt_cleanup.h"
 
 namespace octocosm::synth {
 
@@ -83,7 +86,8 @@ class GadgetFileWriter {
   // particles of the file are those counted in header.npart (one type with a
   // mass-table entry > 0); id_bytes is 4 or 8.
   GadgetFileWriter(std::string path, const GadgetHeader& header, GadgetFormat format, int id_bytes);
-  // Removes the temporary file unless Commit() ran.
+  // Removes the temporary file unless Commit() ran; so does SIGINT, SIGTERM
+  // or SIGHUP (tools/interrupt_cleanup.h).
   ~GadgetFileWriter();
   GadgetFileWriter(const GadgetFileWriter&) = delete;
   GadgetFileWriter& operator=(const GadgetFileWriter&) = delete;
@@ -119,6 +123,8 @@ class GadgetFileWriter {
   std::uint64_t id_payload_ = 0;
   bool closed_ = false;
   bool committed_ = false;
+  // The temporary file goes if a signal ends the program (synth's runs are long).
+  std::optional<RemoveOnInterrupt> remove_on_interrupt_;
 };
 
 // What a whole snapshot (possibly several files) records about itself.
