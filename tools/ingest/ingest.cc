@@ -78,14 +78,18 @@ struct IdLeafRecord {
 class OutputGuard {
  public:
   explicit OutputGuard(const std::string& path) : path_(path), created_(!fs::exists(path)) {
-    remove_on_interrupt_.emplace([path, created = created_] {
-      if (created) {
-        std::error_code ignored;
-        fs::remove_all(path, ignored);
-      } else {
-        RemoveUnfinishedStore(path);  // the ID index's store within it too
-      }
+    if (!created_) return;  // see StoreLocked
+    remove_on_interrupt_.emplace([path] {
+      std::error_code ignored;
+      fs::remove_all(path, ignored);
     });
+  }
+  // In a directory that was there before, the store files are this run's to
+  // remove only once its store writer holds the lock: until then they may
+  // be another's, which the writer refuses to touch.
+  void StoreLocked() {
+    if (created_) return;
+    remove_on_interrupt_.emplace([path = path_] { RemoveUnfinishedStore(path); });  // with the ID index's store in it
   }
   ~OutputGuard() {
     if (!committed_ && created_) {
@@ -434,6 +438,7 @@ IngestReport Ingest(const IngestOptions& options) {
                                              nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
                                              nlohmann::json::object(), id_store_options);
   }
+  output_guard.StoreLocked();
   // Inside the output by default: where this run may surely write, and where
   // a rerun finds it if a kill leaves it behind (TempDirectory). Made after
   // the store writers, which clear away an abandoned store first.
