@@ -81,7 +81,7 @@ class CrashNote {
     struct sigaction action {};
     action.sa_sigaction = &Note;
     sigemptyset(&action.sa_mask);
-    action.sa_flags = SA_SIGINFO;
+    action.sa_flags = SA_SIGINFO | SA_ONSTACK;  // an alternate stack where one is set (AddressSanitizer sets one)
     sigaction(SIGSEGV, &action, &previous_segv_);
     sigaction(SIGBUS, &action, &previous_bus_);
   }
