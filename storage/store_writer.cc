@@ -112,6 +112,17 @@ StoreWriter::~StoreWriter() {
 
 void StoreWriter::RemoveAbandonedWrite() {
   const std::string lock_path = JoinPath(directory_, kWriterLockFileName);
+  // A writer killed while it made its lock file leaves that file under the
+  // name it was made under (LockDirectory); a live one holds it locked.
+  const std::string unlocked_prefix = std::string(kWriterLockFileName) + ".";
+  for (const std::string& name : ListDirectory(directory_)) {
+    if (name.rfind(unlocked_prefix, 0) != 0) continue;
+    const std::string path = JoinPath(directory_, name);
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) continue;
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) RemoveFileQuietly(path);
+    ::close(fd);
+  }
   for (;;) {
     const int fd = ::open(lock_path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) {

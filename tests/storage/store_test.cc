@@ -460,6 +460,8 @@ TEST(StoreWriter, RemovesWhatAKilledWriterLeft) {
   EXPECT_EQ(Entries(store), (std::vector<std::string>{"epoch-00000.pages", "epoch-00001.pages.tmp", "ids",
                                                       kWriterLockFileName, "notes.txt"}));
   ExpectError(ErrorKind::kCorruption, [&] { StoreReader::Open(store); });
+  // And what one killed while making its lock file leaves.
+  WriteText(store + "/" + kWriterLockFileName + ".Ab12Cd", "pid 1\n");
 
   {
     StoreWriter writer(store, kDataset, kSchema);
