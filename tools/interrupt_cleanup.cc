@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <utility>
 #include <vector>
@@ -72,7 +73,13 @@ sigset_t CleanupSignals() {
 void InstallInterruptCleanup() {
   const sigset_t signals = CleanupSignals();
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
-  std::thread(WaitForSignalThenCleanUp).detach();
+  try {
+    std::thread(WaitForSignalThenCleanUp).detach();
+  } catch (const std::system_error&) {
+    // No thread to take them (a process or memory limit): the signals keep
+    // their default action, and end the program without the clean-up.
+    pthread_sigmask(SIG_UNBLOCK, &signals, nullptr);
+  }
 }
 
 RemoveOnInterrupt::RemoveOnInterrupt(std::function<void()> remove) {

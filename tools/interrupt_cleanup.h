@@ -22,7 +22,8 @@ namespace octocosm {
 
 // Call once, from main, before any other thread starts (threads inherit the
 // blocked signals from their creator). A child process would inherit the
-// blocked signals too: unblock them between fork and exec.
+// blocked signals too: unblock them between fork and exec. If the signal
+// thread cannot start, the signals keep their default action.
 void InstallInterruptCleanup();
 
 // While alive, `remove` runs if one of those signals arrives (on the signal
