@@ -2,7 +2,8 @@
 //
 // On a generated clustered set (default 10^8 points, `octocosm synth scale`),
 // ingested once per representation of the inner nodes (--coarse: clusters,
-// the default, and sample, a random subselection), three views at 1280x720 —
+// the default, drawn with their shapes or, as "round", without; and sample,
+// a random subselection), three views at 1280x720 —
 // the whole box, a mid zoom onto the densest halo, a deep zoom into it — are
 // drawn:
 //   - by the reference renderer (every particle of the snapshot, on the CPU,
@@ -297,13 +298,14 @@ void Run(const Flags& f) {
   // One store per representation of the inner nodes; the leaves, and so
   // the views and the full-detail frames, are the same in all.
   std::vector<std::string> representations = Split(f.coarse);
-  if (representations.empty()) throw Error::InvalidArgument("--coarse: name at least one of clusters, sample");
+  if (representations.empty()) throw Error::InvalidArgument("--coarse: name at least one of clusters, round, sample");
   std::vector<Dataset> datasets;
   for (const std::string& representation : representations) {
-    if (representation != "clusters" && representation != "sample") {
-      throw Error::InvalidArgument("--coarse: '" + representation + "' is neither clusters nor sample");
+    if (representation != "clusters" && representation != "round" && representation != "sample") {
+      throw Error::InvalidArgument("--coarse: '" + representation + "' is none of clusters, round, sample");
     }
-    const fs::path store = dir / ("store-" + representation);
+    // "round": the clusters' store, drawn without the clusters' shapes.
+    const fs::path store = dir / (representation == "sample" ? "store-sample" : "store-clusters");
     if (!fs::exists(store / "manifest.json")) {
       IngestOptions o;
       o.inputs = {snapshot};
@@ -366,6 +368,7 @@ void Run(const Flags& f) {
           SceneOptions options;
           options.lod.pixel_threshold = std::stod(t);
           options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
+          options.cluster_shapes = representations[r] != "round";
           Row row = Measure(datasets[r], options, render_views[v], backend, tone, reference);
           row.view = views[v].name;
           row.mode = representations[r];
@@ -440,7 +443,8 @@ int main(int argc, char** argv) {
   app.add_option("--thresholds", f.thresholds, "pixel thresholds of the sweep")->default_val("8,4,2,1,0.5");
   app.add_option("--budgets", f.budgets, "point budgets of the sweep (0: none)")->default_val("0,1e6,4e6");
   app.add_option("--views", f.views, "views: overview, mid, deep")->default_val("overview,mid,deep");
-  app.add_option("--coarse", f.coarse, "inner nodes' representations to compare, a store each: clusters, sample")
+  app.add_option("--coarse", f.coarse,
+                 "inner nodes' representations to compare: clusters, round (the clusters drawn without their shapes), sample")
       ->default_val("clusters,sample");
   app.add_option("--backend", f.backend, "osmesa or egl")->default_val("osmesa");
   app.add_option("--threads", f.threads, "threads of the reference renderer (default: all)");

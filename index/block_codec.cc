@@ -46,6 +46,7 @@ std::uint64_t BytesPerPoint(ColumnId id, std::uint8_t encoding) {
     case ColumnId::kPrevDisplacement:
     case ColumnId::kPrevVelocity: return 6;
     case ColumnId::kVelocityDispersion: return 2;
+    case ColumnId::kShape: return 6;
   }
   return 0;
 }
@@ -490,6 +491,28 @@ void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const s
   }
 }
 
+// Shape codes (index/cluster_shape.h) as they are: an off-diagonal code of
+// 255 is not one the encoder writes.
+void EncodeShapes(const std::vector<std::uint8_t>& codes, std::uint8_t* out) {
+  for (std::size_t i = 0; i < codes.size(); ++i) {
+    if (i % 6 >= 3 && codes[i] > 254) {
+      throw Error::InvalidArgument("EncodeBlock: column 'shape': off-diagonal code " + std::to_string(codes[i]) +
+                                   " of point " + std::to_string(i / 6) + " is above 254");
+    }
+  }
+  if (!codes.empty()) std::memcpy(out, codes.data(), codes.size());
+}
+
+void DecodeShapes(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
+                  const std::string& where, std::vector<std::uint8_t>& out) {
+  out.assign(bytes.begin(), bytes.begin() + 6 * std::size_t{n});
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    if (i % 6 >= 3 && out[i] > 254) {
+      throw Error::Corruption(where, ColumnWhat(column.id, "off-diagonal code 255 at point " + std::to_string(i / 6)));
+    }
+  }
+}
+
 // The inverse of EncodeNonNegativeRanged1, checking its parameters.
 void DecodeNonNegativeRanged1(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
                               const std::string& where, std::vector<float>& out) {
@@ -523,6 +546,7 @@ const char* ColumnName(ColumnId id) {
     case ColumnId::kPrevDisplacement: return "prev_displacement";
     case ColumnId::kPrevVelocity: return "prev_velocity";
     case ColumnId::kVelocityDispersion: return "velocity_dispersion";
+    case ColumnId::kShape: return "shape";
   }
   return "unknown";
 }
@@ -566,6 +590,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
   if (!points.velocity_dispersion.empty()) {
     CheckLength(ColumnName(ColumnId::kVelocityDispersion), points.velocity_dispersion.size(), n);
   }
+  if (!points.shape.empty()) CheckLength(ColumnName(ColumnId::kShape), points.shape.size(), 6 * n);
   const auto& off = points.octant_offsets;
   if (off[0] != 0 || off[8] != n || !std::is_sorted(off.begin(), off.end())) {
     throw Error::InvalidArgument("EncodeBlock: octant_offsets of node " + key.Path() +
@@ -578,6 +603,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
     const bool present = vector != nullptr                         ? !vector->empty()
                          : id == ColumnId::kId                     ? !points.id.empty()
                          : id == ColumnId::kVelocityDispersion     ? !points.velocity_dispersion.empty()
+                         : id == ColumnId::kShape                  ? !points.shape.empty()
                                                                    : IsRequired(id);
     if (present) ids.push_back(id);
   }
@@ -649,6 +675,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
       case ColumnId::kNextVelocity:
       case ColumnId::kPrevDisplacement:
       case ColumnId::kPrevVelocity: EncodeRanged3(ColumnName(id), *VectorColumnOf(points, id), out, params); break;
+      case ColumnId::kShape: EncodeShapes(points.shape, out); break;
       case ColumnId::kVelocityDispersion:
         EncodeNonNegativeRanged1(ColumnName(id), points.velocity_dispersion, out, params);
         break;
@@ -865,6 +892,7 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
     case ColumnId::kVelocityDispersion:
       DecodeNonNegativeRanged1(*column, n, bytes, where, out.velocity_dispersion);
       break;
+    case ColumnId::kShape: DecodeShapes(*column, n, bytes, where, out.shape); break;
   }
 }
 

@@ -71,6 +71,12 @@
 //                                      velocity dispersion of the particles a cluster stands for
 //                                      (inner nodes whose points are clusters, in a dataset with
 //                                      velocities; leaves and samples never carry it).
+//  12  shape         6n      no        6 x u8 per point: the shape of a cluster's blob, its
+//                                      covariance over trace / 3, entries xx, yy, zz (q / 85) and
+//                                      xy, xz, yz ((q - 127) * 3 / 254, q <= 254), as
+//                                      index/cluster_shape.h encodes it. No parameters. Inner
+//                                      nodes whose points are clusters carry it; leaves and
+//                                      samples never do (their blobs are round).
 //
 // Columns 8-11 were added to version 1 before any store left this project
 // (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
@@ -109,6 +115,7 @@ enum class ColumnId : std::uint8_t {
   kPrevDisplacement = 9,
   kPrevVelocity = 10,
   kVelocityDispersion = 11,
+  kShape = 12,
 };
 
 // The block column of each vector column (index/particle_chunk.h), indexed by VectorColumn.
@@ -124,13 +131,13 @@ inline constexpr ColumnSet kAllColumns = ColumnBit(ColumnId::kPosition) | Column
                                          ColumnBit(ColumnId::kId) | ColumnBit(ColumnId::kType) |
                                          ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kNextVelocity) |
                                          ColumnBit(ColumnId::kPrevDisplacement) | ColumnBit(ColumnId::kPrevVelocity) |
-                                         ColumnBit(ColumnId::kVelocityDispersion);
+                                         ColumnBit(ColumnId::kVelocityDispersion) | ColumnBit(ColumnId::kShape);
 
 // Every column id, in the order blocks store them.
-inline constexpr std::array<ColumnId, 11> kColumnIds = {
-    ColumnId::kPosition, ColumnId::kWeight,       ColumnId::kSmoothing,        ColumnId::kVelocity,
-    ColumnId::kId,       ColumnId::kType,         ColumnId::kDisplacement,     ColumnId::kNextVelocity,
-    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity, ColumnId::kVelocityDispersion};
+inline constexpr std::array<ColumnId, 12> kColumnIds = {
+    ColumnId::kPosition,         ColumnId::kWeight,       ColumnId::kSmoothing,           ColumnId::kVelocity,
+    ColumnId::kId,               ColumnId::kType,         ColumnId::kDisplacement,        ColumnId::kNextVelocity,
+    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity, ColumnId::kVelocityDispersion, ColumnId::kShape};
 
 const char* ColumnName(ColumnId id);
 // The names of the columns in `columns`, comma-separated, in block order.

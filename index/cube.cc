@@ -68,6 +68,7 @@ bool Cube::Holds(NodeKey key, const double* point) const { return LeafKey(point,
 void Cube::Wrap(double* point) const {
   if (!periodic) return;
   for (int a = 0; a < 3; ++a) {
+    if (point[a] >= origin[a] && point[a] < origin[a] + size) continue;  // inside: exactly as it is
     double t = (point[a] - origin[a]) / size;
     t -= std::floor(t);
     double x = origin[a] + t * size;

@@ -114,7 +114,10 @@ struct Cube {
   // octant inside a deepest node, used to order its points).
   int ChildOctant(const double* point, int level) const;
   // In a periodic cube, moves the point into [origin, origin + size) on every
-  // axis (its image there): where ingest stores it. No effect otherwise.
+  // axis (its image there): where ingest stores it. A coordinate already
+  // inside is left exactly as it is (dividing and multiplying by the size
+  // would move it by an ulp, and a store would depend on which chunk a
+  // point arrived in). No effect otherwise.
   void Wrap(double* point) const;
   // Whether the point belongs to `key` (its cell at key.level() is key.cell()).
   bool Holds(NodeKey key, const double* point) const;

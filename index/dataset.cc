@@ -135,8 +135,10 @@ Dataset Dataset::Open(const std::string& directory) {
         flag("has_displacement", ColumnId::kDisplacement) | flag("has_next_velocity", ColumnId::kNextVelocity);
     dataset.backward_columns_ =
         flag("has_prev_displacement", ColumnId::kPrevDisplacement) | flag("has_prev_velocity", ColumnId::kPrevVelocity);
-    dataset.cluster_columns_ = flag("has_velocity_dispersion", ColumnId::kVelocityDispersion);
-    if (dataset.cluster_columns_ != 0 && !(dataset.every_epoch_columns_ & ColumnBit(ColumnId::kVelocity))) {
+    dataset.cluster_columns_ =
+        flag("has_velocity_dispersion", ColumnId::kVelocityDispersion) | flag("has_shape", ColumnId::kShape);
+    if ((dataset.cluster_columns_ & ColumnBit(ColumnId::kVelocityDispersion)) &&
+        !(dataset.every_epoch_columns_ & ColumnBit(ColumnId::kVelocity))) {
       throw Error::Corruption(manifest, "dataset metadata declares velocity dispersions without velocities");
     }
     const std::string ids = meta.value("id_index", "");

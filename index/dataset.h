@@ -82,9 +82,9 @@ class Dataset {
   ColumnSet columns(std::uint32_t epoch) const;
   // The columns that the block of every inner node whose points are clusters
   // (index/aggregator.h) carries besides columns(epoch), in every epoch: the
-  // velocity dispersion, in a dataset with velocities built with clusters
-  // (the manifest's has_velocity_dispersion). Leaves, and inner nodes whose
-  // points are a sample, lack them.
+  // blobs' shapes (the manifest's has_shape) and, in a dataset with
+  // velocities, the velocity dispersion (has_velocity_dispersion). Leaves,
+  // and inner nodes whose points are a sample, lack them.
   ColumnSet cluster_columns() const { return cluster_columns_; }
   // How `epoch` links to the next; empty for the last epoch and for a series
   // without IDs.

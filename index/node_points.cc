@@ -44,6 +44,7 @@ void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube) {
   points.type = Gather(points.type, order, 1);
   for (std::vector<float>* column : VectorColumns(points)) *column = Gather(*column, order, 3);
   points.velocity_dispersion = Gather(points.velocity_dispersion, order, 1);
+  points.shape = Gather(points.shape, order, 6);
   points.grid = Gather(points.grid, order, 1);
 }
 
@@ -58,6 +59,7 @@ NodePoints SelectRows(const NodePoints& points, std::span<const std::uint32_t> r
   const auto to = VectorColumns(out);
   for (std::size_t v = 0; v < from.size(); ++v) *to[v] = Gather(*from[v], rows, 3);
   out.velocity_dispersion = Gather(points.velocity_dispersion, rows, 1);
+  out.shape = Gather(points.shape, rows, 6);
   out.grid = Gather(points.grid, rows, 1);
   std::array<std::uint32_t, 9> offsets{};
   int octant = 0;

@@ -37,6 +37,9 @@ struct NodePoints {
   // whose points are clusters of a dataset with velocities carry it
   // (index/aggregator.h); a single particle's is 0, so leaves leave it empty.
   std::vector<float> velocity_dispersion;
+  // 6 * size(), or empty: each point's blob shape as stored (index/cluster_shape.h
+  // codes; round where empty). Only inner nodes whose points are clusters carry it.
+  std::vector<std::uint8_t> shape;
   std::array<std::uint32_t, 9> octant_offsets{};
   // Empty, or each point's Cube::FinestGridCoords, kept beside the positions
   // by the octree builder so that sampling and encoding place each point

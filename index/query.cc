@@ -26,6 +26,7 @@ void KeepPoints(NodePoints& points, const std::vector<std::uint32_t>& keep) {
   KeepColumn(points.type, 1, keep);
   for (std::vector<float>* column : VectorColumns(points)) KeepColumn(*column, 3, keep);
   KeepColumn(points.velocity_dispersion, 1, keep);
+  KeepColumn(points.shape, 6, keep);
   KeepColumn(points.grid, 1, keep);
 }
 

@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "index/aggregator.h"
+#include "index/cluster_shape.h"
 #include "index/block_codec.h"
 #include "index/radix_sort.h"
 #include "storage/error.h"
@@ -172,6 +173,11 @@ int FirstChildAgreeingOnColumns(NodeKey key, const std::array<NodePoints, 8>& ch
                                    std::to_string(b.size()) + " points" +
                                    (b.velocity.empty() ? " and no velocities" : ""));
     }
+    if (!b.shape.empty() && b.shape.size() != 6 * b.size()) {
+      throw Error::InvalidArgument("subtree builder: child " + key.Child(o).Path() + " has " +
+                                   std::to_string(b.shape.size()) + " shape codes for " + std::to_string(b.size()) +
+                                   " points");
+    }
   }
   return first;
 }
@@ -291,6 +297,7 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
   node.smoothing.resize(n);
   node.type.resize(n);
   node.grid.resize(n);
+  node.shape.resize(6 * n);
   const bool has_id = first >= 0 && !children[first].id.empty();
   if (has_id) node.id.resize(n);
   std::array<bool, kVectorColumnCount> has_vector{};
@@ -340,14 +347,24 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
     // velocity and its own three-dimensional variance 3 sigma^2 (the
     // parallel-axis rule, so a cluster of clusters has the dispersion of all
     // the particles below it).
+    // The covariance likewise, entry by entry (index/cluster_shape.h): the
+    // offsets' outer products and each member's own blob, of its shape.
     double variance = 0, velocity_variance = 0;
+    SymmetricMatrix covariance{};
     for (const std::uint32_t* m = begin; m != end; ++m) {
       const auto [o, k] = from[*m];
       const NodePoints& child = children[o];
       const double w = child.weight[k];
-      double d2 = 0;
-      for (int a = 0; a < 3; ++a) d2 += (child.position[3 * k + a] - centre[a]) * (child.position[3 * k + a] - centre[a]);
-      variance += w * (d2 / 3 + KernelVariance(child.smoothing[k]));
+      double d[3], d2 = 0;
+      for (int a = 0; a < 3; ++a) {
+        d[a] = child.position[3 * k + a] - centre[a];
+        d2 += d[a] * d[a];
+      }
+      const double own = KernelVariance(child.smoothing[k]);
+      variance += w * (d2 / 3 + own);
+      const SymmetricMatrix shape = child.shape.empty() ? kRoundShape : DecodeShape(ShapeCodeAt(child.shape, k));
+      const double outer[6] = {d[0] * d[0], d[1] * d[1], d[2] * d[2], d[0] * d[1], d[0] * d[2], d[1] * d[2]};
+      for (int i = 0; i < 6; ++i) covariance[i] += w * (outer[i] + own * shape[i]);
       if (has_dispersion) {
         const float* value = &child.velocity[3 * k];
         double dv2 = 0;
@@ -355,8 +372,8 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
           const double dv = value[a] - vector_mean[velocity][a];
           dv2 += dv * dv;
         }
-        const double own = child.velocity_dispersion.empty() ? 0.0 : double{child.velocity_dispersion[k]};
-        velocity_variance += w * (dv2 + 3 * own * own);
+        const double own_sigma = child.velocity_dispersion.empty() ? 0.0 : double{child.velocity_dispersion[k]};
+        velocity_variance += w * (dv2 + 3 * own_sigma * own_sigma);
       }
     }
     const auto [ho, hk] = from[heaviest];
@@ -373,6 +390,8 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
     node.grid[c] = centre_grid;
     node.weight[c] = mass;
     node.smoothing[c] = std::clamp(KernelRadiusForVariance(variance / mass), min_h, max_h);
+    const std::array<std::uint8_t, 6> shape = EncodeShape(covariance);
+    std::copy(shape.begin(), shape.end(), node.shape.begin() + static_cast<std::ptrdiff_t>(6 * c));
     node.type[c] = children[ho].type[hk];
     if (has_id) node.id[c] = children[ho].id[hk];
     for (std::size_t v = 0; v < kVectorColumnCount; ++v) {

@@ -26,6 +26,9 @@ enum Attribute : GLuint {
   kNextVelocityAttribute,
   kPrevDisplacementAttribute,
   kPrevVelocityAttribute,
+  kVelocityDispersionAttribute,
+  kShapeDiagonalAttribute,
+  kShapeOffDiagonalAttribute,
 };
 
 // How a column is read as a vertex attribute.
@@ -54,9 +57,16 @@ std::optional<AttributeFormat> FormatOf(const BlockColumn& column) {
     case ColumnId::kNextVelocity: return AttributeFormat{kNextVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
     case ColumnId::kPrevDisplacement: return AttributeFormat{kPrevDisplacementAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
     case ColumnId::kPrevVelocity: return AttributeFormat{kPrevVelocityAttribute, 3, GL_UNSIGNED_SHORT, false, 6};
+    case ColumnId::kVelocityDispersion: return AttributeFormat{kVelocityDispersionAttribute, 1, GL_UNSIGNED_SHORT, false, 2};
+    case ColumnId::kShape: return std::nullopt;  // two attributes: see ShapeFormats
   }
   return std::nullopt;
 }
+
+// The shape column's six bytes a point as two attributes: the diagonal
+// codes at offset 0, the off-diagonal ones at offset 3.
+constexpr AttributeFormat kShapeFormats[2] = {{kShapeDiagonalAttribute, 3, GL_UNSIGNED_BYTE, false, 6},
+                                              {kShapeOffDiagonalAttribute, 3, GL_UNSIGNED_BYTE, false, 6}};
 
 // The uniform block "Block" of shaders/splat_vert.glsl, std140.
 struct BlockUniforms {
@@ -64,8 +74,9 @@ struct BlockUniforms {
   std::int32_t columns[3][4];
   float ranges[5][2][4];  // velocity, displacement, next_velocity, prev_displacement, prev_velocity: min, step
   std::uint32_t id_base[4];  // the id column's base (encoding 2), low word first; 0 for u64 IDs
+  float dispersion[4];       // the velocity dispersion column's minimum and step
 };
-static_assert(sizeof(BlockUniforms) == 240);
+static_assert(sizeof(BlockUniforms) == 256);
 
 float ParamF32(const BlockColumn& c, int offset) { return std::bit_cast<float>(GetU32(c.params.data() + offset)); }
 double ParamF64(const BlockColumn& c, int offset) { return std::bit_cast<double>(GetU64(c.params.data() + offset)); }
@@ -150,6 +161,14 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
         u.columns[2][1] = kPresent;
         SetRange(c, u.ranges[4]);
         break;
+      case ColumnId::kVelocityDispersion: {
+        u.columns[2][2] = kPresent;
+        const float lo = ParamF32(c, 0), hi = ParamF32(c, 4);
+        u.dispersion[0] = lo;
+        u.dispersion[1] = (hi - lo) / 65535.0f;
+        break;
+      }
+      case ColumnId::kShape: u.columns[2][3] = kPresent; break;
       default: break;  // columns the shader does not read
     }
     at += (c.length + 15) / 16 * 16;
@@ -164,17 +183,23 @@ GpuBlock GpuBlock::Upload(std::span<const std::uint8_t> bytes, const BlockHeader
   GLuint vao = 0;
   glCreateVertexArrays(1, &vao);
   block.vertex_array_ = GlVertexArray(vao);
-  for (const auto& [column, offset] : offsets) {
-    const std::optional<AttributeFormat> f = FormatOf(*column);
-    if (!f) continue;  // a column the renderer does not draw with
-    glVertexArrayVertexBuffer(vao, f->location, block.buffer_.get(), static_cast<GLintptr>(offset), f->stride);
-    if (f->integer) {
-      glVertexArrayAttribIFormat(vao, f->location, f->components, f->type, 0);
+  const auto bind = [&](const AttributeFormat& f, std::size_t offset) {
+    glVertexArrayVertexBuffer(vao, f.location, block.buffer_.get(), static_cast<GLintptr>(offset), f.stride);
+    if (f.integer) {
+      glVertexArrayAttribIFormat(vao, f.location, f.components, f.type, 0);
     } else {
-      glVertexArrayAttribFormat(vao, f->location, f->components, f->type, GL_FALSE, 0);
+      glVertexArrayAttribFormat(vao, f.location, f.components, f.type, GL_FALSE, 0);
     }
-    glVertexArrayAttribBinding(vao, f->location, f->location);
-    glEnableVertexArrayAttrib(vao, f->location);
+    glVertexArrayAttribBinding(vao, f.location, f.location);
+    glEnableVertexArrayAttrib(vao, f.location);
+  };
+  for (const auto& [column, offset] : offsets) {
+    if (column->id == ColumnId::kShape) {
+      bind(kShapeFormats[0], offset);
+      bind(kShapeFormats[1], offset + 3);
+    } else if (const std::optional<AttributeFormat> f = FormatOf(*column)) {
+      bind(*f, offset);
+    }  // else a column the renderer does not draw with
   }
   CheckGlError("uploading a block");
   block.gpu_bytes_ = at + sizeof u;

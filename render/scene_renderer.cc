@@ -63,7 +63,8 @@ Interpolation SceneRenderer::InterpolationAvailable(std::uint32_t epoch) const {
 
 ColumnSet SceneRenderer::ColumnsFor(Interpolation interpolation, bool complete) const {
   ColumnSet c = kCoreColumns;
-  if (ColorModeNeedsVelocity(options_.color)) c |= ColumnBit(ColumnId::kVelocity);
+  if (ColorModeNeedsVelocity(options_.color)) c |= ColumnBit(ColumnId::kVelocity) | ColumnBit(ColumnId::kVelocityDispersion);
+  if (options_.cluster_shapes) c |= ColumnBit(ColumnId::kShape);
   // The level of detail needs IDs only to highlight its own points, which a
   // complete frame never does when the selection can be looked up.
   if (selection_ && selection_->size() > 0 && !(complete && selected_ids_)) c |= ColumnBit(ColumnId::kId);

@@ -60,6 +60,9 @@ struct SceneOptions {
   LodOptions lod;                       // pixel threshold, point budget
   ColorMode color = ColorMode::kDensity;
   Interpolation interpolation = Interpolation::kHermite;  // the best the store supports, at most this
+  // Clusters drawn with their shapes (index/cluster_shape.h), where the store
+  // has them; false: as round blobs of the same size.
+  bool cluster_shapes = true;
   std::size_t cpu_cache_bytes = std::size_t{1} << 30;     // blocks read from disk, in memory
   std::size_t gpu_cache_bytes = std::size_t{2} << 30;     // blocks on the GPU
   std::size_t io_threads = 2;

@@ -216,7 +216,7 @@ void AddQueryCommand(CLI::App& app) {
   cmd->add_option("--width", f->width, "viewport width in pixels")->default_val(1920);
   cmd->add_option("--height", f->height, "viewport height in pixels")->default_val(1080);
   cmd->add_option("--columns", f->columns, "extra columns: weight,smoothing,velocity,id,type,displacement,next_velocity,\n"
-                  "prev_displacement,prev_velocity,velocity_dispersion or all");
+                  "prev_displacement,prev_velocity,velocity_dispersion,shape or all");
   cmd->add_option("--format", f->format, "csv, bin (docs/QUERIES.md), ply (binary little endian) or ply-ascii")->default_val("csv");
   cmd->add_option("-o,--output", f->output, "output file (default: stdout)");
   cmd->add_flag("-q,--quiet", f->quiet, "no statistics on stderr");

@@ -8,6 +8,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "index/cluster_shape.h"
 #include "storage/error.h"
 
 namespace octocosm {
@@ -58,6 +59,8 @@ std::vector<Field> FieldsOf(ColumnSet columns) {
       fields.push_back({"type", "uchar"});
     } else if (id == ColumnId::kVelocityDispersion) {
       fields.push_back({ColumnName(id), "float"});
+    } else if (id == ColumnId::kShape) {
+      for (const char* n : {"shape_xx", "shape_yy", "shape_zz", "shape_xy", "shape_xz", "shape_yz"}) fields.push_back({n, "float"});
     }
   }
   return fields;
@@ -81,6 +84,10 @@ void ForEachExtraField(const NodePoints& p, std::size_t i, ColumnSet columns, co
       put(At(p.type, i));
     } else if (id == ColumnId::kVelocityDispersion) {
       put(At(p.velocity_dispersion, i));  // 0 for a leaf's particles, which carry none
+    } else if (id == ColumnId::kShape) {
+      // A leaf's particles, which carry none, are round.
+      const SymmetricMatrix shape = 6 * i < p.shape.size() ? DecodeShape(ShapeCodeAt(p.shape, i)) : kRoundShape;
+      for (const double entry : shape) put(static_cast<float>(entry));
     }
   }
 }

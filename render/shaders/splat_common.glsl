@@ -3,6 +3,7 @@
 
 const float kKernelIntegral = 0.54977871437821381673;  // 7 pi / 40
 const float kExactNormalizationRadius = 4.0;
+const float kExactNormalizationMinor = 2.0;  // pixels: below, an ellipse's pixel sum strays from its integral
 const float kSpriteGuard = 1.0 / 16.0;  // pixels: see SpriteSize
 
 // W(q): the two-dimensional cubic spline (M4).

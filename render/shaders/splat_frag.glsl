@@ -2,13 +2,14 @@
 // RGBA32F accumulation buffer).
 
 flat in vec2 v_center;
-flat in float v_radius;
+flat in vec3 v_conic;
 flat in vec4 v_value;
 
 layout(location = 0) out vec4 out_value;
 
 void main() {
-  float q = distance(gl_FragCoord.xy, v_center) / v_radius;
+  vec2 d = gl_FragCoord.xy - v_center;
+  float q = sqrt(v_conic.x * d.x * d.x + 2.0 * v_conic.y * d.x * d.y + v_conic.z * d.y * d.y);
   if (q >= 1.0) discard;
   out_value = v_value * CubicKernel(q);
 }

@@ -27,19 +27,21 @@ layout(std140, binding = 1) uniform Block {
   vec4 b_node;        // quantum (node edge / 65536), weight unit, log2 of the smallest smoothing, 1 / codes per octave
   ivec4 b_columns0;   // present (>= 0) or absent (-1): position, weight, smoothing, type
   ivec4 b_columns1;   // velocity, id, displacement, next_velocity
-  ivec4 b_columns2;   // prev_displacement, prev_velocity
+  ivec4 b_columns2;   // prev_displacement, prev_velocity, velocity_dispersion, shape
   vec4 b_velocity[2];           // minimum, step ((max - min) / 65535)
   vec4 b_displacement[2];
   vec4 b_next_velocity[2];
   vec4 b_prev_displacement[2];
   vec4 b_prev_velocity[2];
   uvec4 b_id_base;    // added to a_id: the id column's base (u32 offsets), 0 for whole u64 IDs; low word first
+  vec4 b_dispersion;  // velocity dispersion: minimum, step
 };
 
 // The columns, as stored: u16 x 3 positions and ranged vectors (as floats
 // 0..65535), u32 weight units, u16 smoothing codes, u8 types, u64 IDs (as
 // two words, low first) or u32 ID offsets (the high word reads as 0). Absent
-// columns read as zero and are not used.
+// columns read as zero and are not used. A shape (index/cluster_shape.h) is
+// six byte codes, read as two triples.
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in uint a_weight;
 layout(location = 2) in float a_smoothing;
@@ -50,6 +52,9 @@ layout(location = 6) in vec3 a_displacement;
 layout(location = 7) in vec3 a_next_velocity;
 layout(location = 8) in vec3 a_prev_displacement;
 layout(location = 9) in vec3 a_prev_velocity;
+layout(location = 10) in float a_velocity_dispersion;
+layout(location = 11) in vec3 a_shape_diagonal;      // xx, yy, zz codes
+layout(location = 12) in vec3 a_shape_off_diagonal;  // xy, xz, yz codes
 
 layout(std430, binding = 1) readonly buffer Selection {
   uint selection_mask;   // slots - 1 (slots a power of two)
@@ -69,7 +74,7 @@ uniform vec3 u_origin_below;
 uniform vec3 u_origin_above;
 
 flat out vec2 v_center;  // framebuffer coordinates
-flat out float v_radius;
+flat out vec3 v_conic;   // the footprint: a pixel offset d is at q^2 = conic.x dx^2 + 2 conic.y dx dy + conic.z dy^2
 flat out vec4 v_value;   // the blob's amplitude times (1, a, a^2, selected)
 
 vec3 Ranged(vec3 code, vec4 range[2]) { return range[0].xyz + code * range[1].xyz; }
@@ -103,25 +108,56 @@ bool IsSelected(uvec2 id) {
   return false;
 }
 
-float PixelSum(vec2 c, float r) {
+// The kernel summed over the pixel centres of the footprint, which lies
+// within `extent` pixels of c.
+float PixelSum(vec2 c, vec3 conic, float extent) {
   float sum = 0.0;
-  int i0 = int(ceil(c.x - r - 0.5)), i1 = int(floor(c.x + r - 0.5));
-  int j0 = int(ceil(c.y - r - 0.5)), j1 = int(floor(c.y + r - 0.5));
+  int i0 = int(ceil(c.x - extent - 0.5)), i1 = int(floor(c.x + extent - 0.5));
+  int j0 = int(ceil(c.y - extent - 0.5)), j1 = int(floor(c.y + extent - 0.5));
   for (int j = j0; j <= j1; ++j) {
-    float dy = (float(j) + 0.5 - c.y) / r;
+    float dy = float(j) + 0.5 - c.y;
     for (int i = i0; i <= i1; ++i) {
-      float dx = (float(i) + 0.5 - c.x) / r;
-      sum += CubicKernel(sqrt(dx * dx + dy * dy));
+      float dx = float(i) + 0.5 - c.x;
+      sum += CubicKernel(sqrt(conic.x * dx * dx + 2.0 * conic.y * dx * dy + conic.z * dy * dy));
     }
   }
   return sum;
+}
+
+// The footprint of a blob of `scale` pixels (its round radius) and 3-D shape
+// S: the ellipse of S's projection onto the image plane, S restricted to the
+// camera's right and up axes (the same local approximation as the round
+// blob's radius h * focal / depth), scaled by scale^2. Its two radii are held
+// between 1 pixel and the largest blob radius, as a round blob's radius is.
+// Returns the conic (the clamped matrix's inverse) and the two radii.
+void Footprint(float scale, out vec3 conic, out float major, out float minor) {
+  vec3 m = vec3(scale * scale, 0.0, scale * scale);  // xx, xy, yy in pixels^2
+  if (b_columns2.w >= 0) {
+    vec3 d = a_shape_diagonal / 85.0;
+    vec3 o = (a_shape_off_diagonal - 127.0) * (3.0 / 254.0);
+    mat3 shape = mat3(d.x, o.x, o.y, o.x, d.y, o.z, o.y, o.z, d.z);
+    vec3 r = shape * u_right.xyz, u = shape * u_up.xyz;
+    m = scale * scale * vec3(dot(u_right.xyz, r), dot(u_right.xyz, u), dot(u_up.xyz, u));
+  }
+  float mean = 0.5 * (m.x + m.z), half_difference = 0.5 * (m.x - m.z);
+  float root = sqrt(half_difference * half_difference + m.y * m.y);
+  // The major axis, computed without cancellation; any axis for a circle.
+  vec2 axis = half_difference >= 0.0 ? vec2(half_difference + root, m.y) : vec2(m.y, root - half_difference);
+  axis = dot(axis, axis) > 0.0 ? normalize(axis) : vec2(1.0, 0.0);
+  float limit = u_limits.z * u_limits.z;
+  float l1 = clamp(mean + root, 1.0, limit), l2 = clamp(mean - root, 1.0, limit);
+  vec2 other = vec2(-axis.y, axis.x);
+  conic = vec3(axis.x * axis.x, axis.x * axis.y, axis.y * axis.y) / l1 +
+          vec3(other.x * other.x, other.x * other.y, other.y * other.y) / l2;
+  major = sqrt(l1);
+  minor = sqrt(l2);
 }
 
 void Discard() {
   gl_Position = vec4(2.0, 2.0, 2.0, 1.0);  // outside the clip volume: no fragments
   gl_PointSize = 1.0;
   v_center = vec2(0.0);
-  v_radius = 1.0;
+  v_conic = vec3(1.0, 0.0, 1.0);
   v_value = vec4(0.0);
 }
 
@@ -162,24 +198,36 @@ void main() {
   float margin = u_viewport.z, focal = u_viewport.w;
   vec2 center = 0.5 * image + focal * vec2(dot(p, u_right.xyz), dot(p, u_up.xyz)) / depth;
   float smoothing = exp2(b_node.z + a_smoothing * b_node.w);
-  float radius = clamp(smoothing * focal / depth, 1.0, u_limits.z);
+  vec3 conic;
+  float major, minor;
+  Footprint(smoothing * focal / depth, conic, major, minor);
   float weight = float(a_weight) * b_node.y * u_limits.w * u_time.y;
-  float normalization = radius < kExactNormalizationRadius ? PixelSum(center, radius)
-                                                           : kKernelIntegral * radius * radius;
+  // Summed over the pixels where the integral would miss by more than a
+  // fraction of a percent: small blobs, and thin ones.
+  float normalization = major < kExactNormalizationRadius || minor < kExactNormalizationMinor
+                            ? PixelSum(center, conic, major)
+                            : kKernelIntegral * major * minor;
 
-  float a = 0.0;
+  // Where a point stands for many particles, their velocity dispersion
+  // sigma (per axis) adds to the spread of speeds and of line-of-sight
+  // velocities: speed is taken as the rms speed, and the line of sight's
+  // second moment gains sigma^2.
+  float sigma = b_columns2.z >= 0 ? b_dispersion.x + a_velocity_dispersion * b_dispersion.y : 0.0;
+  float a = 0.0, spread = 0.0;
   int mode = u_modes.x;
-  if (mode == 1) a = length(velocity);
-  else if (mode == 2 || mode == 3) a = dot(velocity, u_forward.xyz);
-  else if (mode == 4) a = float(a_type);
+  if (mode == 1) a = sqrt(dot(velocity, velocity) + 3.0 * sigma * sigma);
+  else if (mode == 2 || mode == 3) {
+    a = dot(velocity, u_forward.xyz);
+    spread = sigma * sigma;
+  } else if (mode == 4) a = float(a_type);
   float selected = 0.0;
   if (u_modes.z == 1 && b_columns1.y >= 0) selected = IsSelected(ParticleId()) ? 1.0 : 0.0;
 
   vec2 framebuffer = image + 2.0 * margin;
   v_center = center + margin;
-  v_radius = radius;
+  v_conic = conic;
   v_value = u_modes.z == 2 ? vec4(0.0, 0.0, 0.0, weight / normalization)
-                           : (weight / normalization) * vec4(1.0, a, a * a, selected);
+                           : (weight / normalization) * vec4(1.0, a, a * a + spread, selected);
   gl_Position = vec4(v_center / framebuffer * 2.0 - 1.0, 0.0, 1.0);
-  gl_PointSize = 2.0 * radius + kSpriteGuard;
+  gl_PointSize = 2.0 * major + kSpriteGuard;
 }

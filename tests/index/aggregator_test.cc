@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "index/block_codec.h"
+#include "index/cluster_shape.h"
 #include "index/subtree_builder.h"
 #include "storage/error.h"
 
@@ -358,6 +359,102 @@ TEST(AggregateParent, DispersionThroughChildClustersIsTheDirectOneOverTheirParti
     for (int a = 0; a < 3; ++a) between += parent.weight[k] * std::pow(parent.velocity[3 * k + a] - mean[a], 2);
   }
   EXPECT_LT(std::sqrt(between / (3 * total_mass)), 0.9 * direct);
+}
+
+// C = sum w ((x - mean)(x - mean)^T + own blob's covariance) / W over points
+// with round blobs, as (xx, yy, zz, xy, xz, yz).
+SymmetricMatrix DirectCovariance(const std::vector<const NodePoints*>& sets) {
+  double mass = 0, mean[3] = {0, 0, 0};
+  for (const NodePoints* p : sets) {
+    for (std::size_t i = 0; i < p->size(); ++i) {
+      mass += p->weight[i];
+      for (int a = 0; a < 3; ++a) mean[a] += p->weight[i] * p->position[3 * i + a];
+    }
+  }
+  for (double& m : mean) m /= mass;
+  SymmetricMatrix c{};
+  for (const NodePoints* p : sets) {
+    for (std::size_t i = 0; i < p->size(); ++i) {
+      double d[3];
+      for (int a = 0; a < 3; ++a) d[a] = p->position[3 * i + a] - mean[a];
+      const double own = KernelVariance(p->smoothing[i]);
+      const double outer[6] = {d[0] * d[0] + own, d[1] * d[1] + own, d[2] * d[2] + own, d[0] * d[1], d[0] * d[2], d[1] * d[2]};
+      for (int k = 0; k < 6; ++k) c[k] += p->weight[i] * outer[k];
+    }
+  }
+  for (double& x : c) x /= mass;
+  return c;
+}
+
+// Normalized to trace 3 and pulled towards the sphere, as stored.
+SymmetricMatrix ExpectedShape(const SymmetricMatrix& c) {
+  const double mean = (c[0] + c[1] + c[2]) / 3;
+  SymmetricMatrix s{};
+  for (int k = 0; k < 6; ++k) s[k] = (1 - kShapeFloor) * c[k] / mean + kShapeFloor * (k < 3 ? 1 : 0);
+  return s;
+}
+
+// Clusters keep their members' covariance as a shape: a leaf of particles on
+// a segment gives a cluster stretched along it, and a cluster of such
+// clusters has the covariance of all the particles below it, its members'
+// shapes included (within the codes' rounding: 1/85 on the diagonal, 3/254
+// off it, and their effect through the members).
+TEST(AggregateParent, ShapesKeepTheCovarianceThroughClustersOfClusters) {
+  SubtreeOptions options;
+  options.capacity = 8;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  const NodeKey r0 = NodeKey::Root().Child(0), r7 = NodeKey::Root().Child(7);
+  std::map<NodeKey, NodePoints> nodes;
+  const NodeSink sink = [&](NodeKey key, const NodePoints& p) { nodes[key] = p; };
+  std::vector<RegionRoot> regions;
+  std::vector<NodeKey> leaves;
+  for (int octant = 0; octant < 8; ++octant) {
+    const NodeKey key = r0.Child(octant);
+    const NodeCube cell = kCube.NodeCubeOf(key);
+    // Up to 8 particles (a leaf) on a segment through the cell, each octant
+    // along another direction.
+    const double direction[3] = {1.0 + octant % 2, 0.3 * (octant / 2 % 2), -0.5 * (octant / 4)};
+    ParticleChunk c;
+    for (int i = 0; i < 8; ++i) {
+      const double t = u(rng) - 0.5;
+      for (int a = 0; a < 3; ++a) c.position.push_back(cell.origin[a] + cell.size * (0.5 + 0.4 * t * direction[a] / 2));
+      c.mass.push_back(0.5 + u(rng));
+      c.type.push_back(0);
+      c.smoothing.push_back(static_cast<float>(0.01 * cell.size));
+    }
+    regions.push_back({key, BuildSubtree(c, key, kCube, options, sink)});
+    leaves.push_back(key);
+  }
+  ParticleChunk far;
+  far.position = {25, 25, 25};
+  far.mass = {1};
+  far.type = {0};
+  far.smoothing = {0.5f};
+  regions.push_back({r7, BuildSubtree(far, r7, kCube, options, sink)});
+  const NodePoints root = BuildTopLevels(std::move(regions), kCube, options, sink);
+
+  const NodePoints& parent = nodes.at(r0);
+  ASSERT_EQ(parent.size(), 8u);
+  ASSERT_EQ(parent.shape.size(), 6 * parent.size());
+  for (int octant = 0; octant < 8; ++octant) {
+    SCOPED_TRACE(octant);
+    const NodePoints& leaf = nodes.at(leaves[octant]);
+    EXPECT_TRUE(leaf.shape.empty()) << "a leaf's points are particles, round";
+    const SymmetricMatrix want = ExpectedShape(DirectCovariance({&leaf}));
+    const SymmetricMatrix got = DecodeShape(ShapeCodeAt(parent.shape, static_cast<std::size_t>(octant)));
+    for (int k = 0; k < 6; ++k) EXPECT_NEAR(got[k], want[k], 0.5 / 85 + 1e-9) << "entry " << k;
+    EXPECT_GT(got[0], 1.5) << "stretched along x";
+  }
+  // The root: r0's clusters in one, r7's particle (round) in another.
+  ASSERT_EQ(root.size(), 2u);
+  std::vector<const NodePoints*> all;
+  for (const NodeKey& key : leaves) all.push_back(&nodes.at(key));
+  const SymmetricMatrix want = ExpectedShape(DirectCovariance(all));
+  const SymmetricMatrix got = DecodeShape(ShapeCodeAt(root.shape, 0));
+  for (int k = 0; k < 6; ++k) EXPECT_NEAR(got[k], want[k], 0.03) << "entry " << k;
+  const SymmetricMatrix single = DecodeShape(ShapeCodeAt(root.shape, 1));
+  for (int k = 0; k < 6; ++k) EXPECT_NEAR(single[k], k < 3 ? 1.0 : 0.0, 1e-12) << "a lone particle is round";
 }
 
 // Only clusters of particles with velocities carry a dispersion: not a

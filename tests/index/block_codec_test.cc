@@ -26,11 +26,12 @@ constexpr ColumnSet kVelocityBit = ColumnBit(ColumnId::kVelocity);
 constexpr ColumnSet kIdBit = ColumnBit(ColumnId::kId);
 constexpr ColumnSet kDisplacementBit = ColumnBit(ColumnId::kDisplacement);
 constexpr ColumnSet kDispersionBit = ColumnBit(ColumnId::kVelocityDispersion);
+constexpr ColumnSet kShapeBit = ColumnBit(ColumnId::kShape);
 // The optional columns, in block order.
-constexpr std::array<ColumnId, 7> kOptionalColumns = {ColumnId::kVelocity,     ColumnId::kId,
+constexpr std::array<ColumnId, 8> kOptionalColumns = {ColumnId::kVelocity,     ColumnId::kId,
                                                       ColumnId::kDisplacement, ColumnId::kNextVelocity,
                                                       ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity,
-                                                      ColumnId::kVelocityDispersion};
+                                                      ColumnId::kVelocityDispersion, ColumnId::kShape};
 
 // n random points inside node `key`, optional columns as `optional` says.
 NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const Cube& cube, ColumnSet optional) {
@@ -60,6 +61,10 @@ NodePoints RandomPoints(std::mt19937_64& rng, std::size_t n, NodeKey key, const 
     }
     // Dispersions >= 0, a few exactly 0 (clusters of one particle).
     if (optional & kDispersionBit) p.velocity_dispersion.push_back(rng() % 8 == 0 ? 0.0f : std::fabs(vel(rng)) / 3);
+    // Any codes: 0..255 on the diagonal, 0..254 off it.
+    if (optional & kShapeBit) {
+      for (int k = 0; k < 6; ++k) p.shape.push_back(static_cast<std::uint8_t>(rng() % (k < 3 ? 256 : 255)));
+    }
   }
   OrderByOctant(p, key, cube);
   return p;
@@ -125,13 +130,14 @@ void ExpectMatches(const NodePoints& original, const NodePoints& decoded, NodeKe
       ASSERT_LE(std::fabs(decoded.velocity_dispersion[i] - original.velocity_dispersion[i]), bound) << i;
     }
   }
+  ASSERT_EQ(decoded.shape, original.shape);  // codes, stored as they are
 }
 
 bool SamePoints(const NodePoints& a, const NodePoints& b) {
   bool same = a.position == b.position && a.weight == b.weight && a.smoothing == b.smoothing && a.id == b.id &&
               a.type == b.type && a.octant_offsets == b.octant_offsets;
   for (const ColumnId id : kVectorColumnIds) same &= *VectorColumnOf(a, id) == *VectorColumnOf(b, id);
-  return same && a.velocity_dispersion == b.velocity_dispersion;
+  return same && a.velocity_dispersion == b.velocity_dispersion && a.shape == b.shape;
 }
 
 const Cube kCube{{-3.25, 12.0, 1000.0}, 77.5, false};
@@ -746,9 +752,9 @@ TEST(BlockCodec, EpochLinkColumnsAreCheckedLikeVelocity) {
   const NodePoints points = RandomPoints(rng, 30, key, kCube, kAllColumns);
   const Bytes block = EncodeBlock(points, key, kCube);
   const BlockHeader header = DecodeBlockHeader(block, key, "links");
-  // All eleven columns, in id order.
-  ASSERT_EQ(header.columns.size(), 11u);
-  for (std::size_t c = 0; c < 11; ++c) EXPECT_EQ(static_cast<int>(header.columns[c].id), static_cast<int>(c + 1));
+  // All twelve columns, in id order.
+  ASSERT_EQ(header.columns.size(), 12u);
+  for (std::size_t c = 0; c < 12; ++c) EXPECT_EQ(static_cast<int>(header.columns[c].id), static_cast<int>(c + 1));
   auto expect_corrupt = [&](const Bytes& bad, ColumnSet wanted, const std::string& message) {
     try {
       DecodeBlock(bad, wanted, key, kCube, "links");
@@ -781,11 +787,40 @@ TEST(BlockCodec, EpochLinkColumnsAreCheckedLikeVelocity) {
     FixChecksums(bad);
     expect_corrupt(bad, kAllColumns, name);
   }
-  // Id 12 is not a column of version 1.
+  // Id 13 is not a column of version 1.
   Bytes bad = block;
-  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 10] = 12;
+  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 11] = 13;
   FixChecksums(bad);
-  expect_corrupt(bad, kAllColumns, "unknown column id 12");
+  expect_corrupt(bad, kAllColumns, "unknown column id 13");
+}
+
+// Column 12: six byte codes a point, as given; an off-diagonal code of 255
+// is refused by the encoder and reported as corruption by the decoder.
+TEST(BlockCodec, ShapeCodesAreStoredAsTheyAreAndChecked) {
+  std::mt19937_64 rng(41);
+  const NodeKey key = NodeKey::FromPath("r3");
+  NodePoints points = RandomPoints(rng, 20, key, kCube, kShapeBit);
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const BlockHeader header = DecodeBlockHeader(block, key, "shape");
+  const BlockColumn& column = *header.Find(ColumnId::kShape);
+  ASSERT_EQ(column.length, 6u * points.size());
+  EXPECT_TRUE(std::equal(points.shape.begin(), points.shape.end(), block.begin() + static_cast<std::ptrdiff_t>(column.offset)));
+  EXPECT_EQ(DecodeBlock(block, kShapeBit, key, kCube, "shape").points.shape, points.shape);
+
+  Bytes bad = block;
+  bad[column.offset + 6 * 4 + 3] = 255;
+  FixChecksums(bad);
+  try {
+    DecodeBlock(bad, kShapeBit, key, kCube, "shape");
+    ADD_FAILURE() << "an off-diagonal code of 255 decoded";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kCorruption);
+    EXPECT_NE(std::string(e.what()).find("column 'shape': off-diagonal code 255 at point 4"), std::string::npos) << e.what();
+  }
+  points.shape[6 * 2 + 5] = 255;
+  EXPECT_THROW(EncodeBlock(points, key, kCube), Error);
+  points.shape.pop_back();
+  EXPECT_THROW(EncodeBlock(points, key, kCube), Error);
 }
 
 // Column 11: u16 codes between the block's f32 min and max dispersion, as

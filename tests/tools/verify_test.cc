@@ -201,7 +201,7 @@ TEST_F(VerifyTest, BlocksWithoutAColumnTheManifestDeclaresAreAFault) {
 }
 
 // With velocities and clusters, every inner node carries its clusters'
-// velocity dispersions and no leaf does; together with the mean velocities
+// velocity dispersions and shapes and no leaf does; together with the mean velocities
 // they keep the particles' second velocity moment (the kinetic energy)
 // through the codec's quantization.
 TEST_F(VerifyTest, ClusterNodesCarryVelocityDispersionsAndVerify) {
@@ -212,7 +212,7 @@ TEST_F(VerifyTest, ClusterNodesCarryVelocityDispersionsAndVerify) {
   EXPECT_TRUE(report.faults.empty()) << AllFaults(report);
   const Dataset dataset = Dataset::Open(store);
   const ColumnSet dispersion = ColumnBit(ColumnId::kVelocityDispersion);
-  EXPECT_EQ(dataset.cluster_columns(), dispersion);
+  EXPECT_EQ(dataset.cluster_columns(), dispersion | ColumnBit(ColumnId::kShape));
   EXPECT_EQ(dataset.columns(0) & dispersion, 0u) << "not in every block: leaves lack it";
   EXPECT_EQ(dataset.columns() & dispersion, dispersion);
   std::size_t inner = 0, leaves = 0;
@@ -225,6 +225,7 @@ TEST_F(VerifyTest, ClusterNodesCarryVelocityDispersionsAndVerify) {
     const DecodedBlock block = DecodeBlock(reader.ReadBlock({0, entry.key}), kAllColumns, key, dataset.cube(0), "test");
     (leaf ? leaves : inner) += 1;
     EXPECT_EQ(block.points.velocity_dispersion.size(), leaf ? 0 : block.points.size()) << key.Path();
+    EXPECT_EQ(block.points.shape.size(), leaf ? 0 : 6 * block.points.size()) << key.Path();
     if (key == NodeKey::Root()) {
       for (std::size_t i = 0; i < block.points.size(); ++i) {
         const float* v = &block.points.velocity[3 * i];
@@ -254,7 +255,7 @@ TEST_F(VerifyTest, DispersionsTheManifestDoesNotDeclareAreAFault) {
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,velocity,id,type,"
-                                       "velocity_dispersion, the manifest declares position,weight,smoothing,velocity,id,type"))
+                                       "velocity_dispersion,shape, the manifest declares position,weight,smoothing,velocity,id,type"))
       << AllFaults(report);
 }
 

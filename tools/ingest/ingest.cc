@@ -135,7 +135,7 @@ bool InnerNodesCarryVelocityDispersion(bool has_velocity, CoarsePoints coarse) {
   return has_velocity && coarse == CoarsePoints::kClusters;
 }
 
-nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links, bool velocity_dispersion) {
+nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links, bool velocity_dispersion, bool shapes) {
   nlohmann::json columns = nlohmann::json::array();
   auto add = [&](ColumnId column, const char* encoding, const char* meaning) {
     columns.push_back({{"id", static_cast<int>(column)}, {"name", ColumnName(column)}, {"encoding", encoding},
@@ -157,6 +157,10 @@ nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links, bool ve
   if (velocity_dispersion) {
     add(ColumnId::kVelocityDispersion, "u16 between per-block min and max",
         "1-D rms velocity dispersion of the particles a cluster stands for; inner nodes of clusters only");
+  }
+  if (shapes) {
+    add(ColumnId::kShape, "u8x6 covariance over trace / 3 (index/cluster_shape.h)",
+        "shape of the blob of the particles a cluster stands for; inner nodes of clusters only");
   }
   return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
 }
@@ -421,13 +425,15 @@ IngestReport Ingest(const IngestOptions& options) {
                             {"has_prev_displacement", join_epochs},
                             {"has_prev_velocity", join_epochs && has_velocity},
                             {"has_velocity_dispersion", InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse)},
+                            {"has_shape", options.tree.coarse == CoarsePoints::kClusters},
                             {"id_index", has_id ? "ids" : ""},
                             {"epochs", nlohmann::json::array()}};
   StoreWriterOptions store_options;
   store_options.page_size = options.page_size;
   StoreWriter store(options.output, dataset,
                     AttributeSchema(has_velocity, has_id, join_epochs,
-                                    InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse)),
+                                    InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse),
+                                    options.tree.coarse == CoarsePoints::kClusters),
                     store_options);
   std::unique_ptr<StoreWriter> id_store;
   const std::uint32_t id_index_page_size = std::max(options.page_size, kIdIndexMinPageSize);
