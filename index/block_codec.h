@@ -78,7 +78,7 @@
 //                                      nodes whose points are clusters carry it; leaves and
 //                                      samples never do (their blobs are round).
 //
-// Columns 8-11 were added to version 1 before any store left this project
+// Columns 8-12 were added to version 1 before any store left this project
 // (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
 // So was the id column's encoding 2: a reader from before reports such a
 // block as corrupt ("unknown encoding"); blocks with encoding 1 read as ever.
