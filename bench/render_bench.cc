@@ -1,6 +1,7 @@
 // octocosm-bench-render: run time against error.
 //
-// On a generated clustered set (default 10^8 points, `octocosm synth scale`),
+// On a generated clustered set (default 10^8 points, `octocosm synth scale`;
+// or any snapshot, --snapshot),
 // ingested once per representation of the inner nodes (--coarse: clusters,
 // the default, drawn with their shapes or, as "round", without; and sample,
 // a random subselection), three views at 1280x720 —
@@ -58,6 +59,8 @@ struct Flags {
   int width = 1280, height = 720;
   std::string thresholds = "8,4,2,1,0.5", budgets = "0,1e6,4e6", views = "overview,mid,deep";
   std::string coarse = "clusters,sample";  // inner nodes' representations to compare, a store each
+  std::string snapshot;                    // an existing snapshot instead of a generated one
+  std::size_t capacity = 0;                // points a node holds (0: ingest's default)
   std::string backend = "osmesa";
   bool full = true, selection = false, prepare_only = false;
   unsigned threads = 0;
@@ -285,8 +288,8 @@ void Run(const Flags& f) {
   const fs::path dir = f.dir;
   fs::create_directories(dir);
   const HeadlessBackend backend = ParseHeadlessBackend(f.backend);
-  const std::string snapshot = (dir / "snap" / "snap").string();
-  if (!fs::exists(dir / "snap" / "snap.0")) {
+  const std::string snapshot = f.snapshot.empty() ? (dir / "snap" / "snap").string() : f.snapshot;
+  if (f.snapshot.empty() && !fs::exists(dir / "snap" / "snap.0")) {
     synth::ScaleOptions s;
     s.output_directory = (dir / "snap").string();
     s.particle_count = static_cast<std::uint64_t>(f.points);
@@ -311,6 +314,7 @@ void Run(const Flags& f) {
       o.inputs = {snapshot};
       o.output = store.string();
       o.tree.coarse = representation == "sample" ? CoarsePoints::kSample : CoarsePoints::kClusters;
+      if (f.capacity > 0) o.tree.capacity = f.capacity;
       o.quiet = true;
       const IngestReport report = Ingest(o);
       std::printf("ingested %llu points (%s) in %.1f s\n", static_cast<unsigned long long>(report.input_points),
@@ -446,6 +450,9 @@ int main(int argc, char** argv) {
   app.add_option("--coarse", f.coarse,
                  "inner nodes' representations to compare: clusters, round (the clusters drawn without their shapes), sample")
       ->default_val("clusters,sample");
+  app.add_option("--snapshot", f.snapshot,
+                 "measure on this snapshot (any format ingest reads, first epoch) instead of a generated one");
+  app.add_option("--capacity", f.capacity, "points a node holds in the stores (default: ingest's)");
   app.add_option("--backend", f.backend, "osmesa or egl")->default_val("osmesa");
   app.add_option("--threads", f.threads, "threads of the reference renderer (default: all)");
   app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");
