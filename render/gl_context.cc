@@ -15,10 +15,6 @@ HeadlessBackend ParseHeadlessBackend(const std::string& name) {
   throw Error::InvalidArgument("unknown headless GL backend '" + name + "': expected osmesa or egl");
 }
 
-const char* HeadlessBackendName(HeadlessBackend backend) {
-  return backend == HeadlessBackend::kEgl ? "egl" : "osmesa";
-}
-
 std::unique_ptr<GlContext> CreateHeadlessContext(HeadlessBackend backend) {
   switch (backend) {
     case HeadlessBackend::kOsMesa: return CreateOsMesaContext();

@@ -23,10 +23,9 @@ enum class HeadlessBackend {
   kEgl,     // the system's EGL driver (a GPU), where one is installed
 };
 
-// "osmesa" / "egl" <-> HeadlessBackend. Throws Error::InvalidArgument for
+// "osmesa" / "egl" -> HeadlessBackend. Throws Error::InvalidArgument for
 // anything else.
 HeadlessBackend ParseHeadlessBackend(const std::string& name);
-const char* HeadlessBackendName(HeadlessBackend backend);
 
 class GlContext {
  public:

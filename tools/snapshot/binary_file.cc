@@ -128,7 +128,6 @@ void DecodeUnsigned(const std::uint8_t* bytes, std::size_t count, std::size_t wi
 }
 
 std::uint32_t LoadU32(const std::uint8_t* bytes, bool swap) { return LoadAs<std::uint32_t>(bytes, swap); }
-std::uint64_t LoadU64(const std::uint8_t* bytes, bool swap) { return LoadAs<std::uint64_t>(bytes, swap); }
 double LoadF64(const std::uint8_t* bytes, bool swap) { return LoadAs<double>(bytes, swap); }
 
 }  // namespace octocosm

@@ -46,9 +46,9 @@ void DecodeReals(const std::uint8_t* bytes, std::size_t count, std::size_t width
 void DecodeUnsigned(const std::uint8_t* bytes, std::size_t count, std::size_t width, bool swap,
                     std::uint64_t* out);
 
-// Loads one 4-byte little- or big-endian integer (`swap` = differs from host).
+// Loads one 4-byte little- or big-endian integer or 8-byte float (`swap` =
+// differs from host).
 std::uint32_t LoadU32(const std::uint8_t* bytes, bool swap);
-std::uint64_t LoadU64(const std::uint8_t* bytes, bool swap);
 double LoadF64(const std::uint8_t* bytes, bool swap);
 
 }  // namespace octocosm
