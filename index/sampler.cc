@@ -11,25 +11,16 @@
 #include "index/extended_sum.h"
 #include "index/nth_largest.h"
 #include "storage/error.h"
+#include "storage/hash.h"
 
 namespace octocosm {
 namespace {
 
-// splitmix64's finaliser: a bijection with good avalanche, enough to turn
-// sequential IDs into independent-looking uniforms.
-std::uint64_t Mix(std::uint64_t x) {
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  x ^= x >> 31;
-  return x;
-}
 
 // PriorityUniform in two steps, so that a node mixes its seed once, not once per point.
-std::uint64_t MixedPrioritySeed(std::uint64_t seed) { return Mix(seed + 0x9e3779b97f4a7c15ull); }
+std::uint64_t MixedPrioritySeed(std::uint64_t seed) { return MixBits64(seed + kGoldenGamma); }
 double PriorityUniformMixed(std::uint64_t sampling_id, std::uint64_t mixed_seed) {
-  const std::uint64_t h = Mix(sampling_id ^ mixed_seed);
+  const std::uint64_t h = MixBits64(sampling_id ^ mixed_seed);
   return static_cast<double>((h >> 11) + 1) * 0x1.0p-53;
 }
 
@@ -131,7 +122,7 @@ class PairMemo {
   double Get(double first, double second, const F& f) {
     const std::uint64_t a = std::bit_cast<std::uint64_t>(first);
     const std::uint64_t b = std::bit_cast<std::uint64_t>(second);
-    const std::size_t slot = static_cast<std::size_t>(Mix(a ^ (b * 0x9e3779b97f4a7c15ull)) % kSlots);
+    const std::size_t slot = static_cast<std::size_t>(MixBits64(a ^ (b * kGoldenGamma)) % kSlots);
     if (first_[slot] != first || second_[slot] != second) {
       first_[slot] = first;
       second_[slot] = second;
@@ -222,12 +213,12 @@ std::uint32_t DensityCellIndex(const double* position, NodeKey key, const Cube& 
 
 std::uint64_t SamplingId(const double* position) {
   std::uint64_t h = 0x6a09e667f3bcc908ull;
-  for (int a = 0; a < 3; ++a) h = Mix(h ^ std::bit_cast<std::uint64_t>(position[a]));
+  for (int a = 0; a < 3; ++a) h = MixBits64(h ^ std::bit_cast<std::uint64_t>(position[a]));
   return h;
 }
 
 std::uint64_t LevelSeed(std::uint64_t seed, int level) {
-  return Mix(seed ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(level + 1)));
+  return MixBits64(seed ^ (kGoldenGamma * static_cast<std::uint64_t>(level + 1)));
 }
 
 double PriorityUniform(std::uint64_t sampling_id, std::uint64_t seed) {

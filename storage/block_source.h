@@ -8,6 +8,8 @@
 #include <functional>
 #include <vector>
 
+#include "storage/hash.h"
+
 namespace octocosm {
 
 using Bytes = std::vector<std::uint8_t>;
@@ -23,12 +25,8 @@ struct BlockId {
 
 struct BlockIdHash {
   std::size_t operator()(const BlockId& id) const noexcept {
-    // splitmix64 finaliser over key and epoch: keys are dense Morton codes, so
-    // a plain identity hash would cluster in the low bits.
-    std::uint64_t h = id.key ^ (static_cast<std::uint64_t>(id.epoch) << 58) ^ 0x9e3779b97f4a7c15ull;
-    h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
-    h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
-    return static_cast<std::size_t>(h ^ (h >> 31));
+    // Keys are dense Morton codes: a plain identity hash would cluster in the low bits.
+    return static_cast<std::size_t>(MixBits64(id.key ^ (static_cast<std::uint64_t>(id.epoch) << 58) ^ kGoldenGamma));
   }
 };
 
