@@ -11,7 +11,11 @@ std::array<std::uint8_t, 6> EncodeShape(const SymmetricMatrix& c) {
   std::array<std::uint8_t, 6> code{};
   for (int i = 0; i < 6; ++i) {
     const double identity = i < 3 ? 1.0 : 0.0;
-    const double s = (1 - kShapeFloor) * (c[i] / mean) + kShapeFloor * identity;
+    // Snapped to 2^-20 before rounding to a code: covariances of points on a
+    // lattice (faces, grids) land exactly on a code's rounding boundary, where
+    // sums that differ in their last bits (another summation order, float or
+    // double input) would otherwise round apart.
+    const double s = std::round(((1 - kShapeFloor) * (c[i] / mean) + kShapeFloor * identity) * 0x1p20) * 0x1p-20;
     // NaN entries (never from finite members) fall back to the round value.
     const double q = i < 3 ? std::round(85 * s) : 127 + std::round(254 * s / 3);
     const double round_value = kRoundShapeCode[i];

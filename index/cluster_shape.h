@@ -34,7 +34,8 @@ inline constexpr double kShapeFloor = 1.0 / 16.0;
 inline constexpr std::array<std::uint8_t, 6> kRoundShapeCode = {85, 85, 85, 127, 127, 127};
 
 // The stored shape of covariance `c`: normalized to trace 3, pulled towards
-// the sphere, rounded to bytes (diagonal q = round(85 s), in [0, 255];
+// the sphere, snapped to multiples of 2^-20 (so that last-bit differences in
+// `c` give the same code), rounded to bytes (diagonal q = round(85 s), in [0, 255];
 // off-diagonal q = 127 + round(254 s / 3), in [0, 254]). A covariance
 // without a positive finite trace gives the round shape.
 std::array<std::uint8_t, 6> EncodeShape(const SymmetricMatrix& c);
