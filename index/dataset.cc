@@ -115,8 +115,13 @@ Dataset Dataset::Open(const std::string& directory) {
       Cube cube{c.at("origin").get<std::array<double, 3>>(), c.at("size").get<double>(), c.at("periodic").get<bool>()};
       cube.Validate();
       dataset.cubes_.push_back(cube);
-      dataset.points_.push_back(epoch.at("points").get<std::uint64_t>());
-      dataset.masses_.push_back(epoch.value("mass", 0.0));
+      EpochSummary summary;
+      summary.points = epoch.at("points").get<std::uint64_t>();
+      if (epoch.contains("mass")) summary.mass = epoch.at("mass").get<double>();
+      if (epoch.contains("nodes")) summary.nodes = epoch.at("nodes").get<std::uint64_t>();
+      if (epoch.contains("leaves")) summary.leaves = epoch.at("leaves").get<std::uint64_t>();
+      if (epoch.contains("depth")) summary.depth = epoch.at("depth").get<int>();
+      dataset.summaries_.push_back(summary);
       std::optional<EpochLink> link;
       if (epoch.contains("to_next")) {
         const auto& to_next = epoch.at("to_next");

@@ -58,6 +58,17 @@ struct PhysicalTime {
 double FractionalEpochAt(const std::vector<std::optional<double>>& epoch_scale_factors, const PhysicalTime& time,
                          const std::string& store);
 
+// What the dataset metadata records about one epoch's tree, as ingest
+// counted it while building; `verify` checks it against the blocks. Stores
+// built by hand (tests) may leave out what they do not know.
+struct EpochSummary {
+  std::uint64_t points = 0;  // particles in the leaves
+  std::optional<double> mass;  // of all particles
+  std::optional<std::uint64_t> nodes;
+  std::optional<std::uint64_t> leaves;
+  std::optional<int> depth;  // the deepest leaf's level
+};
+
 class Dataset {
  public:
   // Opens the store at `directory`; throws Error (kCorruption when the
@@ -67,9 +78,8 @@ class Dataset {
   const StoreReader& store() const { return store_; }
   std::uint32_t epoch_count() const { return store_.epoch_count(); }
   const Cube& cube(std::uint32_t epoch) const { return cubes_.at(epoch); }
-  std::uint64_t points(std::uint32_t epoch) const { return points_.at(epoch); }
-  // The total mass of the epoch (the root's weights).
-  double mass(std::uint32_t epoch) const { return masses_.at(epoch); }
+  std::uint64_t points(std::uint32_t epoch) const { return summaries_.at(epoch).points; }
+  const EpochSummary& summary(std::uint32_t epoch) const { return summaries_.at(epoch); }
   // The columns some block of some epoch carries.
   ColumnSet columns() const {
     return every_epoch_columns_ | forward_columns_ | backward_columns_ | cluster_columns_;
@@ -105,8 +115,7 @@ class Dataset {
 
   StoreReader store_;
   std::vector<Cube> cubes_;
-  std::vector<std::uint64_t> points_;
-  std::vector<double> masses_;
+  std::vector<EpochSummary> summaries_;
   std::vector<std::optional<EpochLink>> links_;
   std::vector<std::optional<double>> scale_factors_;
   ColumnSet every_epoch_columns_ = 0;  // the columns of every epoch

@@ -31,7 +31,7 @@ SceneRenderer::SceneRenderer(const Dataset& dataset, SplatRenderer& splat, const
   if (options.io_threads == 0) throw Error::InvalidArgument("the renderer needs at least one I/O thread");
   hierarchies_.resize(dataset.epoch_count());
   double mass = 0;
-  for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) mass = std::max(mass, dataset.mass(e));
+  for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) mass = std::max(mass, dataset.summary(e).mass.value_or(0));
   mass_unit_ = mass > 0 && std::isfinite(mass) ? mass / kMassUnitDivisor : 1;
 }
 

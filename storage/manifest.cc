@@ -3,13 +3,14 @@
 #include <cinttypes>
 #include <cstdio>
 
+#include "storage/checksum.h"
 #include "storage/error.h"
 #include "storage/page_file_format.h"
 
 namespace octocosm {
 namespace {
 
-std::string StoreIdText(std::uint64_t id) {
+std::string HexDigits16(std::uint64_t id) {
   char text[17];
   std::snprintf(text, sizeof text, "%016" PRIx64, id);
   return text;
@@ -65,7 +66,18 @@ bool IsPlainFileName(const std::string& name) {
          name.find('\0') == std::string::npos;
 }
 
+// XXH3-64 of the manifest's canonical text without its checksum member.
+std::uint64_t ManifestChecksum(nlohmann::json manifest) {
+  manifest.erase(kManifestChecksumMember);
+  const std::string text = manifest.dump();
+  return Checksum64({reinterpret_cast<const std::uint8_t*>(text.data()), text.size()});
+}
+
 }  // namespace
+
+void SealManifest(nlohmann::json& manifest) {
+  manifest[kManifestChecksumMember] = HexDigits16(ManifestChecksum(manifest));
+}
 
 std::string EpochFileName(std::uint32_t epoch) {
   char name[32];
@@ -83,13 +95,15 @@ nlohmann::json Manifest::ToJson() const {
                           {"block_count", info.block_count},
                           {"file_size", info.file_size}});
   }
-  return {{"format", kStoreFormatName},
-          {"format_version", kStoreFormatVersion},
-          {"store_id", StoreIdText(store_id)},
-          {"page_size", page_size},
-          {"dataset", dataset},
-          {"attribute_schema", attribute_schema},
-          {"epochs", std::move(epoch_list)}};
+  nlohmann::json json = {{"format", kStoreFormatName},
+                         {"format_version", kStoreFormatVersion},
+                         {"store_id", HexDigits16(store_id)},
+                         {"page_size", page_size},
+                         {"dataset", dataset},
+                         {"attribute_schema", attribute_schema},
+                         {"epochs", std::move(epoch_list)}};
+  SealManifest(json);
+  return json;
 }
 
 Manifest Manifest::FromJson(const nlohmann::json& json, const std::string& path) {
@@ -102,6 +116,14 @@ Manifest Manifest::FromJson(const nlohmann::json& json, const std::string& path)
   if (version.get<std::int64_t>() != kStoreFormatVersion) {
     throw Error::NotSupported(path, "store format version " + version.dump() + "; this build reads version " +
                                         std::to_string(kStoreFormatVersion));
+  }
+  // After the version, whose layout may differ, and before any other member
+  // is believed.
+  const std::string stored_checksum = fields.String(kManifestChecksumMember);
+  const std::uint64_t computed_checksum = ManifestChecksum(json);
+  if (stored_checksum != HexDigits16(computed_checksum)) {
+    throw fields.Bad("checksum mismatch: stored \"" + stored_checksum + "\", computed \"" +
+                     HexDigits16(computed_checksum) + "\" (the manifest was changed after it was written)");
   }
   Manifest manifest;
   std::string id_text = fields.String("store_id");

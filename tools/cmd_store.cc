@@ -81,8 +81,9 @@ void AddVerifyCommand(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "verify",
       "Check every checksum and every structural invariant of a store (block columns, key structure, node\n"
-      "capacities, weight sums of every node against its children, leaf counts, ID index). Exit status 3 and\n"
-      "a list of faults when anything is wrong.");
+      "capacities, weight sums of every node against its children, the manifest's checksum and its points,\n"
+      "mass, nodes, leaves and depth of every epoch, ID index). Exit status 3 and a list of faults when\n"
+      "anything is wrong.");
   cmd->add_option("store", *directory, "store directory")->required();
   cmd->callback([directory] {
     const VerifyReport report = VerifyStore(*directory, [](const std::string& fault) {

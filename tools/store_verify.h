@@ -1,7 +1,9 @@
 // Verification of a dataset store: every block's checksum and columns, the
 // key structure (valid keys, every node's parent present), node capacities,
-// the weights of every inner node against its children's, the leaves' point
-// count against the manifest, and a sample of the ID index against the leaves.
+// the weights of every inner node against its children's, what the dataset
+// metadata records of each epoch's tree (points, mass, nodes, leaves, depth)
+// against the blocks, and a sample of the ID index against the leaves. The
+// manifest's own checksum is checked when the store opens.
 #pragma once
 
 #include <cstdint>

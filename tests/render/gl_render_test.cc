@@ -146,7 +146,7 @@ TEST_F(GlRenderTest, MassIsConservedAtEveryLevelOfDetail) {
   OffscreenRenderer full(d, HeadlessBackend::kOsMesa, Full());
   const double overview_full = Total(*full.Render(Overview(d), 0, {}, true).hdr);
   const double inside_full = Total(*full.Render(Inside(d), 0, {}, true).hdr);
-  EXPECT_NEAR(overview_full / d.mass(0), 1, 1e-3);
+  EXPECT_NEAR(overview_full / d.summary(0).mass.value(), 1, 1e-3);
   for (const auto& [threshold, budget] : std::vector<std::pair<double, std::uint64_t>>{
            {32, 0}, {8, 0}, {2, 0}, {1, 40000}, {0.5, 80000}}) {
     SceneOptions o;

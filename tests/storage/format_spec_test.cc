@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <xxhash.h>
 
+#include <cstdio>
 #include <fstream>
 
 #include "storage/block_index_format.h"
@@ -150,7 +151,14 @@ TEST(FormatSpec, ManifestAsDocumented) {
   }
   nlohmann::json manifest = nlohmann::json::parse(std::ifstream(dir.File("manifest.json")));
   EXPECT_EQ(manifest["format"], "octocosm-store");
-  EXPECT_EQ(manifest["format_version"], 1);
+  EXPECT_EQ(manifest["format_version"], 2);
+  // The checksum: XXH3-64 of the compact, key-sorted text of the rest.
+  nlohmann::json rest = manifest;
+  rest.erase("checksum");
+  const std::string text = rest.dump();
+  char expected[17];
+  std::snprintf(expected, sizeof expected, "%016llx", static_cast<unsigned long long>(XXH3_64bits(text.data(), text.size())));
+  EXPECT_EQ(manifest["checksum"], expected);
   EXPECT_EQ(manifest["store_id"], "0000000000abcdef");
   EXPECT_EQ(manifest["page_size"], 8192);
   EXPECT_EQ(manifest["dataset"], (nlohmann::json{{"name", "x"}}));

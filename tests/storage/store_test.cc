@@ -252,8 +252,37 @@ std::string OpenWithEditedManifest(ErrorKind kind, const std::function<void(nloh
   WriteStore(dir.path(), 4096, 2, 40, 5);
   nlohmann::json manifest = ReadManifest(dir);
   edit(manifest);
+  // Sealed again, so that the checks behind the checksum are reached.
+  if (manifest.is_object() && manifest.contains("checksum")) SealManifest(manifest);
   WriteManifest(dir, manifest);
   return ExpectError(kind, [&] { StoreReader::Open(dir.path()); });
+}
+
+// Any change to the manifest that its checksum was not recomputed for, even
+// in the caller's metadata, which storage/ does not interpret.
+TEST(StoreManifest, AChangedManifestFailsItsChecksum) {
+  ScratchDirectory dir;
+  WriteStore(dir.path(), 4096, 2, 40, 5);
+  const nlohmann::json original = ReadManifest(dir);
+  const std::vector<std::function<void(nlohmann::json&)>> edits = {
+      [](nlohmann::json& m) { m["dataset"]["cube_origin"] = 1.5; },
+      [](nlohmann::json& m) { m["epochs"][1]["time"] = 0.25; },
+      [](nlohmann::json& m) { m["attribute_schema"] = "other"; },
+      [](nlohmann::json& m) { m["unknown_member"] = 1; },
+      [](nlohmann::json& m) { m.erase("checksum"); },
+  };
+  for (std::size_t i = 0; i < edits.size(); ++i) {
+    nlohmann::json manifest = original;
+    edits[i](manifest);
+    WriteManifest(dir, manifest);
+    const std::string message = ExpectError(ErrorKind::kCorruption, [&] { StoreReader::Open(dir.path()); });
+    EXPECT_NE(message.find(i + 1 < edits.size() ? "checksum mismatch" : "missing member \"checksum\""), std::string::npos)
+        << "edit " << i << ": " << message;
+    EXPECT_NE(message.find(kManifestFileName), std::string::npos) << message;
+  }
+  // The layout of the text does not matter, only the JSON value.
+  std::ofstream(dir.File(kManifestFileName), std::ios::trunc) << original.dump();
+  EXPECT_NO_THROW(StoreReader::Open(dir.path()));
 }
 
 TEST(StoreManifest, DisagreementsWithPageFiles) {
@@ -282,8 +311,8 @@ TEST(StoreManifest, MalformedManifests) {
     EXPECT_NE(message.find(text), std::string::npos) << message;
     EXPECT_NE(message.find("manifest.json"), std::string::npos) << message;
   };
-  expect_mentions(OpenWithEditedManifest(ErrorKind::kNotSupported, [](auto& m) { m["format_version"] = 2; }),
-                  "store format version 2");
+  expect_mentions(OpenWithEditedManifest(ErrorKind::kNotSupported, [](auto& m) { m["format_version"] = 3; }),
+                  "store format version 3");
   expect_mentions(OpenWithEditedManifest(ErrorKind::kCorruption, [](auto& m) { m["format"] = "other"; }), "\"format\"");
   expect_mentions(OpenWithEditedManifest(ErrorKind::kCorruption, [](auto& m) { m.erase("epochs"); }),
                   "missing member \"epochs\"");

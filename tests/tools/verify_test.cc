@@ -6,6 +6,7 @@
 
 
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <random>
 
@@ -15,6 +16,7 @@
 #include "index/dataset.h"
 #include "storage/error.h"
 #include "tests/support/temp_dir.h"
+#include "storage/manifest.h"
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"
 #include "tools/ingest/ingest.h"
@@ -183,9 +185,60 @@ TEST_F(VerifyTest, AManifestThatMiscountsTheLeavesIsAFault) {
   const fs::path manifest = fs::path(store) / "manifest.json";
   nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
   json["dataset"]["epochs"][0]["points"] = 20001;
+  SealManifest(json);
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "leaves hold 20000 points, the manifest says 20001")) << AllFaults(report);
+}
+
+// Everything the dataset metadata records about the tree is checked against
+// the blocks, even where the manifest's checksum was recomputed after an edit.
+TEST_F(VerifyTest, AManifestThatMiscountsTheTreeIsAFault) {
+  const std::string store = IngestedStore();
+  const fs::path manifest = fs::path(store) / "manifest.json";
+  const nlohmann::json original = nlohmann::json::parse(std::ifstream(manifest));
+  EXPECT_TRUE(VerifyStore(store).faults.empty());
+  const nlohmann::json& epoch = original["dataset"]["epochs"][0];
+  const std::uint64_t nodes = epoch["nodes"], leaves = epoch["leaves"];
+  const int depth = epoch["depth"];
+  const double mass = epoch["mass"];
+  const std::vector<std::pair<std::function<void(nlohmann::json&)>, std::string>> edits = {
+      {[](nlohmann::json& e) { e["nodes"] = e["nodes"].get<std::uint64_t>() + 1; },
+       "the index holds " + std::to_string(nodes) + " nodes, the manifest says " + std::to_string(nodes + 1)},
+      {[](nlohmann::json& e) { e["leaves"] = e["leaves"].get<std::uint64_t>() - 1; },
+       "the tree has " + std::to_string(leaves) + " leaves, the manifest says " + std::to_string(leaves - 1)},
+      {[](nlohmann::json& e) { e["depth"] = e["depth"].get<int>() + 1; },
+       "the deepest leaf is at level " + std::to_string(depth) + ", the manifest says " + std::to_string(depth + 1)},
+      {[](nlohmann::json& e) { e["mass"] = e["mass"].get<double>() * (1 + 1e-6); }, "the leaves' weights sum to"},
+      {[](nlohmann::json& e) { e["mass"] = e["mass"].get<double>() * (1 + 1e-6); }, "the root's weights sum to"},
+  };
+  for (const auto& [edit, expected] : edits) {
+    nlohmann::json json = original;
+    edit(json["dataset"]["epochs"][0]);
+    SealManifest(json);
+    std::ofstream(manifest, std::ios::trunc) << json.dump();
+    const VerifyReport report = VerifyStore(store);
+    EXPECT_TRUE(AnyFaultMentions(report, expected)) << AllFaults(report);
+  }
+  EXPECT_GT(mass, 0);
+}
+
+// An edit the checksum was not recomputed for (a shifted cube origin, which
+// no block could contradict) stops the store from opening at all.
+TEST_F(VerifyTest, AnEditedCubeFailsTheManifestChecksum) {
+  const std::string store = IngestedStore();
+  const fs::path manifest = fs::path(store) / "manifest.json";
+  nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
+  json["dataset"]["epochs"][0]["cube"]["origin"][0] = json["dataset"]["epochs"][0]["cube"]["origin"][0].get<double>() + 1;
+  std::ofstream(manifest, std::ios::trunc) << json.dump(2);
+  try {
+    VerifyStore(store);
+    FAIL() << "an edited manifest verified";
+  } catch (const Error& error) {
+    EXPECT_EQ(error.kind(), ErrorKind::kCorruption);
+    EXPECT_NE(std::string(error.what()).find("checksum mismatch"), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find("manifest.json"), std::string::npos) << error.what();
+  }
 }
 
 TEST_F(VerifyTest, BlocksWithoutAColumnTheManifestDeclaresAreAFault) {
@@ -193,6 +246,7 @@ TEST_F(VerifyTest, BlocksWithoutAColumnTheManifestDeclaresAreAFault) {
   const fs::path manifest = fs::path(store) / "manifest.json";
   nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
   json["dataset"]["has_velocity"] = true;
+  SealManifest(json);
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,id,type, the manifest declares "
@@ -252,6 +306,7 @@ TEST_F(VerifyTest, DispersionsTheManifestDoesNotDeclareAreAFault) {
   nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
   ASSERT_TRUE(json["dataset"]["has_velocity_dispersion"].get<bool>());
   json["dataset"]["has_velocity_dispersion"] = false;
+  SealManifest(json);
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,velocity,id,type,"
@@ -268,6 +323,7 @@ TEST_F(VerifyTest, ClusterNodesWithoutTheDeclaredDispersionsAreAFault) {
   nlohmann::json json = nlohmann::json::parse(std::ifstream(manifest));
   ASSERT_FALSE(json["dataset"]["has_velocity_dispersion"].get<bool>());
   json["dataset"]["has_velocity_dispersion"] = true;
+  SealManifest(json);
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "block r: lacks velocity_dispersion, but with capacity 500 and 1 particle "
