@@ -23,7 +23,9 @@ void ParallelFor(std::size_t count, int threads, const std::function<void(std::s
 // For loops whose items are independent but whose threads run unevenly: on a
 // shared machine a thread that is descheduled, or stops to fault in fresh
 // pages, holds up a static split by the whole delay, a dynamic one by at most
-// one piece. After an error no further pieces are taken.
+// one piece. Once a piece's error has left `body`, no thread takes another
+// piece (pieces already running finish), and the error is rethrown on the
+// calling thread.
 void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
                         const std::function<void(std::size_t, std::size_t)>& body);
 

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
 #include <chrono>
 #include <cstddef>
 #include <mutex>
@@ -51,21 +52,31 @@ TEST(ParallelForDynamic, CoversEveryItemOnceInPiecesOfTheGrain) {
 }
 
 TEST(ParallelForDynamic, AThreadHeldUpLeavesTheRestToTheOthers) {
-  // The calling thread sleeps in its first piece; a static split would still
-  // give it half the items.
+  // The calling thread is held in its first piece until the other thread has
+  // done every other piece, which only a dynamic split lets it do: a static
+  // one would leave half the items waiting for the caller (the wait's minute
+  // is there to fail rather than hang, not to time anything).
   const std::thread::id caller = std::this_thread::get_id();
+  std::mutex mutex;
+  std::condition_variable others_done;
+  std::size_t by_others = 0;
   std::atomic<std::size_t> by_caller{0};
-  std::atomic<std::size_t> total{0};
-  std::atomic<bool> slept{false};
+  std::atomic<bool> held{false};
   ParallelForDynamic(1000, 2, 10, [&](std::size_t begin, std::size_t end) {
-    if (std::this_thread::get_id() == caller) {
-      if (!slept.exchange(true)) std::this_thread::sleep_for(std::chrono::milliseconds(300));
-      by_caller += end - begin;
+    if (std::this_thread::get_id() != caller) {
+      std::lock_guard lock(mutex);
+      by_others += end - begin;
+      others_done.notify_all();
+      return;
     }
-    total += end - begin;
+    if (!held.exchange(true)) {
+      std::unique_lock lock(mutex);
+      others_done.wait_for(lock, std::chrono::minutes(1), [&] { return by_others + (end - begin) == 1000; });
+    }
+    by_caller += end - begin;
   });
-  EXPECT_EQ(total, 1000u);
-  EXPECT_LT(by_caller, 500u);
+  EXPECT_EQ(by_others + by_caller, 1000u);
+  EXPECT_LE(by_caller, 10u) << "the caller did at most the piece it was held in";
 }
 
 TEST(ParallelForDynamic, AnErrorIsRethrownOnTheCallingThreadAndStopsTheRest) {
