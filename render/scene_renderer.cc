@@ -175,12 +175,36 @@ FrameStats SceneRenderer::Stream(const RenderView& view, double time, bool look_
   return Render(view, time, false, look_ahead);
 }
 
+// A frame in named steps: which epochs and nodes, which blocks to read, what
+// has arrived on the GPU, then the draws.
 FrameStats SceneRenderer::Render(const RenderView& view, double time, bool complete, bool look_ahead) {
   FrameStats stats;
   auto clock = std::chrono::steady_clock::now();
   std::vector<Copy> copies = PlanCopies(time, stats);
-  const double t = copies.size() == 2 ? copies[1].weight : 0;
   const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), options_.lod.pixel_threshold};
+  SelectFrontiers(error_view, copies, stats);
+  UseColumns(ColumnsFor(stats.interpolation, complete));
+  const std::vector<BlockId> needed = RequestBlocks(error_view, copies, complete, look_ahead);
+  stats.select_ms = Milliseconds(clock);
+
+  clock = std::chrono::steady_clock::now();
+  UploadArrived(needed, complete, stats);
+  const std::vector<const SelectionOverlay*> overlays = ReadyOverlays(copies, complete, stats);
+  stats.upload_ms = Milliseconds(clock);
+
+  clock = std::chrono::steady_clock::now();
+  DrawCopies(view, copies, overlays, stats);
+  stats.draw_ms = Milliseconds(clock);
+
+  EvictGpuBlocks();
+  ++frame_;
+  stats.gpu_blocks = gpu_.size();
+  stats.gpu_bytes = gpu_bytes_;
+  for (const auto& overlay : overlays_) stats.gpu_bytes += overlay->gpu_bytes();
+  return stats;
+}
+
+void SceneRenderer::SelectFrontiers(const ScreenErrorView& error_view, std::vector<Copy>& copies, FrameStats& stats) {
   for (Copy& copy : copies) {
     LodOptions lod = options_.lod;
     if (lod.point_budget > 0) {
@@ -197,42 +221,44 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     stats.budget_reached |= copy.frontier.budget_reached;
   }
   stats.epochs_drawn = static_cast<std::uint32_t>(copies.size());
+}
 
+BlockId SceneRenderer::IdOf(const Copy& copy, std::int32_t node) {
+  return BlockId{copy.epoch, hierarchy(copy.epoch).node(node).key.value()};
+}
+
+std::vector<BlockId> SceneRenderer::RequestBlocks(const ScreenErrorView& error_view, const std::vector<Copy>& copies,
+                                                  bool complete, bool look_ahead) {
   // Blocks wanted, most important first: coarse before fine, the two copies
   // interleaved; then, when playing, the next interval's.
-  UseColumns(ColumnsFor(stats.interpolation, complete));
-  std::vector<BlockId> wanted;
   std::vector<BlockId> needed;  // what this frame draws
-  const auto id_of = [&](const Copy& c, std::int32_t node) {
-    return BlockId{c.epoch, hierarchy(c.epoch).node(node).key.value()};
-  };
   std::size_t longest = 0;
   for (const Copy& c : copies) longest = std::max(longest, complete ? c.frontier.selected.size() : c.frontier.load_order.size());
   for (std::size_t i = 0; i < longest; ++i) {
     for (const Copy& c : copies) {
       const auto& order = complete ? c.frontier.selected : c.frontier.load_order;
-      if (i < order.size()) needed.push_back(id_of(c, order[i]));
+      if (i < order.size()) needed.push_back(IdOf(c, order[i]));
     }
   }
-  wanted = needed;
+  std::vector<BlockId> wanted = needed;
   std::vector<std::uint32_t> overlay_epochs;
   for (const Copy& c : copies) overlay_epochs.push_back(c.epoch);
   if (look_ahead && !complete) {
     const std::uint32_t ahead = copies.back().epoch + 1;
     if (ahead < dataset_.epoch_count()) {
       overlay_epochs.push_back(ahead);
-      LodOptions lod = options_.lod;
-      const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, lod);
+      const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, options_.lod);
       for (std::int32_t node : next.load_order) wanted.push_back({ahead, hierarchy(ahead).node(node).key.value()});
     }
   }
   prefetcher_->Submit(wanted);
   KeepOverlays(overlay_epochs);
   for (const std::uint32_t epoch : overlay_epochs) Overlay(epoch);  // started early: the look-up reads leaves
-  stats.select_ms = Milliseconds(clock);
+  return needed;
+}
 
-  // Upload what has arrived (or, for a complete frame, wait for it).
-  clock = std::chrono::steady_clock::now();
+// Uploads what has arrived (or, for a complete frame, waits for it).
+void SceneRenderer::UploadArrived(const std::vector<BlockId>& needed, bool complete, FrameStats& stats) {
   for (const BlockId& id : needed) {
     auto it = gpu_.find(Key(id));
     if (it != gpu_.end()) {
@@ -260,34 +286,38 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
     ++stats.blocks_uploaded;
     stats.bytes_uploaded += gpu_.at(Key(id)).block.gpu_bytes();
   }
-  // The selected particles at full detail, once looked up for every epoch drawn.
-  std::vector<const SelectionOverlay*> overlays;
-  if (selected_ids_) {
-    for (const Copy& c : copies) {
-      SelectionOverlay* overlay = Overlay(c.epoch);
-      bool ready = false;
-      if (complete) {
-        ready = overlay->Ready(true);
-      } else {
-        try {
-          ready = overlay->Ready(false);
-        } catch (const Error& e) {
-          last_error_ = e.what();
-        }
-      }
-      if (ready) overlays.push_back(overlay);
-    }
-    stats.highlight_exact = overlays.size() == copies.size();
-  }
-  stats.upload_ms = Milliseconds(clock);
+}
 
-  // Draw.
-  clock = std::chrono::steady_clock::now();
+// The selected particles at full detail, once looked up for every epoch drawn.
+std::vector<const SelectionOverlay*> SceneRenderer::ReadyOverlays(const std::vector<Copy>& copies, bool complete,
+                                                                  FrameStats& stats) {
+  std::vector<const SelectionOverlay*> overlays;
+  if (!selected_ids_) return overlays;
+  for (const Copy& c : copies) {
+    SelectionOverlay* overlay = Overlay(c.epoch);
+    bool ready = false;
+    if (complete) {
+      ready = overlay->Ready(true);
+    } else {
+      try {
+        ready = overlay->Ready(false);
+      } catch (const Error& e) {
+        last_error_ = e.what();
+      }
+    }
+    if (ready) overlays.push_back(overlay);
+  }
+  stats.highlight_exact = overlays.size() == copies.size();
+  return overlays;
+}
+
+void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& copies,
+                               const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats) {
   FrameSettings settings;
   settings.color = options_.color;
   settings.mass_unit = mass_unit_;
   settings.interpolation = stats.interpolation;
-  settings.t = t;
+  settings.t = copies.size() == 2 ? copies[1].weight : 0;
   if (stats.interpolation == Interpolation::kHermite) settings.hermite_scale = dataset_.link_to_next(copies[0].epoch)->velocity_scale;
   if (const Cube& box = dataset_.cube(copies[0].epoch); box.periodic) {
     settings.box_origin = box.origin;
@@ -298,14 +328,13 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   splat_.SetSelection(probe_ids ? selection_.get() : nullptr);
   for (std::size_t copy = 0; copy < copies.size(); ++copy) {
     const Copy& c = copies[copy];
-    const NodeHierarchy& h = hierarchy(c.epoch);
     const auto resident = [&](std::int32_t node) -> const Resident* {
-      const auto it = gpu_.find(Key(id_of(c, node)));
+      const auto it = gpu_.find(Key(IdOf(c, node)));
       return it == gpu_.end() ? nullptr : &it->second;
     };
     for (std::int32_t node : c.frontier.selected) stats.blocks_missing += resident(node) == nullptr;
     const DrawPlan plan = PlanDraws(
-        h, c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
+        hierarchy(c.epoch), c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
         [&](std::int32_t node) { return resident(node)->block.octant_offsets(); });
     splat_.SetCopy(c.direction, c.weight);
     for (const DrawRange& range : plan.ranges) splat_.Draw(resident(range.node)->block, range.first, range.count);
@@ -320,14 +349,6 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
       stats.draws += overlays[copy]->blocks().size();
     }
   }
-  stats.draw_ms = Milliseconds(clock);
-
-  EvictGpuBlocks();
-  ++frame_;
-  stats.gpu_blocks = gpu_.size();
-  stats.gpu_bytes = gpu_bytes_;
-  for (const auto& overlay : overlays_) stats.gpu_bytes += overlay->gpu_bytes();
-  return stats;
 }
 
 ReadCounters SceneRenderer::disk_reads() const {

@@ -139,7 +139,18 @@ class SceneRenderer {
   };
 
   FrameStats Render(const RenderView& view, double time, bool complete, bool look_ahead);
+  // The steps of Render, in order.
   std::vector<Copy> PlanCopies(double time, FrameStats& stats) const;
+  void SelectFrontiers(const ScreenErrorView& error_view, std::vector<Copy>& copies, FrameStats& stats);
+  // Submits the blocks wanted to the prefetcher and starts the selection
+  // overlays; returns the blocks this frame draws.
+  std::vector<BlockId> RequestBlocks(const ScreenErrorView& error_view, const std::vector<Copy>& copies, bool complete,
+                                     bool look_ahead);
+  void UploadArrived(const std::vector<BlockId>& needed, bool complete, FrameStats& stats);
+  std::vector<const SelectionOverlay*> ReadyOverlays(const std::vector<Copy>& copies, bool complete, FrameStats& stats);
+  void DrawCopies(const RenderView& view, const std::vector<Copy>& copies,
+                  const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats);
+  BlockId IdOf(const Copy& copy, std::int32_t node);
   ColumnSet ColumnsFor(Interpolation interpolation, bool complete) const;
   void UseColumns(ColumnSet columns);
   const Resident* Upload(const BlockId& id, const Bytes& bytes);
