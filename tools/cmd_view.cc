@@ -85,6 +85,152 @@ void LoadEveryTree(SceneRenderer& scene, const Dataset& dataset) {
   for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) scene.hierarchy(e);
 }
 
+ViewerScriptOptions ScriptOptionsFrom(const ViewFlags& f, const Cube& start_cube, const Dataset& dataset) {
+  ViewerScriptOptions options;
+  options.store = f.store;
+  if (!f.path.empty()) options.path = CameraPath::Load(f.path, start_cube, dataset);
+  options.screenshot = f.screenshot;
+  options.exit_after = f.exit_after_path;
+  options.settle_timeout = f.settle_timeout;
+  return options;
+}
+
+// Step 5 of a frame: exposure (smoothed over `seconds` when automatic, so
+// that blocks arriving or bright clumps entering the view do not make it
+// flicker), and tone mapping into the window.
+ToneMapParameters ToneMapIntoWindow(const ToneMapSettings& tone, double seconds, SplatRenderer& splat, ViewerWindow& window,
+                                    ExposureSmoother& smoother) {
+  const ImageStatistics image = splat.Measure();
+  if (tone.exposure == 0 && image.max_density > 0) smoother.Update(AutomaticExposure(tone, image), seconds);
+  const ToneMapParameters parameters = ResolveToneMap(tone, image, tone.exposure > 0 ? 0.0 : smoother.current());
+  window.BindAndClear();
+  splat.ToneMapToViewport(parameters, 0, 0);
+  return parameters;
+}
+
+// What the user and the script have set, carried from frame to frame.
+struct ViewerState {
+  ViewerState(const Camera& start_camera, double cube_size, std::uint32_t epochs, double start_time)
+      : controller(start_camera, cube_size), playback(epochs, start_time) {}
+  CameraController controller;
+  Playback playback;
+  OverlayRequests overlay_requests;  // from the previous frame's overlay
+  SelectionJob selection_job;
+  std::string selection_message;
+  std::string status;
+  ScreenshotRequest screenshot_request;  // the P key's, or the overlay's button's
+  ExposureSmoother smoother;
+};
+
+// Step 1 of a frame: what the user asked for, by key, mouse or the overlay's
+// buttons. The camera and the clock are the script's while it runs.
+void ApplyUserCommands(const ViewerCommands& commands, int height, bool script_running, double elapsed, double now,
+                       const Camera& start_camera, ViewerSettings& settings, SceneRenderer& scene, ViewerState& state) {
+  if (!script_running) {
+    CameraController& controller = state.controller;
+    if (commands.toggle_camera_mode) {
+      controller.set_mode(controller.mode() == CameraMode::kOrbit ? CameraMode::kFly : CameraMode::kOrbit);
+    }
+    if (commands.reset_view) controller.JumpTo(start_camera);
+    if (height > 0) controller.Update(commands.camera, height);
+    if (commands.toggle_playing) state.playback.Toggle();
+    if (commands.step_epochs != 0) state.playback.Step(commands.step_epochs);
+    state.playback.Advance(elapsed);
+  }
+  if (commands.toggle_overlay) settings.show_overlay = !settings.show_overlay;
+  if (commands.clear_selection || state.overlay_requests.clear_selection) {
+    state.selection_job.Cancel();
+    scene.SetSelection({});
+    state.selection_message = "cleared";
+  }
+  if (commands.cancel && state.selection_job.running()) {
+    state.selection_job.Cancel();
+    state.selection_message = "abandoned";
+  }
+  if (state.overlay_requests.id_file) {
+    state.selection_job.Start(IdFileSelectionWork(*state.overlay_requests.id_file));
+    state.selection_message = "reading " + *state.overlay_requests.id_file;
+  }
+  if (commands.screenshot || state.overlay_requests.screenshot) state.screenshot_request.Ask(now);
+}
+
+// Step 3: a box drawn starts a selection in the background; a finished one
+// goes to the GPU.
+void UpdateSelection(const ViewerCommands& commands, const Dataset& dataset, double time, const RenderView& view,
+                     bool quiet, SceneRenderer& scene, ViewerState& state) {
+  if (commands.box_drawn) {
+    if ((dataset.columns() & ColumnBit(ColumnId::kId)) == 0) {
+      state.selection_message = "this store holds no particle IDs: nothing can be selected";
+    } else {
+      state.selection_job.Start(BoxSelectionWork(dataset, NearestEpoch(time), RectangleFrustum(view, *commands.box_drawn)));
+      state.selection_message = "selecting the particles in the box...";
+    }
+  }
+  if (std::optional<SelectionResult> result = state.selection_job.TakeResult()) {
+    state.selection_message = result->message;
+    if (!quiet) std::fprintf(stderr, "view: selection: %s (%.2f s)\n", result->message.c_str(), result->seconds);
+    if (!result->failed) {
+      try {
+        scene.SetSelection(result->ids);
+      } catch (const Error& e) {
+        state.selection_message = e.what();
+      }
+    }
+  }
+}
+
+// Step 6, the P key's screenshot (the script's is taken by the caller): of
+// the picture without the overlay, once the view is complete or the request
+// has waited long enough.
+void TakeRequestedScreenshot(ViewerWindow& window, const FrameStats& stats, const std::string& frame_text, double now,
+                             bool quiet, ViewerState& state) {
+  const ScreenshotRequest::Take take = state.screenshot_request.FrameDrawn(stats.blocks_missing, now);
+  if (take == ScreenshotRequest::Take::kNotYet) {
+    if (state.screenshot_request.waiting()) {
+      state.status = "screenshot: waiting for " + std::to_string(stats.blocks_missing) + " blocks to load";
+    }
+    return;
+  }
+  // A screenshot that cannot be written is a message, not the end of the session.
+  try {
+    const std::string name = FreeScreenshotName();
+    WritePng(name, window.ReadBackBuffer());
+    const std::string completeness = take == ScreenshotRequest::Take::kComplete
+                                         ? "view complete"
+                                         : std::to_string(stats.blocks_missing) + " blocks still loading";
+    state.status = "screenshot " + name + " (" + completeness + ")";
+    if (!quiet) std::fprintf(stderr, "view: %s %s, %s\n", name.c_str(), frame_text.c_str(), completeness.c_str());
+  } catch (const Error& e) {
+    state.status = e.what();
+  }
+}
+
+// Step 7: what the overlay shows.
+OverlayReport MakeOverlayReport(const ViewerWindow& window, const FrameStats& stats, const SceneRenderer& scene,
+                                const Dataset& dataset, const Camera& camera, double exposure, bool script_running,
+                                const ViewerState& state) {
+  OverlayReport report;
+  report.fps = window.frames_per_second();
+  report.frame_ms = report.fps > 0 ? 1000 / report.fps : 0;
+  report.frame = stats;
+  report.cache = scene.cache_stats();
+  report.disk = scene.disk_reads();
+  report.exposure = exposure;
+  report.last_error = scene.last_error();
+  report.selected = scene.selection_size();
+  report.selection_message = state.selection_message;
+  report.selection_running = state.selection_job.running();
+  report.store_has_ids = (dataset.columns() & ColumnBit(ColumnId::kId)) != 0;
+  report.store_has_velocity = (dataset.columns() & ColumnBit(ColumnId::kVelocity)) != 0;
+  report.camera_mode = state.controller.mode();
+  report.camera_position = camera.position;
+  report.fly_speed = state.controller.fly_speed();
+  report.script_running = script_running;
+  report.status = state.status;
+  report.gl_description = window.description();
+  return report;
+}
+
 void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
   // The store and everything the flags decide, before a window opens: a bad
   // flag or store fails fast, with or without a display.
@@ -98,14 +244,8 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
   const Camera start_camera = CameraFromFlags(f.scene.camera, start_cube, static_cast<double>(f.width) / f.height,
                                               OverviewPosition(start_cube, f.scene.camera.fov));
   const std::vector<std::uint64_t> initial_selection = SelectedIds(f.scene, dataset, NearestEpoch(f.scene.time));
-  ViewerScriptOptions script_options;
-  script_options.store = f.store;
-  if (!f.path.empty()) script_options.path = CameraPath::Load(f.path, start_cube, dataset);
-  script_options.screenshot = f.screenshot;
-  script_options.exit_after = f.exit_after_path;
-  script_options.settle_timeout = f.settle_timeout;
+  const ViewerScriptOptions script_options = ScriptOptionsFrom(f, start_cube, dataset);
   ViewerScript script(script_options);
-  const bool store_has_ids = (dataset.columns() & ColumnBit(ColumnId::kId)) != 0;
 
   // The window with its OpenGL 4.5 core context and Dear ImGui.
   ViewerWindow window(f.width, f.height, "octocosm view " + f.store, !f.no_vsync);
@@ -124,19 +264,13 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
   }
 
   // The user's side of things.
-  CameraController controller(start_camera, start_cube.size);
-  Playback playback(dataset.epoch_count(), f.scene.time);
-  playback.set_speed(f.speed);
-  playback.set_loop(!f.no_loop);
-  playback.set_playing(f.play);
+  ViewerState state(start_camera, start_cube.size, dataset.epoch_count(), f.scene.time);
+  state.playback.set_speed(f.speed);
+  state.playback.set_loop(!f.no_loop);
+  state.playback.set_playing(f.play);
+  state.selection_message = initial_selection.empty() ? "" : "from --select / --select-box";
   ViewerInput input;
   Overlay overlay;
-  OverlayRequests overlay_requests;  // from the previous frame's overlay
-  SelectionJob selection_job;
-  std::string selection_message = initial_selection.empty() ? "" : "from --select / --select-box";
-  std::string status;
-  ScreenshotRequest screenshot_request;  // the P key's, or the overlay's button's
-  ExposureSmoother smoother;
   const double path_frame_seconds = script_options.path ? 1 / script_options.path->fps() : 0;
 
   const auto started = Clock::now();
@@ -149,34 +283,9 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
     window.BeginFrame();
     const int width = window.framebuffer_width(), height = window.framebuffer_height();
 
-    // 1. What the user asked for, by key, mouse or the overlay's buttons.
-    // The camera and the clock are the script's while it runs.
+    // 1. What the user asked for.
     const ViewerCommands commands = input.Read(height, window.keys_pressed());
-    if (!script.running()) {
-      if (commands.toggle_camera_mode) {
-        controller.set_mode(controller.mode() == CameraMode::kOrbit ? CameraMode::kFly : CameraMode::kOrbit);
-      }
-      if (commands.reset_view) controller.JumpTo(start_camera);
-      if (height > 0) controller.Update(commands.camera, height);
-      if (commands.toggle_playing) playback.Toggle();
-      if (commands.step_epochs != 0) playback.Step(commands.step_epochs);
-      playback.Advance(elapsed);
-    }
-    if (commands.toggle_overlay) settings.show_overlay = !settings.show_overlay;
-    if (commands.clear_selection || overlay_requests.clear_selection) {
-      selection_job.Cancel();
-      scene.SetSelection({});
-      selection_message = "cleared";
-    }
-    if (commands.cancel && selection_job.running()) {
-      selection_job.Cancel();
-      selection_message = "abandoned";
-    }
-    if (overlay_requests.id_file) {
-      selection_job.Start(IdFileSelectionWork(*overlay_requests.id_file));
-      selection_message = "reading " + *overlay_requests.id_file;
-    }
-    if (commands.screenshot || overlay_requests.screenshot) screenshot_request.Ask(SecondsSince(started));
+    ApplyUserCommands(commands, height, script.running(), elapsed, SecondsSince(started), start_camera, settings, scene, state);
     if (width == 0 || height == 0) {  // minimised: nothing to draw, and no hurry
       window.EndFrame();
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -185,33 +294,14 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
 
     // 2. This frame's camera and time: the script's path, else the user's.
     const std::optional<CameraPathFrame> path_frame = script.PathFrame();
-    Camera camera = path_frame ? path_frame->camera : controller.camera(1);
+    Camera camera = path_frame ? path_frame->camera : state.controller.camera(1);
     camera.aspect = static_cast<double>(width) / height;
-    const double time = path_frame ? std::clamp(path_frame->epoch, 0.0, playback.last()) : playback.time();
+    const double time = path_frame ? std::clamp(path_frame->epoch, 0.0, state.playback.last()) : state.playback.time();
     ApplyDepthRange(f.scene.camera, dataset.cube(NearestEpoch(time)), camera);
     const RenderView view(camera, width, height, f.scene.max_radius);
 
-    // 3. Selections: a box drawn starts one in the background; a finished
-    // one goes to the GPU.
-    if (commands.box_drawn) {
-      if (!store_has_ids) {
-        selection_message = "this store holds no particle IDs: nothing can be selected";
-      } else {
-        selection_job.Start(BoxSelectionWork(dataset, NearestEpoch(time), RectangleFrustum(view, *commands.box_drawn)));
-        selection_message = "selecting the particles in the box...";
-      }
-    }
-    if (std::optional<SelectionResult> result = selection_job.TakeResult()) {
-      selection_message = result->message;
-      if (!f.quiet) std::fprintf(stderr, "view: selection: %s (%.2f s)\n", result->message.c_str(), result->seconds);
-      if (!result->failed) {
-        try {
-          scene.SetSelection(result->ids);
-        } catch (const Error& e) {
-          selection_message = e.what();
-        }
-      }
-    }
+    // 3. Selections.
+    UpdateSelection(commands, dataset, time, view, f.quiet, scene, state);
 
     // 4. The scene, streamed. The script's last view is drawn complete once
     // a block has failed to stream: Complete() waits for every block and
@@ -220,81 +310,37 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
     scene.SetColorMode(settings.tone.color);
     const FrameStats stats = script.settling() && !scene.last_error().empty()
                                  ? scene.Complete(view, time)
-                                 : scene.Stream(view, time, playback.playing() && !script.running());
+                                 : scene.Stream(view, time, state.playback.playing() && !script.running());
 
-    // 5. Exposure (smoothed over frames when automatic, so that blocks
-    // arriving or bright clumps entering the view do not make it flicker),
-    // and tone mapping into the window.
-    const ImageStatistics image = splat.Measure();
-    if (settings.tone.exposure == 0 && image.max_density > 0) {
-      smoother.Update(AutomaticExposure(settings.tone, image), script.running() ? path_frame_seconds : elapsed);
-    }
+    // 5. Exposure and tone mapping.
     const ToneMapParameters tone =
-        ResolveToneMap(settings.tone, image, settings.tone.exposure > 0 ? 0.0 : smoother.current());
-    window.BindAndClear();
-    splat.ToneMapToViewport(tone, 0, 0);
+        ToneMapIntoWindow(settings.tone, script.running() ? path_frame_seconds : elapsed, splat, window, state.smoother);
 
     // 6. Screenshots, of the picture without the overlay.
+    const std::string frame_text = DescribeFrame(width, height, stats, time, tone.exposure);
     const bool script_was_running = script.running();
     const ViewerScript::AfterFrame after = script.FrameDrawn(stats.blocks_missing, SecondsSince(started));
     if (after.take_screenshot) {
       WritePng(f.screenshot, window.ReadBackBuffer());
       if (!f.quiet) {
-        std::fprintf(stderr, "view: %s %s, after %.2f s\n", f.screenshot.c_str(),
-                     DescribeFrame(width, height, stats, time, tone.exposure).c_str(), SecondsSince(started));
+        std::fprintf(stderr, "view: %s %s, after %.2f s\n", f.screenshot.c_str(), frame_text.c_str(), SecondsSince(started));
       }
     }
-    const ScreenshotRequest::Take take = screenshot_request.FrameDrawn(stats.blocks_missing, SecondsSince(started));
-    if (take != ScreenshotRequest::Take::kNotYet) {
-      // A screenshot that cannot be written is a message, not the end of the session.
-      try {
-        const std::string name = FreeScreenshotName();
-        WritePng(name, window.ReadBackBuffer());
-        const std::string completeness = take == ScreenshotRequest::Take::kComplete
-                                             ? "view complete"
-                                             : std::to_string(stats.blocks_missing) + " blocks still loading";
-        status = "screenshot " + name + " (" + completeness + ")";
-        if (!f.quiet) {
-          std::fprintf(stderr, "view: %s %s, %s\n", name.c_str(),
-                       DescribeFrame(width, height, stats, time, tone.exposure).c_str(), completeness.c_str());
-        }
-      } catch (const Error& e) {
-        status = e.what();
-      }
-    } else if (screenshot_request.waiting()) {
-      status = "screenshot: waiting for " + std::to_string(stats.blocks_missing) + " blocks to load";
-    }
+    TakeRequestedScreenshot(window, stats, frame_text, SecondsSince(started), f.quiet, state);
     if (script_was_running && !script.running()) {
       // The user takes over where the script left the camera and the clock.
-      controller.JumpTo(camera);
-      playback.set_time(time);
+      state.controller.JumpTo(camera);
+      state.playback.set_time(time);
     }
     quit = after.quit;
 
     // 7. The overlay, and the frame goes to the screen.
     if (commands.box_drawing) Overlay::DrawSelectionBox(*commands.box_drawing, height);
-    overlay_requests = {};
+    state.overlay_requests = {};
     if (settings.show_overlay) {
-      OverlayReport report;
-      report.fps = window.frames_per_second();
-      report.frame_ms = report.fps > 0 ? 1000 / report.fps : 0;
-      report.frame = stats;
-      report.cache = scene.cache_stats();
-      report.disk = scene.disk_reads();
-      report.exposure = tone.exposure;
-      report.last_error = scene.last_error();
-      report.selected = scene.selection_size();
-      report.selection_message = selection_message;
-      report.selection_running = selection_job.running();
-      report.store_has_ids = store_has_ids;
-      report.store_has_velocity = (dataset.columns() & ColumnBit(ColumnId::kVelocity)) != 0;
-      report.camera_mode = controller.mode();
-      report.camera_position = camera.position;
-      report.fly_speed = controller.fly_speed();
-      report.script_running = script.running();
-      report.status = status;
-      report.gl_description = window.description();
-      overlay_requests = overlay.Draw(report, settings, playback);
+      state.overlay_requests = overlay.Draw(
+          MakeOverlayReport(window, stats, scene, dataset, camera, tone.exposure, script.running(), state), settings,
+          state.playback);
     }
     window.EndFrame();
 
