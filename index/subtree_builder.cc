@@ -5,6 +5,7 @@
 #include <iterator>
 #include <limits>
 #include <map>
+#include <span>
 #include <string>
 #include <utility>
 
@@ -263,6 +264,91 @@ NodePoints SampleParent(NodeKey key, const std::array<NodePoints, 8>& children, 
   return node;
 }
 
+// A cluster's moments (AggregateParent): its mass, centre of mass,
+// mass-weighted mean vectors, spread, covariance and velocity variance, and
+// its heaviest member, from the members' population indices.
+struct ClusterMoments {
+  double mass = 0;
+  double centre[3] = {0, 0, 0};
+  std::array<std::array<double, 3>, kVectorColumnCount> vector_mean{};
+  double variance = 0;           // mass-weighted, per axis, times the mass
+  double velocity_variance = 0;  // mass-weighted, three-dimensional, times the mass
+  SymmetricMatrix covariance{};  // times the mass
+  std::uint32_t heaviest = 0;
+};
+
+ClusterMoments MeasureCluster(std::span<const std::uint32_t> members,
+                              std::span<const std::pair<std::uint8_t, std::uint32_t>> from,
+                              const std::array<NodePoints, 8>& children, std::span<const double> weight,
+                              const std::array<bool, kVectorColumnCount>& has_vector, bool has_dispersion) {
+  const std::size_t velocity = static_cast<std::size_t>(VectorColumn::kVelocity);
+  double mass = 0, centre[3] = {0, 0, 0};
+  std::array<std::array<double, 3>, kVectorColumnCount> vector_mean{};
+  std::uint32_t heaviest = members.front();
+  for (const std::uint32_t m : members) {
+    const auto [o, k] = from[m];
+    const NodePoints& child = children[o];
+    const double w = child.weight[k];
+    mass += w;
+    for (int a = 0; a < 3; ++a) centre[a] += w * child.position[3 * k + a];
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (!has_vector[v]) continue;
+      const float* value = &(*VectorColumns(child)[v])[3 * k];
+      for (int a = 0; a < 3; ++a) vector_mean[v][a] += w * value[a];
+    }
+    if (w > weight[heaviest]) heaviest = m;
+  }
+  // mass > 0: every weight is > 0 (ClusterPopulation's contract).
+  for (double& x : centre) x /= mass;
+  for (auto& mean : vector_mean) {
+    for (double& x : mean) x /= mass;
+  }
+  // The spread: each member's squared distance from the centre, a third per
+  // axis, and its own blob's variance, mass-weighted. The velocity
+  // dispersion likewise: each member's squared offset from the mean
+  // velocity and its own three-dimensional variance 3 sigma^2 (the
+  // parallel-axis rule, so a cluster of clusters has the dispersion of all
+  // the particles below it).
+  // The covariance likewise, entry by entry (index/cluster_shape.h): the
+  // offsets' outer products and each member's own blob, of its shape.
+  double variance = 0, velocity_variance = 0;
+  SymmetricMatrix covariance{};
+  for (const std::uint32_t m : members) {
+    const auto [o, k] = from[m];
+    const NodePoints& child = children[o];
+    const double w = child.weight[k];
+    double d[3], d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      d[a] = child.position[3 * k + a] - centre[a];
+      d2 += d[a] * d[a];
+    }
+    const double own = KernelVariance(child.smoothing[k]);
+    variance += w * (d2 / 3 + own);
+    const SymmetricMatrix shape = child.shape.empty() ? kRoundShape : DecodeShape(ShapeCodeAt(child.shape, k));
+    const double outer[6] = {d[0] * d[0], d[1] * d[1], d[2] * d[2], d[0] * d[1], d[0] * d[2], d[1] * d[2]};
+    for (int i = 0; i < 6; ++i) covariance[i] += w * (outer[i] + own * shape[i]);
+    if (has_dispersion) {
+      const float* value = &child.velocity[3 * k];
+      double dv2 = 0;
+      for (int a = 0; a < 3; ++a) {
+        const double dv = value[a] - vector_mean[velocity][a];
+        dv2 += dv * dv;
+      }
+      const double own_sigma = child.velocity_dispersion.empty() ? 0.0 : double{child.velocity_dispersion[k]};
+      velocity_variance += w * (dv2 + 3 * own_sigma * own_sigma);
+    }
+  }
+  ClusterMoments moments;
+  moments.mass = mass;
+  for (int a = 0; a < 3; ++a) moments.centre[a] = centre[a];
+  moments.vector_mean = vector_mean;
+  moments.variance = variance;
+  moments.velocity_variance = velocity_variance;
+  moments.covariance = covariance;
+  moments.heaviest = heaviest;
+  return moments;
+}
+
 // The node `key` as clusters of its children's points (index/aggregator.h):
 // each cluster's mass, centre of mass and spread in one point, and with
 // velocities its mass-weighted mean velocity and velocity dispersion.
@@ -320,62 +406,13 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
   for (std::size_t c = 0; c < n; ++c) {
     const std::uint32_t* begin = clusters.member.data() + clusters.begin[c];
     const std::uint32_t* end = clusters.member.data() + clusters.begin[c + 1];
-    double mass = 0, centre[3] = {0, 0, 0};
-    std::array<std::array<double, 3>, kVectorColumnCount> vector_mean{};
-    std::uint32_t heaviest = *begin;
-    for (const std::uint32_t* m = begin; m != end; ++m) {
-      const auto [o, k] = from[*m];
-      const NodePoints& child = children[o];
-      const double w = child.weight[k];
-      mass += w;
-      for (int a = 0; a < 3; ++a) centre[a] += w * child.position[3 * k + a];
-      for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
-        if (!has_vector[v]) continue;
-        const float* value = &(*VectorColumns(child)[v])[3 * k];
-        for (int a = 0; a < 3; ++a) vector_mean[v][a] += w * value[a];
-      }
-      if (w > weight[heaviest]) heaviest = *m;
-    }
-    // mass > 0: every weight is > 0 (ClusterPopulation's contract).
-    for (double& x : centre) x /= mass;
-    for (auto& mean : vector_mean) {
-      for (double& x : mean) x /= mass;
-    }
-    // The spread: each member's squared distance from the centre, a third per
-    // axis, and its own blob's variance, mass-weighted. The velocity
-    // dispersion likewise: each member's squared offset from the mean
-    // velocity and its own three-dimensional variance 3 sigma^2 (the
-    // parallel-axis rule, so a cluster of clusters has the dispersion of all
-    // the particles below it).
-    // The covariance likewise, entry by entry (index/cluster_shape.h): the
-    // offsets' outer products and each member's own blob, of its shape.
-    double variance = 0, velocity_variance = 0;
-    SymmetricMatrix covariance{};
-    for (const std::uint32_t* m = begin; m != end; ++m) {
-      const auto [o, k] = from[*m];
-      const NodePoints& child = children[o];
-      const double w = child.weight[k];
-      double d[3], d2 = 0;
-      for (int a = 0; a < 3; ++a) {
-        d[a] = child.position[3 * k + a] - centre[a];
-        d2 += d[a] * d[a];
-      }
-      const double own = KernelVariance(child.smoothing[k]);
-      variance += w * (d2 / 3 + own);
-      const SymmetricMatrix shape = child.shape.empty() ? kRoundShape : DecodeShape(ShapeCodeAt(child.shape, k));
-      const double outer[6] = {d[0] * d[0], d[1] * d[1], d[2] * d[2], d[0] * d[1], d[0] * d[2], d[1] * d[2]};
-      for (int i = 0; i < 6; ++i) covariance[i] += w * (outer[i] + own * shape[i]);
-      if (has_dispersion) {
-        const float* value = &child.velocity[3 * k];
-        double dv2 = 0;
-        for (int a = 0; a < 3; ++a) {
-          const double dv = value[a] - vector_mean[velocity][a];
-          dv2 += dv * dv;
-        }
-        const double own_sigma = child.velocity_dispersion.empty() ? 0.0 : double{child.velocity_dispersion[k]};
-        velocity_variance += w * (dv2 + 3 * own_sigma * own_sigma);
-      }
-    }
+    const ClusterMoments moments = MeasureCluster({begin, end}, from, children, weight, has_vector, has_dispersion);
+    const std::uint32_t heaviest = moments.heaviest;
+    const double mass = moments.mass;
+    double centre[3] = {moments.centre[0], moments.centre[1], moments.centre[2]};
+    const auto& vector_mean = moments.vector_mean;
+    const double variance = moments.variance, velocity_variance = moments.velocity_variance;
+    const SymmetricMatrix& covariance = moments.covariance;
     const auto [ho, hk] = from[heaviest];
     // The centre of mass lies in the cluster's cell, so in the child octant
     // of its members; should rounding put it on the far side of a face, the
