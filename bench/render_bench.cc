@@ -280,16 +280,11 @@ void Playback(const Flags& f) {
               frames, total, frames / total, worst, static_cast<double>(points) / frames, with_stand_ins);
 }
 
-void Run(const Flags& f) {
-  if (!f.playback.empty()) {
-    Playback(f);
-    return;
-  }
+// The snapshot measured: the user's, or one generated into the working directory once.
+std::string PrepareSnapshot(const Flags& f) {
   const fs::path dir = f.dir;
-  fs::create_directories(dir);
-  const HeadlessBackend backend = ParseHeadlessBackend(f.backend);
-  const std::string snapshot = f.snapshot.empty() ? (dir / "snap" / "snap").string() : f.snapshot;
-  if (f.snapshot.empty() && !fs::exists(dir / "snap" / "snap.0")) {
+  if (!f.snapshot.empty()) return f.snapshot;
+  if (!fs::exists(dir / "snap" / "snap.0")) {
     synth::ScaleOptions s;
     s.output_directory = (dir / "snap").string();
     s.particle_count = static_cast<std::uint64_t>(f.points);
@@ -298,9 +293,13 @@ void Run(const Flags& f) {
     synth::RunScaleGenerator(s);
     std::printf("generated %.3g points in %.1f s\n", f.points, Seconds(start));
   }
-  // One store per representation of the inner nodes; the leaves, and so
-  // the views and the full-detail frames, are the same in all.
-  std::vector<std::string> representations = Split(f.coarse);
+  return (dir / "snap" / "snap").string();
+}
+
+// One store per representation of the inner nodes, ingested once; the
+// leaves, and so the views and the full-detail frames, are the same in all.
+std::vector<Dataset> PrepareStores(const Flags& f, const std::string& snapshot,
+                                   const std::vector<std::string>& representations) {
   if (representations.empty()) throw Error::InvalidArgument("--coarse: name at least one of clusters, round, sample");
   std::vector<Dataset> datasets;
   for (const std::string& representation : representations) {
@@ -308,7 +307,7 @@ void Run(const Flags& f) {
       throw Error::InvalidArgument("--coarse: '" + representation + "' is none of clusters, round, sample");
     }
     // "round": the clusters' store, drawn without the clusters' shapes.
-    const fs::path store = dir / (representation == "sample" ? "store-sample" : "store-clusters");
+    const fs::path store = fs::path(f.dir) / (representation == "sample" ? "store-sample" : "store-clusters");
     if (!fs::exists(store / "manifest.json")) {
       IngestOptions o;
       o.inputs = {snapshot};
@@ -322,32 +321,37 @@ void Run(const Flags& f) {
     }
     datasets.push_back(Dataset::Open(store.string()));
   }
-  const Dataset& dataset = datasets.front();
-  const std::vector<NamedView> views = Views(dataset, Split(f.views));
-  std::vector<RenderView> render_views;
-  for (const NamedView& v : views) render_views.emplace_back(v.camera, f.width, f.height);
+  return datasets;
+}
 
-  // The reference pictures, rendered once and kept.
+// The reference pictures, rendered once and kept in the working directory;
+// `seconds` is the reference's time a view.
+std::vector<HdrImage> PrepareReferences(const Flags& f, const std::string& snapshot, const std::vector<NamedView>& views,
+                                        const std::vector<RenderView>& render_views, double& seconds) {
+  const fs::path dir = f.dir;
   std::vector<HdrImage> references(views.size());
   bool missing = false;
   for (std::size_t v = 0; v < views.size(); ++v) missing |= !fs::exists(dir / ("reference-" + views[v].name + ".pfm"));
-  double reference_seconds = 0;
   if (missing) {
     ReferenceRenderOptions options;
     options.threads = f.threads;
     ReferenceRenderStats stats;
     references = RenderReference(snapshot, render_views, options, &stats);
-    reference_seconds = stats.seconds / static_cast<double>(views.size());
-    std::ofstream(dir / "reference-seconds.txt") << reference_seconds << "\n";
+    seconds = stats.seconds / static_cast<double>(views.size());
+    std::ofstream(dir / "reference-seconds.txt") << seconds << "\n";
     for (std::size_t v = 0; v < views.size(); ++v) WritePfm((dir / ("reference-" + views[v].name + ".pfm")).string(), references[v]);
   } else {
     for (std::size_t v = 0; v < views.size(); ++v) references[v] = ReadPfm((dir / ("reference-" + views[v].name + ".pfm")).string());
-    std::ifstream(dir / "reference-seconds.txt") >> reference_seconds;
+    std::ifstream(dir / "reference-seconds.txt") >> seconds;
   }
-  std::printf("reference: %llu points, %.1f s a view on the CPU\n", static_cast<unsigned long long>(dataset.points(0)),
-              reference_seconds);
-  if (f.prepare_only) return;
+  return references;
+}
 
+// Every view at full detail (unless --no-full) and at each representation,
+// threshold and budget of the sweep, against its reference.
+std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, const std::vector<std::string>& representations,
+                       const std::vector<NamedView>& views, const std::vector<RenderView>& render_views,
+                       const std::vector<HdrImage>& references, HeadlessBackend backend) {
   std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s\n", "view", "mode", "threshold", "budget", "points",
               "nodes", "read", "cold s", "warm s", "PSNR", "SSIM");
   std::vector<Row> rows;
@@ -355,12 +359,12 @@ void Run(const Flags& f) {
   for (std::size_t v = 0; v < views.size(); ++v) {
     const ToneMapParameters tone = ResolveToneMap({}, MeasureImage(references[v], ColorMode::kDensity));
     const DisplayImage reference = ToneMap(references[v], tone);
-    WritePng((dir / ("reference-" + views[v].name + ".png")).string(), ToBytes(reference));
+    WritePng((fs::path(f.dir) / ("reference-" + views[v].name + ".png")).string(), ToBytes(reference));
     if (f.full) {
       SceneOptions options;
       options.lod.pixel_threshold = 1e-9;
       options.gpu_cache_bytes = std::size_t{64} << 30;
-      Row row = Measure(dataset, options, render_views[v], backend, tone, reference);
+      Row row = Measure(datasets.front(), options, render_views[v], backend, tone, reference);
       row.view = views[v].name;
       row.mode = "full";
       rows.push_back(row);
@@ -384,6 +388,13 @@ void Run(const Flags& f) {
       }
     }
   }
+  return rows;
+}
+
+// Per view and representation, the fastest level of detail that meets the
+// quality targets, and its ratios to the full rendering and the reference.
+void PrintTargets(const std::vector<Row>& rows, const std::vector<NamedView>& views,
+                  const std::vector<std::string>& representations, double reference_seconds) {
   std::printf("\nreference: %.1f s a view (CPU, all points, double precision)\n", reference_seconds);
   std::printf("targets: PSNR >= 40 dB and SSIM >= 0.98 at >= 20x less time than the full rendering\n");
   for (const NamedView& v : views) {
@@ -411,26 +422,50 @@ void Run(const Flags& f) {
       std::printf(", %.0fx less than the reference\n", reference_seconds / best->warm);
     }
   }
-  Plot(dir, rows, views);
+}
 
-  if (f.selection) {
-    // The selection's cost: the same frame with 10^6 IDs highlighted.
-    std::vector<std::uint64_t> ids;
-    for (std::uint64_t id = 1; ids.size() < 1000000; id += 2) ids.push_back(id);
-    SceneOptions options;
-    options.lod.pixel_threshold = 1;
-    OffscreenRenderer renderer(dataset, backend, options);
-    const RenderView& view = render_views[0];
-    renderer.Render(view, 0, {}, false);
-    const double plain = renderer.Render(view, 0, {}, false).seconds;
-    renderer.scene().SetSelection(ids);
-    const Picture first = renderer.Render(view, 0, {}, false);  // looks the IDs up through the ID index
-    const double selected = renderer.Render(view, 0, {}, false).seconds;
-    std::printf("selection: %s, threshold 1: %.3f s without, %.3f s with 10^6 IDs (%+.1f%%; %llu of them in the store, "
-                "drawn at full detail; the first frame, which looks them up, %.3f s)\n",
-                views[0].name.c_str(), plain, selected, 100 * (selected / plain - 1),
-                static_cast<unsigned long long>(first.stats.points_highlighted), first.seconds);
+// The selection's cost: the same frame with 10^6 IDs highlighted.
+void MeasureSelection(const Dataset& dataset, const NamedView& named_view, const RenderView& view,
+                      HeadlessBackend backend) {
+  std::vector<std::uint64_t> ids;
+  for (std::uint64_t id = 1; ids.size() < 1000000; id += 2) ids.push_back(id);
+  SceneOptions options;
+  options.lod.pixel_threshold = 1;
+  OffscreenRenderer renderer(dataset, backend, options);
+  renderer.Render(view, 0, {}, false);
+  const double plain = renderer.Render(view, 0, {}, false).seconds;
+  renderer.scene().SetSelection(ids);
+  const Picture first = renderer.Render(view, 0, {}, false);  // looks the IDs up through the ID index
+  const double selected = renderer.Render(view, 0, {}, false).seconds;
+  std::printf("selection: %s, threshold 1: %.3f s without, %.3f s with 10^6 IDs (%+.1f%%; %llu of them in the store, "
+              "drawn at full detail; the first frame, which looks them up, %.3f s)\n",
+              named_view.name.c_str(), plain, selected, 100 * (selected / plain - 1),
+              static_cast<unsigned long long>(first.stats.points_highlighted), first.seconds);
+}
+
+void Run(const Flags& f) {
+  if (!f.playback.empty()) {
+    Playback(f);
+    return;
   }
+  fs::create_directories(f.dir);
+  const HeadlessBackend backend = ParseHeadlessBackend(f.backend);
+  const std::string snapshot = PrepareSnapshot(f);
+  const std::vector<std::string> representations = Split(f.coarse);
+  const std::vector<Dataset> datasets = PrepareStores(f, snapshot, representations);
+  const std::vector<NamedView> views = Views(datasets.front(), Split(f.views));
+  std::vector<RenderView> render_views;
+  for (const NamedView& v : views) render_views.emplace_back(v.camera, f.width, f.height);
+  double reference_seconds = 0;
+  const std::vector<HdrImage> references = PrepareReferences(f, snapshot, views, render_views, reference_seconds);
+  std::printf("reference: %llu points, %.1f s a view on the CPU\n",
+              static_cast<unsigned long long>(datasets.front().points(0)), reference_seconds);
+  if (f.prepare_only) return;
+
+  const std::vector<Row> rows = Sweep(f, datasets, representations, views, render_views, references, backend);
+  PrintTargets(rows, views, representations, reference_seconds);
+  Plot(fs::path(f.dir), rows, views);
+  if (f.selection) MeasureSelection(datasets.front(), views[0], render_views[0], backend);
 }
 
 }  // namespace
