@@ -141,6 +141,11 @@ struct Row {
   double threshold = 0;
   std::uint64_t budget = 0, points = 0, nodes = 0, bytes = 0;
   double cold = 0, warm = 0, psnr = 0, ssim = 0;
+  // The warm frame's stages, milliseconds: on the CPU selecting nodes,
+  // uploading blocks and issuing the draws; on the GPU drawing, measuring
+  // and tone mapping (0 where the driver gave no timestamps); reading back.
+  double select_ms = 0, upload_ms = 0, submit_ms = 0, gpu_draw_ms = 0, gpu_measure_ms = 0, gpu_tone_map_ms = 0,
+         readback_ms = 0;
 };
 
 // Renders `view` twice with fresh caches: cold (nothing in memory, the OS
@@ -160,6 +165,15 @@ Row Measure(const Dataset& dataset, const SceneOptions& options, const RenderVie
   row.bytes = bytes;
   row.cold = cold.seconds;
   row.warm = warm.seconds;
+  row.select_ms = warm.stats.select_ms;
+  row.upload_ms = warm.stats.upload_ms;
+  row.submit_ms = warm.stats.draw_ms;
+  if (warm.gpu_times) {
+    row.gpu_draw_ms = warm.gpu_times->draw_ms;
+    row.gpu_measure_ms = warm.gpu_times->measure_ms;
+    row.gpu_tone_map_ms = warm.gpu_times->tone_map_ms;
+  }
+  row.readback_ms = warm.readback_ms;
   const DisplayImage picture = ToneMap(*warm.hdr, tone);
   row.psnr = Psnr(picture, reference);
   row.ssim = Ssim(picture, reference);
@@ -167,10 +181,11 @@ Row Measure(const Dataset& dataset, const SceneOptions& options, const RenderVie
 }
 
 void PrintRow(const Row& r) {
-  std::printf("%-9s %-6s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f\n", r.view.c_str(), r.mode.c_str(),
-              r.threshold, static_cast<unsigned long long>(r.budget), static_cast<unsigned long long>(r.points),
-              static_cast<unsigned long long>(r.nodes), HumanBytes(static_cast<double>(r.bytes)).c_str(), r.cold, r.warm,
-              r.psnr, r.ssim);
+  std::printf("%-9s %-6s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f %7.1f %7.1f %7.1f %8.1f %7.1f %7.1f %7.1f\n",
+              r.view.c_str(), r.mode.c_str(), r.threshold, static_cast<unsigned long long>(r.budget),
+              static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
+              HumanBytes(static_cast<double>(r.bytes)).c_str(), r.cold, r.warm, r.psnr, r.ssim, r.select_ms, r.upload_ms,
+              r.submit_ms, r.gpu_draw_ms, r.gpu_measure_ms, r.gpu_tone_map_ms, r.readback_ms);
   std::fflush(stdout);
 }
 
@@ -178,10 +193,13 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
   const fs::path data = dir / "render_bench.csv", script = dir / "render_bench.gp", png = dir / "render_bench.png";
   {
     std::ofstream csv(data);
-    csv << "view,mode,threshold,budget,points,nodes,bytes_read,cold_s,warm_s,psnr_db,ssim\n";
+    csv << "view,mode,threshold,budget,points,nodes,bytes_read,cold_s,warm_s,psnr_db,ssim,select_ms,upload_ms,submit_ms,"
+           "gpu_draw_ms,gpu_measure_ms,gpu_tone_map_ms,readback_ms\n";
     for (const Row& r : rows) {
       csv << r.view << ',' << r.mode << ',' << r.threshold << ',' << r.budget << ',' << r.points << ',' << r.nodes << ','
-          << r.bytes << ',' << r.cold << ',' << r.warm << ',' << r.psnr << ',' << r.ssim << '\n';
+          << r.bytes << ',' << r.cold << ',' << r.warm << ',' << r.psnr << ',' << r.ssim << ',' << r.select_ms << ','
+          << r.upload_ms << ',' << r.submit_ms << ',' << r.gpu_draw_ms << ',' << r.gpu_measure_ms << ','
+          << r.gpu_tone_map_ms << ',' << r.readback_ms << '\n';
     }
   }
   // Per view a colour, per representation a point shape; the x axis of the
@@ -352,8 +370,9 @@ std::vector<HdrImage> PrepareReferences(const Flags& f, const std::string& snaps
 std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, const std::vector<std::string>& representations,
                        const std::vector<NamedView>& views, const std::vector<RenderView>& render_views,
                        const std::vector<HdrImage>& references, HeadlessBackend backend) {
-  std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s\n", "view", "mode", "threshold", "budget", "points",
-              "nodes", "read", "cold s", "warm s", "PSNR", "SSIM");
+  std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s %7s %7s %7s %8s %7s %7s %7s\n", "view", "mode",
+              "threshold", "budget", "points", "nodes", "read", "cold s", "warm s", "PSNR", "SSIM", "sel ms", "upl ms",
+              "call ms", "gpu draw", "measure", "tone", "read ms");
   std::vector<Row> rows;
   const std::vector<std::string> thresholds = Split(f.thresholds), budgets = Split(f.budgets);
   for (std::size_t v = 0; v < views.size(); ++v) {

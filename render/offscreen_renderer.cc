@@ -28,9 +28,13 @@ Picture OffscreenRenderer::Render(const RenderView& view, double time, const Ton
       smoother && tone.exposure == 0 ? smoother->Update(AutomaticExposure(tone, statistics), elapsed) : 0.0;
   picture.tone = ResolveToneMap(tone, statistics, exposure);
   splat_->ToneMapToImage(picture.tone);
+  const auto readback = std::chrono::steady_clock::now();
   picture.rgb = splat_->ReadDisplay();
   if (read_hdr) picture.hdr = splat_->ReadHdr();
-  picture.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const auto end = std::chrono::steady_clock::now();
+  picture.readback_ms = std::chrono::duration<double, std::milli>(end - readback).count();
+  picture.seconds = std::chrono::duration<double>(end - start).count();
+  picture.gpu_times = splat_->LatestGpuTimes(true);  // finished: the picture was read back
   return picture;
 }
 

@@ -22,6 +22,10 @@ struct Picture {
   FrameStats stats;
   ToneMapParameters tone;        // what the tone mapping used (the exposure, resolved)
   double seconds = 0;            // the whole frame, GPU work included
+  // Where the time went besides stats' CPU times (select, upload, draw
+  // calls): the GPU's stages, and reading the picture back.
+  std::optional<GpuStageTimes> gpu_times;
+  double readback_ms = 0;
 };
 
 class OffscreenRenderer {

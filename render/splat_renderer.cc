@@ -72,7 +72,13 @@ SplatRenderer::SplatRenderer() {
   glCreateVertexArrays(1, &vao);
   empty_vao_ = GlVertexArray(vao);
   frame_uniforms_ = MakeGlBuffer(sizeof(FrameUniforms), nullptr, GL_DYNAMIC_STORAGE_BIT);
-  statistics_buffer_ = MakeGlBuffer(kStatisticsWords * 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
+  constexpr GLbitfield kMapped = GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
+  for (PendingStatistics& pending : measures_) {
+    pending.buffer = MakeGlBuffer(kStatisticsWords * 4, nullptr, kMapped | GL_DYNAMIC_STORAGE_BIT);
+    pending.words = static_cast<const std::uint32_t*>(
+        glMapNamedBufferRange(pending.buffer.get(), 0, static_cast<GLsizeiptr>(kStatisticsWords * 4), kMapped));
+    if (pending.words == nullptr) throw Error::NotSupported("OpenGL", "cannot map the image statistics' buffer");
+  }
   const SelectionSet empty({});
   no_selection_ = MakeGlBuffer(empty.words().size() * 4, empty.words().data(), 0);
 
@@ -81,6 +87,12 @@ SplatRenderer::SplatRenderer() {
   // A sprite of side SpriteSize(R) must fit the largest point size.
   max_blob_radius_ = std::max(kMinBlobRadius, std::floor((double{range[1]} - kSpriteGuard) / 2));
   CheckGlError("setting up the splat renderer");
+}
+
+SplatRenderer::~SplatRenderer() {
+  for (PendingStatistics& pending : measures_) {
+    if (pending.fence != nullptr) glDeleteSync(pending.fence);
+  }
 }
 
 void SplatRenderer::Allocate(RenderTarget& target, GLenum format, int width, int height, const char* what) {
@@ -158,6 +170,7 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   glViewport(0, 0, accumulation_.width, accumulation_.height);
   const float zero[4] = {0, 0, 0, 0};
   glClearNamedFramebufferfv(accumulation_.framebuffer.get(), GL_COLOR, 0, zero);
+  timer_.Record(GpuStageTimer::Mark::kFrameStart);
 }
 
 void SplatRenderer::UploadFrameUniforms() {
@@ -225,14 +238,18 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
   glDrawArrays(GL_POINTS, static_cast<GLint>(first), static_cast<GLsizei>(count));
 }
 
-ImageStatistics SplatRenderer::Measure() {
+void SplatRenderer::StartMeasure() {
   draw_state_set_ = false;
+  timer_.Record(GpuStageTimer::Mark::kMeasureStart);
+  PendingStatistics& pending = measures_[measure_next_];
+  measure_next_ = (measure_next_ + 1) % measures_.size();
+  Collect(pending, true);  // the oldest in flight: its buffer is about to be written again
   std::vector<std::uint32_t> words(kStatisticsWords, 0);
   words[1] = 0xFFFFFFFFu;  // the ordered minimum starts at the largest value
-  glNamedBufferSubData(statistics_buffer_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
+  glNamedBufferSubData(pending.buffer.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
   glUseProgram(statistics_.get());
   glBindTextureUnit(0, accumulation_.texture.get());
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, statistics_buffer_.get());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, pending.buffer.get());
   glProgramUniform2i(statistics_.get(), Location(statistics_, "u_offset"), margin_, margin_);
   glProgramUniform2i(statistics_.get(), Location(statistics_, "u_size"), width_, height_);
   glProgramUniform1i(statistics_.get(), Location(statistics_, "u_color_mode"), static_cast<GLint>(settings_.color));
@@ -243,17 +260,52 @@ ImageStatistics SplatRenderer::Measure() {
     glDispatchCompute(static_cast<GLuint>((width_ + 15) / 16), static_cast<GLuint>((height_ + 15) / 16), 1);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
   }
-  glGetNamedBufferSubData(statistics_buffer_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
+  // The writes reach the mapping before the fence signals.
+  glMemoryBarrier(GL_CLIENT_MAPPED_BUFFER_BARRIER_BIT);
+  pending.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
+  pending.color = settings_.color;
+  pending.serial = ++measures_started_;
   CheckGlError("measuring the image");
+}
+
+bool SplatRenderer::Collect(PendingStatistics& pending, bool wait) {
+  if (pending.fence == nullptr) return false;
+  for (;;) {
+    const GLenum status = glClientWaitSync(pending.fence, GL_SYNC_FLUSH_COMMANDS_BIT, wait ? 1'000'000'000 : 0);
+    if (status == GL_ALREADY_SIGNALED || status == GL_CONDITION_SATISFIED) break;
+    if (status == GL_WAIT_FAILED) throw Error::NotSupported("OpenGL", "waiting for the image statistics failed");
+    if (!wait) return false;
+  }
+  glDeleteSync(pending.fence);
+  pending.fence = nullptr;
+  if (pending.serial <= measures_collected_) return true;
+  const std::uint32_t* words = pending.words;
   ImageStatistics s;
   s.max_density = std::bit_cast<float>(words[0]);
-  if (s.max_density > 0 && settings_.color != ColorMode::kDensity) {
+  if (s.max_density > 0 && pending.color != ColorMode::kDensity) {
     s.attribute_min = Unordered(words[1]);
     s.attribute_max = Unordered(words[2]);
   }
-  std::copy_n(words.begin() + 4, kHistogramBins, s.density.begin());
-  std::copy_n(words.begin() + 4 + kHistogramBins, kHistogramBins, s.attribute.begin());
-  return s;
+  std::copy_n(words + 4, kHistogramBins, s.density.begin());
+  std::copy_n(words + 4 + kHistogramBins, kHistogramBins, s.attribute.begin());
+  latest_statistics_ = s;
+  measures_collected_ = pending.serial;
+  return true;
+}
+
+std::optional<ImageStatistics> SplatRenderer::LatestStatistics(bool wait) {
+  if (wait) {
+    Collect(measures_[(measure_next_ + measures_.size() - 1) % measures_.size()], true);  // the newest started
+    return latest_statistics_;
+  }
+  // Oldest first, so that the newest finished one is kept.
+  for (std::size_t i = 0; i < measures_.size(); ++i) Collect(measures_[(measure_next_ + i) % measures_.size()], false);
+  return latest_statistics_;
+}
+
+ImageStatistics SplatRenderer::Measure() {
+  StartMeasure();
+  return *LatestStatistics(true);
 }
 
 void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
@@ -274,10 +326,12 @@ void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
   SetMap(tone_map_, "u_attribute_map", p.attribute_map);
   glDisable(GL_BLEND);
   glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_FETCH_BARRIER_BIT);
+  timer_.Record(GpuStageTimer::Mark::kToneMapStart);
   glUseProgram(program);
   glBindVertexArray(empty_vao_.get());
   glBindTextureUnit(0, accumulation_.texture.get());
   glDrawArrays(GL_TRIANGLES, 0, 3);
+  timer_.Record(GpuStageTimer::Mark::kToneMapEnd);
   CheckGlError("tone mapping");
 }
 

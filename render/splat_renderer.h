@@ -16,9 +16,11 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 
 #include "render/gl_objects.h"
 #include "render/gpu_block.h"
+#include "render/gpu_stage_timer.h"
 #include "render/image.h"
 #include "render/render_view.h"
 #include "render/selection_set.h"
@@ -49,6 +51,9 @@ struct FrameSettings {
 class SplatRenderer {
  public:
   SplatRenderer();
+  SplatRenderer(const SplatRenderer&) = delete;
+  SplatRenderer& operator=(const SplatRenderer&) = delete;
+  ~SplatRenderer();
 
   // The largest blob radius this GL implementation can draw (its point size limit).
   double max_blob_radius() const { return max_blob_radius_; }
@@ -71,8 +76,21 @@ class SplatRenderer {
   // Draws points [first, first + count) of `block`.
   void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count);
 
-  // ImageStatistics of the frame so far (two compute passes, 8 KiB read back).
+  // Starts measuring the frame so far (ImageStatistics: two compute passes
+  // into an 8 KiB buffer that the CPU reads where the GPU wrote it) without
+  // waiting for the GPU. A render loop takes LatestStatistics(), usually a
+  // frame late, and never stalls on a read-back.
+  void StartMeasure();
+  // The statistics of the newest measure the GPU has finished, without
+  // waiting (`wait`: of the newest started, waiting for it); empty before
+  // the first.
+  std::optional<ImageStatistics> LatestStatistics(bool wait = false);
+  // StartMeasure, waiting for the result: the statistics of the frame so far.
   ImageStatistics Measure();
+  // GPU time of the stages of the newest frame the GPU has finished (frame
+  // start to measure, measure, tone map); `wait`: of the last frame drawn,
+  // waiting for it.
+  std::optional<GpuStageTimes> LatestGpuTimes(bool wait) { return timer_.Latest(wait); }
   // Tone maps the frame into the internal display image (ReadDisplay), or
   // into the viewport at (x, y) of the framebuffer bound for drawing.
   void ToneMapToImage(const ToneMapParameters& parameters);
@@ -92,7 +110,24 @@ class SplatRenderer {
   GlProgram statistics_;
   GlVertexArray empty_vao_;
   GlBuffer frame_uniforms_;
-  GlBuffer statistics_buffer_;
+  // Measures in flight: the GPU writes one buffer while the CPU may still
+  // read an older one.
+  struct PendingStatistics {
+    GlBuffer buffer;
+    const std::uint32_t* words = nullptr;  // mapped for good (persistent, coherent)
+    GLsync fence = nullptr;                // set when a measure was started; null once collected
+    ColorMode color = ColorMode::kDensity;
+    std::uint64_t serial = 0;
+  };
+  // Reads `pending` once the GPU has written it (waiting when `wait`) into
+  // latest_statistics_ unless a newer one is there; false when not yet written.
+  bool Collect(PendingStatistics& pending, bool wait);
+  std::array<PendingStatistics, 3> measures_;
+  std::size_t measure_next_ = 0;
+  std::uint64_t measures_started_ = 0;    // serial of the newest measure started
+  std::uint64_t measures_collected_ = 0;  // serial of latest_statistics_
+  std::optional<ImageStatistics> latest_statistics_;
+  GpuStageTimer timer_;
   GlBuffer no_selection_;
   // A texture and the framebuffer that draws into it.
   struct RenderTarget {

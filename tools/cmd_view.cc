@@ -100,7 +100,12 @@ ViewerScriptOptions ScriptOptionsFrom(const ViewFlags& f, const Cube& start_cube
 // flicker), and tone mapping into the window.
 ToneMapParameters ToneMapIntoWindow(const ToneMapSettings& tone, double seconds, SplatRenderer& splat, ViewerWindow& window,
                                     ExposureSmoother& smoother) {
-  const ImageStatistics image = splat.Measure();
+  // The statistics come a frame or two late, so that the CPU never waits
+  // for the GPU to finish drawing; only the first frame waits for its own.
+  splat.StartMeasure();
+  std::optional<ImageStatistics> measured = splat.LatestStatistics();
+  if (!measured) measured = splat.LatestStatistics(true);
+  const ImageStatistics& image = *measured;
   if (tone.exposure == 0 && image.max_density > 0) smoother.Update(AutomaticExposure(tone, image), seconds);
   const ToneMapParameters parameters = ResolveToneMap(tone, image, tone.exposure > 0 ? 0.0 : smoother.current());
   window.BindAndClear();
@@ -206,13 +211,14 @@ void TakeRequestedScreenshot(ViewerWindow& window, const FrameStats& stats, cons
 }
 
 // Step 7: what the overlay shows.
-OverlayReport MakeOverlayReport(const ViewerWindow& window, const FrameStats& stats, const SceneRenderer& scene,
+OverlayReport MakeOverlayReport(const ViewerWindow& window, const FrameStats& stats, SplatRenderer& splat, const SceneRenderer& scene,
                                 const Dataset& dataset, const Camera& camera, double exposure, bool script_running,
                                 const ViewerState& state) {
   OverlayReport report;
   report.fps = window.frames_per_second();
   report.frame_ms = report.fps > 0 ? 1000 / report.fps : 0;
   report.frame = stats;
+  report.gpu_times = splat.LatestGpuTimes(false);
   report.cache = scene.cache_stats();
   report.disk = scene.disk_reads();
   report.exposure = exposure;
@@ -339,7 +345,7 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
     state.overlay_requests = {};
     if (settings.show_overlay) {
       state.overlay_requests = overlay.Draw(
-          MakeOverlayReport(window, stats, scene, dataset, camera, tone.exposure, script.running(), state), settings,
+          MakeOverlayReport(window, stats, splat, scene, dataset, camera, tone.exposure, script.running(), state), settings,
           state.playback);
     }
     window.EndFrame();

@@ -12,6 +12,7 @@
 
 #include "index/column_reader.h"
 #include "index/lod_frontier.h"
+#include "render/gpu_stage_timer.h"
 #include "render/scene_renderer.h"
 #include "render/tone_map.h"
 #include "storage/block_cache.h"
@@ -32,6 +33,7 @@ struct ViewerSettings {
 struct OverlayReport {
   double fps = 0, frame_ms = 0;
   FrameStats frame;
+  std::optional<GpuStageTimes> gpu_times;  // of a recent frame the GPU has finished
   CacheStats cache;
   ReadCounters disk;
   double exposure = 0;  // as tone mapped
