@@ -114,7 +114,7 @@ SelectionOverlay* SceneRenderer::Overlay(std::uint32_t epoch) {
   for (const auto& overlay : overlays_) {
     if (overlay->epoch() == epoch && overlay->columns() == columns_) return overlay.get();
   }
-  overlays_.push_back(std::make_unique<SelectionOverlay>(dataset_, epoch, selected_ids_, columns_));
+  overlays_.push_back(std::make_unique<SelectionOverlay>(dataset_, splat_.blocks(), epoch, selected_ids_, columns_));
   return overlays_.back().get();
 }
 
@@ -149,7 +149,7 @@ const SceneRenderer::Resident* SceneRenderer::Upload(const BlockId& id, const By
     throw Error::Corruption(where, "a cached block of " + std::to_string(bytes.size()) + " bytes says it has " +
                                        std::to_string(header.block_size));
   }
-  Resident resident{GpuBlock::Upload(bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where), frame_};
+  Resident resident{GpuBlock::Upload(splat_.blocks(), bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where), frame_};
   gpu_bytes_ += resident.block.gpu_bytes();
   return &gpu_.insert_or_assign(Key(id), std::move(resident)).first->second;
 }

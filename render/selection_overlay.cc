@@ -8,9 +8,9 @@
 
 namespace octocosm {
 
-SelectionOverlay::SelectionOverlay(const Dataset& dataset, std::uint32_t epoch,
+SelectionOverlay::SelectionOverlay(const Dataset& dataset, GpuBlockArena& arena, std::uint32_t epoch,
                                    std::shared_ptr<const std::vector<std::uint64_t>> ids, ColumnSet columns)
-    : dataset_(dataset), epoch_(epoch), columns_(columns), lookup_(std::make_unique<Lookup>()) {
+    : dataset_(dataset), arena_(arena), epoch_(epoch), columns_(columns), lookup_(std::make_unique<Lookup>()) {
   Lookup* lookup = lookup_.get();
   lookup->thread = std::jthread([lookup, &dataset, epoch, ids = std::move(ids), columns](std::stop_token stop) {
     try {
@@ -42,7 +42,7 @@ bool SelectionOverlay::Ready(bool wait) {
     const Bytes& bytes = lookup_->blocks[i];
     const std::string where = dataset_.Where(epoch_, lookup_->keys[i]) + " (selected particles)";
     const BlockHeader header = DecodeBlockHeader(bytes, lookup_->keys[i], where);
-    blocks_.push_back(GpuBlock::Upload(bytes, header, dataset_.cube(epoch_).NodeCubeOf(lookup_->keys[i]), where));
+    blocks_.push_back(GpuBlock::Upload(arena_, bytes, header, dataset_.cube(epoch_).NodeCubeOf(lookup_->keys[i]), where));
     points_ += header.point_count;
   }
   lookup_.reset();

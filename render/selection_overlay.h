@@ -29,9 +29,10 @@ namespace octocosm {
 class SelectionOverlay {
  public:
   // Starts looking up `ids` in `epoch` with the columns `columns`. `dataset`
-  // must outlive the overlay; the store must have an ID index.
-  SelectionOverlay(const Dataset& dataset, std::uint32_t epoch, std::shared_ptr<const std::vector<std::uint64_t>> ids,
-                   ColumnSet columns);
+  // and `arena` (where the blocks go on the GPU) must outlive the overlay;
+  // the store must have an ID index.
+  SelectionOverlay(const Dataset& dataset, GpuBlockArena& arena, std::uint32_t epoch,
+                   std::shared_ptr<const std::vector<std::uint64_t>> ids, ColumnSet columns);
   // Asks the worker to stop and waits for it (it stops after the leaf it is
   // reading).
   ~SelectionOverlay();
@@ -59,6 +60,7 @@ class SelectionOverlay {
   };
 
   const Dataset& dataset_;
+  GpuBlockArena& arena_;
   std::uint32_t epoch_;
   ColumnSet columns_;
   std::unique_ptr<Lookup> lookup_;  // null once uploaded

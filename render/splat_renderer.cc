@@ -43,11 +43,10 @@ void SetMap(const GlProgram& program, const char* name, ColorMapId id) {
   glProgramUniform3fv(program.get(), Location(program, name), kColorMapKnots, knots[0].data());
 }
 
-// Sets the vec3 uniform at `location` to a + shift - b, in double before the
-// float.
-void SetDifference(GLint location, const std::array<double, 3>& a, double shift, const std::array<double, 3>& b) {
-  glUniform3f(location, static_cast<float>(a[0] + shift - b[0]), static_cast<float>(a[1] + shift - b[1]),
-              static_cast<float>(a[2] + shift - b[2]));
+// Sets `out` to a + shift - b, in double before the float.
+void SetDifference(float (&out)[4], const std::array<double, 3>& a, double shift, const std::array<double, 3>& b) {
+  for (std::size_t i = 0; i < 3; ++i) out[i] = static_cast<float>(a[i] + shift - b[i]);
+  out[3] = 0;
 }
 
 float Unordered(std::uint32_t u) {
@@ -62,11 +61,6 @@ SplatRenderer::SplatRenderer() {
   tone_map_ = Build("tone map", {{GL_VERTEX_SHADER, {shaders::kShaderFullscreenVert}},
                                  {GL_FRAGMENT_SHADER, {shaders::kShaderToneMapFrag}}});
   statistics_ = Build("image statistics", {{GL_COMPUTE_SHADER, {shaders::kShaderImageStatsComp}}});
-  origin_location_ = Location(splat_, "u_origin");
-  box_low_location_ = Location(splat_, "u_box_low");
-  box_high_location_ = Location(splat_, "u_box_high");
-  origin_below_location_ = Location(splat_, "u_origin_below");
-  origin_above_location_ = Location(splat_, "u_origin_above");
 
   GLuint vao = 0;
   glCreateVertexArrays(1, &vao);
@@ -133,6 +127,10 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   }
   margin_ = GuardMargin(view.max_blob_radius());
   const int tw = view.width() + 2 * margin_, th = view.height() + 2 * margin_;
+  Flush();  // a frame left unfinished: its draws go where they were meant to
+  records_.clear();
+  records_uploaded_ = 0;
+  commands_used_ = 0;
   Allocate(accumulation_, GL_RGBA32F, tw, th, "the accumulation buffer");
   in_frame_ = true;
   width_ = view.width();
@@ -182,18 +180,21 @@ void SplatRenderer::UploadFrameUniforms() {
 }
 
 void SplatRenderer::SetCopy(int direction, double weight) {
+  Flush();
   copy_direction_ = direction >= 0 ? 1 : -1;
   copy_weight_ = weight;
   UploadFrameUniforms();
 }
 
 void SplatRenderer::SetSelection(const SelectionSet* selection) {
+  Flush();
   selection_on_ = selection != nullptr && selection->size() > 0 && selection->buffer() != 0;
   glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, selection_on_ ? selection->buffer() : no_selection_.get());
   UploadFrameUniforms();
 }
 
 void SplatRenderer::SetHighlightOnly(bool on) {
+  Flush();
   highlight_only_ = on;
   UploadFrameUniforms();
 }
@@ -206,11 +207,32 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
                                  std::to_string(first + count) + ") are outside a block of " +
                                  std::to_string(block.point_count()));
   }
+  const GpuBlockArena::Placement& placement = block.placement();
+  DrawRecord record{};
+  const NodeCube& node = block.node();
+  SetDifference(record.origin, node.origin, 0, camera_position_);
+  if (uniforms_.wrap[0] != 0) {
+    const double size = settings_.box_size;
+    SetDifference(record.box_low, settings_.box_origin, 0, node.origin);
+    SetDifference(record.box_high, settings_.box_origin, size, node.origin);
+    SetDifference(record.origin_below, node.origin, -size, camera_position_);
+    SetDifference(record.origin_above, node.origin, size, camera_position_);
+  }
+  record.block[0] = placement.slot;
+  if (commands_.size() <= placement.pool) commands_.resize(placement.pool + 1);
+  commands_[placement.pool].push_back({count, 1, placement.first + first, static_cast<GLuint>(records_.size())});
+  records_.push_back(record);
+}
+
+void SplatRenderer::Flush() {
+  std::size_t pending = 0;
+  for (const auto& pool : commands_) pending += pool.size();
+  if (pending == 0) return;
+  glBindFramebuffer(GL_FRAMEBUFFER, accumulation_.framebuffer.get());
+  glViewport(0, 0, accumulation_.width, accumulation_.height);
   if (!draw_state_set_) {
-    // Once per frame: state changes between draws make drivers (llvmpipe
-    // among them) flush the work queued so far.
-    glBindFramebuffer(GL_FRAMEBUFFER, accumulation_.framebuffer.get());
-    glViewport(0, 0, accumulation_.width, accumulation_.height);
+    // Once per frame, or after another pass: state changes between draws
+    // make drivers (llvmpipe among them) flush the work queued so far.
     glEnable(GL_BLEND);
     glBlendEquation(GL_FUNC_ADD);
     glBlendFunc(GL_ONE, GL_ONE);
@@ -220,25 +242,42 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
     glBindBufferBase(GL_UNIFORM_BUFFER, 0, frame_uniforms_.get());
     draw_state_set_ = true;
   }
-  glBindVertexArray(block.vertex_array());
-  glBindBufferBase(GL_UNIFORM_BUFFER, 1, block.parameters());
-  // The node's corner relative to the camera, in double before the float:
-  // the precision that matters is near the camera.
-  const NodeCube& node = block.node();
-  SetDifference(origin_location_, node.origin, 0, camera_position_);
-  if (uniforms_.wrap[0] != 0) {
-    // The same for the wrap: the box's faces relative to the node's corner,
-    // and the corner moved by a box length relative to the camera.
-    const double size = settings_.box_size;
-    SetDifference(box_low_location_, settings_.box_origin, 0, node.origin);
-    SetDifference(box_high_location_, settings_.box_origin, size, node.origin);
-    SetDifference(origin_below_location_, node.origin, -size, camera_position_);
-    SetDifference(origin_above_location_, node.origin, size, camera_position_);
+  // The frame's draw records so far: new ones appended, or all of them into
+  // a larger buffer (draws issued earlier keep the one they read).
+  arena_.ReserveDrawIndices(records_.size());
+  if (records_.size() > records_capacity_) {
+    records_capacity_ = std::max({records_.size(), 2 * records_capacity_, std::size_t{1024}});
+    records_buffer_ = MakeGlBuffer(records_capacity_ * sizeof(DrawRecord), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    records_uploaded_ = 0;
   }
-  glDrawArrays(GL_POINTS, static_cast<GLint>(first), static_cast<GLsizei>(count));
+  glNamedBufferSubData(records_buffer_.get(), static_cast<GLintptr>(records_uploaded_ * sizeof(DrawRecord)),
+                       static_cast<GLsizeiptr>((records_.size() - records_uploaded_) * sizeof(DrawRecord)),
+                       records_.data() + records_uploaded_);
+  records_uploaded_ = records_.size();
+  if (commands_used_ + pending > commands_capacity_) {
+    commands_capacity_ = std::max({pending, 2 * commands_capacity_, std::size_t{1024}});
+    commands_buffer_ = MakeGlBuffer(commands_capacity_ * sizeof(DrawCommand), nullptr, GL_DYNAMIC_STORAGE_BIT);
+    commands_used_ = 0;
+  }
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, arena_.parameters());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, records_buffer_.get());
+  glBindBuffer(GL_DRAW_INDIRECT_BUFFER, commands_buffer_.get());
+  for (std::uint32_t pool = 0; pool < commands_.size(); ++pool) {
+    std::vector<DrawCommand>& commands = commands_[pool];
+    if (commands.empty()) continue;
+    const std::size_t offset = commands_used_ * sizeof(DrawCommand);
+    glNamedBufferSubData(commands_buffer_.get(), static_cast<GLintptr>(offset),
+                         static_cast<GLsizeiptr>(commands.size() * sizeof(DrawCommand)), commands.data());
+    glBindVertexArray(arena_.vertex_array(pool));
+    glMultiDrawArraysIndirect(GL_POINTS, reinterpret_cast<const void*>(offset), static_cast<GLsizei>(commands.size()), 0);
+    commands_used_ += commands.size();
+    commands.clear();
+  }
+  CheckGlError("drawing blocks");
 }
 
 void SplatRenderer::StartMeasure() {
+  Flush();
   draw_state_set_ = false;
   timer_.Record(GpuStageTimer::Mark::kMeasureStart);
   PendingStatistics& pending = measures_[measure_next_];
@@ -309,6 +348,7 @@ ImageStatistics SplatRenderer::Measure() {
 }
 
 void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
+  Flush();
   draw_state_set_ = false;
   const GLuint program = tone_map_.get();
   glProgramUniform2i(program, Location(tone_map_, "u_offset"), margin_, margin_);
@@ -336,6 +376,7 @@ void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
 }
 
 void SplatRenderer::ToneMapToImage(const ToneMapParameters& parameters) {
+  Flush();
   Allocate(display_, GL_RGBA8, width_, height_, "the display image");
   glBindFramebuffer(GL_FRAMEBUFFER, display_.framebuffer.get());
   glViewport(0, 0, width_, height_);
@@ -343,11 +384,13 @@ void SplatRenderer::ToneMapToImage(const ToneMapParameters& parameters) {
 }
 
 void SplatRenderer::ToneMapToViewport(const ToneMapParameters& parameters, int x, int y) {
+  Flush();
   glViewport(x, y, width_, height_);
   ToneMap(parameters, x, y);
 }
 
 HdrImage SplatRenderer::ReadHdr() {
+  Flush();
   HdrImage image{width_, height_, {}};
   std::vector<float> texels(4 * static_cast<std::size_t>(width_) * height_);
   glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_UPDATE_BARRIER_BIT);
@@ -372,6 +415,9 @@ RgbImage SplatRenderer::ReadDisplay() {
   return image;
 }
 
-void SplatRenderer::Finish() { glFinish(); }
+void SplatRenderer::Finish() {
+  Flush();
+  glFinish();
+}
 
 }  // namespace octocosm

@@ -17,6 +17,7 @@
 #include <array>
 #include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "render/gl_objects.h"
 #include "render/gpu_block.h"
@@ -73,7 +74,12 @@ class SplatRenderer {
   // attribute channels already hold them, in whatever level of detail drew
   // the rest). Off at BeginFrame.
   void SetHighlightOnly(bool on);
-  // Draws points [first, first + count) of `block`.
+  // Where blocks are uploaded for drawing; it outlives every GpuBlock in it
+  // as long as their owners are destroyed before this renderer.
+  GpuBlockArena& blocks() { return arena_; }
+  // Draws points [first, first + count) of `block`: queued, and issued with
+  // the other draws queued since, as one multi-draw per pool, before the next
+  // change of settings, measure, tone map or read-back.
   void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count);
 
   // Starts measuring the frame so far (ImageStatistics: two compute passes
@@ -103,6 +109,8 @@ class SplatRenderer {
 
  private:
   void UploadFrameUniforms();
+  // Issues the queued draws.
+  void Flush();
   void ToneMap(const ToneMapParameters& parameters, int x, int y);
 
   GlProgram splat_;
@@ -158,9 +166,26 @@ class SplatRenderer {
     float time[4];
     std::int32_t wrap[4];
   } uniforms_{};
-  GLint origin_location_ = -1;
-  GLint box_low_location_ = -1, box_high_location_ = -1;
-  GLint origin_below_location_ = -1, origin_above_location_ = -1;
+
+  // The frame's draws ("Draws" and the indirect commands of
+  // shaders/splat_vert.glsl); each command's base instance is its record.
+  struct DrawRecord {
+    float origin[4], box_low[4], box_high[4], origin_below[4], origin_above[4];
+    std::uint32_t block[4];
+  };
+  static_assert(sizeof(DrawRecord) == 96);
+  struct DrawCommand {
+    GLuint count, instance_count, first, base_instance;
+  };
+  GpuBlockArena arena_;
+  std::vector<DrawRecord> records_;                 // this frame's, in order
+  std::size_t records_uploaded_ = 0;
+  std::vector<std::vector<DrawCommand>> commands_;  // queued, by pool
+  GlBuffer records_buffer_;
+  std::size_t records_capacity_ = 0;
+  GlBuffer commands_buffer_;
+  std::size_t commands_capacity_ = 0;
+  std::size_t commands_used_ = 0;  // this frame
 };
 
 }  // namespace octocosm

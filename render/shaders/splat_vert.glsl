@@ -20,22 +20,55 @@ layout(std140, binding = 0) uniform Frame {
   vec4 u_limits;    // near, far, largest blob radius, 1 / mass unit
   ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), highlight (0 none, 1 selected IDs, 2 every point, alone), copy direction (+1 / -1)
   vec4 u_time;      // t in [0, 1], weight of this copy, Hermite velocity scale, unused
-  ivec4 u_wrap;     // 1: moved points are wrapped into the periodic box (u_box_*), 0: not; unused x 3
+  ivec4 u_wrap;     // 1: moved points are wrapped into the periodic box (the draw's box_*), 0: not; unused x 3
 };
 
-layout(std140, binding = 1) uniform Block {
-  vec4 b_node;        // quantum (node edge / 65536), weight unit, log2 of the smallest smoothing, 1 / codes per octave
-  ivec4 b_columns0;   // present (>= 0) or absent (-1): position, weight, smoothing, type
-  ivec4 b_columns1;   // velocity, id, displacement, next_velocity
-  ivec4 b_columns2;   // prev_displacement, prev_velocity, velocity_dispersion, shape
-  vec4 b_velocity[2];           // minimum, step ((max - min) / 65535)
-  vec4 b_displacement[2];
-  vec4 b_next_velocity[2];
-  vec4 b_prev_displacement[2];
-  vec4 b_prev_velocity[2];
-  uvec4 b_id_base;    // added to a_id: the id column's base (u32 offsets), 0 for whole u64 IDs; low word first
-  vec4 b_dispersion;  // velocity dispersion: minimum, step
+// A block's decode parameters (render/gpu_block_arena.h, GpuBlockParameters).
+struct BlockParams {
+  vec4 node;        // quantum (node edge / 65536), weight unit, log2 of the smallest smoothing, 1 / codes per octave
+  ivec4 columns0;   // present (>= 0) or absent (-1): position, weight, smoothing, type
+  ivec4 columns1;   // velocity, id, displacement, next_velocity
+  ivec4 columns2;   // prev_displacement, prev_velocity, velocity_dispersion, shape
+  vec4 velocity[2];           // minimum, step ((max - min) / 65535)
+  vec4 displacement[2];
+  vec4 next_velocity[2];
+  vec4 prev_displacement[2];
+  vec4 prev_velocity[2];
+  uvec4 id_base;    // added to a_id: the id column's base (u32 offsets), 0 for whole u64 IDs; low word first
+  vec4 dispersion;  // velocity dispersion: minimum, step
 };
+layout(std430, binding = 3) readonly buffer Blocks { BlockParams blocks[]; };
+
+// One draw of a block's points (render/splat_renderer.h): its node's corner
+// minus the camera position, in double on the CPU before the float, so that
+// the precision that matters is near the camera. With u_wrap.x: the
+// periodic box relative to the node's corner, [low, high) per axis, and the
+// node's corner one box length lower (for points past the upper face) and
+// higher (for points below the lower face), minus the camera.
+struct DrawParams {
+  vec4 origin;
+  vec4 box_low;
+  vec4 box_high;
+  vec4 origin_below;
+  vec4 origin_above;
+  uvec4 block;  // x: the block's slot in Blocks
+};
+layout(std430, binding = 4) readonly buffer Draws { DrawParams draws[]; };
+
+// This vertex's draw and block, read once.
+DrawParams d;
+BlockParams b;
+#define b_node b.node
+#define b_columns0 b.columns0
+#define b_columns1 b.columns1
+#define b_columns2 b.columns2
+#define b_velocity b.velocity
+#define b_displacement b.displacement
+#define b_next_velocity b.next_velocity
+#define b_prev_displacement b.prev_displacement
+#define b_prev_velocity b.prev_velocity
+#define b_id_base b.id_base
+#define b_dispersion b.dispersion
 
 // The columns, as stored: u16 x 3 positions and ranged vectors (as floats
 // 0..65535), u32 weight units, u16 smoothing codes, u8 types, u64 IDs (as
@@ -55,6 +88,7 @@ layout(location = 9) in vec3 a_prev_velocity;
 layout(location = 10) in float a_velocity_dispersion;
 layout(location = 11) in vec3 a_shape_diagonal;      // xx, yy, zz codes
 layout(location = 12) in vec3 a_shape_off_diagonal;  // xy, xz, yz codes
+layout(location = 13) in uint a_draw;  // the draw's index in Draws: its base instance
 
 layout(std430, binding = 1) readonly buffer Selection {
   uint selection_mask;   // slots - 1 (slots a power of two)
@@ -63,15 +97,6 @@ layout(std430, binding = 1) readonly buffer Selection {
   uint selection_pad1;
   uvec2 selection_slots[];  // (low, high) words of a selected ID; (~0, ~0) empty
 };
-
-uniform vec3 u_origin;  // the node's lower corner minus the camera position
-// With u_wrap.x: the periodic box relative to the node's corner, [low, high)
-// per axis, and the node's corner one box length lower (for points past the
-// upper face) and higher (for points below the lower face), minus the camera.
-uniform vec3 u_box_low;
-uniform vec3 u_box_high;
-uniform vec3 u_origin_below;
-uniform vec3 u_origin_above;
 
 flat out vec2 v_center;  // framebuffer coordinates
 flat out vec3 v_conic;   // the footprint: a pixel offset d is at q^2 = conic.x dx^2 + 2 conic.y dx dy + conic.z dy^2
@@ -162,11 +187,13 @@ void Discard() {
 }
 
 void main() {
+  d = draws[a_draw];
+  b = blocks[d.block.x];
   // Relative to the node's corner until the end of the move.
   vec3 p = (a_position + 0.5) * b_node.x;
   vec3 velocity = b_columns1.x >= 0 ? Ranged(a_velocity, b_velocity) : vec3(0.0);
 
-  vec3 origin = u_origin;
+  vec3 origin = d.origin.xyz;
   if (u_modes.y != 0) {
     // Both epochs of an interval follow the same curve from p_e to p_e+1, so
     // the two copies of a particle coincide at every t.
@@ -183,8 +210,8 @@ void main() {
     }
     if (u_wrap.x != 0) {
       // A path strays less than a box length from its ends, so one image is enough.
-      origin = mix(origin, u_origin_below, greaterThanEqual(p, u_box_high));
-      origin = mix(origin, u_origin_above, lessThan(p, u_box_low));
+      origin = mix(origin, d.origin_below.xyz, greaterThanEqual(p, d.box_high.xyz));
+      origin = mix(origin, d.origin_above.xyz, lessThan(p, d.box_low.xyz));
     }
   }
   p += origin;

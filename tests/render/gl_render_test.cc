@@ -367,7 +367,7 @@ TEST_F(GlRenderTest, TenMillionBlobsInOnePixelSumToTheDoubleReference) {
   OrderByOctant(points, key, cube);
   const Bytes bytes = EncodeBlock(points, key, cube);
   const BlockHeader header = DecodeBlockHeader(bytes, key, "test");
-  const GpuBlock block = GpuBlock::Upload(bytes, header, cube.NodeCubeOf(key), "test");
+  const GpuBlock block = GpuBlock::Upload(renderer.splat().blocks(), bytes, header, cube.NodeCubeOf(key), "test");
   // The decoded weights are what the GPU adds: sum them in double.
   const DecodedBlock decoded = DecodeBlock(bytes, kAllColumns, key, cube, "test");
   const double expected = 10 * std::accumulate(decoded.points.weight.begin(), decoded.points.weight.end(), 0.0);
@@ -429,7 +429,7 @@ TEST_F(GlRenderTest, HighlightingReadsIdOffsetsAcross32BitsAndWholeIds) {
     const Bytes bytes = EncodeBlock(points, key, cube);
     const BlockHeader header = DecodeBlockHeader(bytes, key, "test");
     ASSERT_EQ(header.Find(ColumnId::kId)->encoding, c.encoding) << c.first;
-    const GpuBlock block = GpuBlock::Upload(bytes, header, cube.NodeCubeOf(key), "test");
+    const GpuBlock block = GpuBlock::Upload(renderer.splat().blocks(), bytes, header, cube.NodeCubeOf(key), "test");
     const DecodedBlock decoded = DecodeBlock(bytes, kAllColumns, key, cube, "test");
     std::vector<std::uint64_t> selected;
     double all = 0, selected_mass = 0;
