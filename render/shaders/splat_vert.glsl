@@ -55,20 +55,21 @@ struct DrawParams {
 };
 layout(std430, binding = 4) readonly buffer Draws { DrawParams draws[]; };
 
-// This vertex's draw and block, read once.
-DrawParams d;
-BlockParams b;
-#define b_node b.node
-#define b_columns0 b.columns0
-#define b_columns1 b.columns1
-#define b_columns2 b.columns2
-#define b_velocity b.velocity
-#define b_displacement b.displacement
-#define b_next_velocity b.next_velocity
-#define b_prev_displacement b.prev_displacement
-#define b_prev_velocity b.prev_velocity
-#define b_id_base b.id_base
-#define b_dispersion b.dispersion
+// This vertex's draw and block: fields read where used, not whole structs
+// (a per-vertex copy of 352 bytes costs a software rasterizer dearly).
+#define this_draw draws[a_draw]
+#define this_block blocks[draws[a_draw].block.x]
+#define b_node this_block.node
+#define b_columns0 this_block.columns0
+#define b_columns1 this_block.columns1
+#define b_columns2 this_block.columns2
+#define b_velocity this_block.velocity
+#define b_displacement this_block.displacement
+#define b_next_velocity this_block.next_velocity
+#define b_prev_displacement this_block.prev_displacement
+#define b_prev_velocity this_block.prev_velocity
+#define b_id_base this_block.id_base
+#define b_dispersion this_block.dispersion
 
 // The columns, as stored: u16 x 3 positions and ranged vectors (as floats
 // 0..65535), u32 weight units, u16 smoothing codes, u8 types, u64 IDs (as
@@ -187,13 +188,11 @@ void Discard() {
 }
 
 void main() {
-  d = draws[a_draw];
-  b = blocks[d.block.x];
   // Relative to the node's corner until the end of the move.
   vec3 p = (a_position + 0.5) * b_node.x;
   vec3 velocity = b_columns1.x >= 0 ? Ranged(a_velocity, b_velocity) : vec3(0.0);
 
-  vec3 origin = d.origin.xyz;
+  vec3 origin = this_draw.origin.xyz;
   if (u_modes.y != 0) {
     // Both epochs of an interval follow the same curve from p_e to p_e+1, so
     // the two copies of a particle coincide at every t.
@@ -210,8 +209,8 @@ void main() {
     }
     if (u_wrap.x != 0) {
       // A path strays less than a box length from its ends, so one image is enough.
-      origin = mix(origin, d.origin_below.xyz, greaterThanEqual(p, d.box_high.xyz));
-      origin = mix(origin, d.origin_above.xyz, lessThan(p, d.box_low.xyz));
+      origin = mix(origin, this_draw.origin_below.xyz, greaterThanEqual(p, this_draw.box_high.xyz));
+      origin = mix(origin, this_draw.origin_above.xyz, lessThan(p, this_draw.box_low.xyz));
     }
   }
   p += origin;
