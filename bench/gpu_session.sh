@@ -1,0 +1,38 @@
+#!/bin/bash
+# The whole GPU measurement in one run, for a machine lent for minutes: the
+# render bench's sweep at 10^8 points (overview, mid, deep; every stage's
+# time), then playback through a particle-mesh series. Writes its tables and
+# logs under OUT. Run from the repository root on the GPU machine, after
+# ../shared/gpu/bundle.sh packed build/ (docs/BENCHMARKS.md):
+#
+#   bash .gpu/run.sh bash bench/gpu_session.sh "$OUT"
+#
+# POINTS (default 1e8), PM_SIDE (default 128) and BACKEND (default egl) make a
+# dry run possible on any machine:
+#   POINTS=2e5 PM_SIDE=16 BACKEND=osmesa bash bench/gpu_session.sh /tmp/out
+set -euo pipefail
+out=${1:?usage: gpu_session.sh OUT_DIR}
+points=${POINTS:-1e8}
+backend=${BACKEND:-egl}
+work=${WORK:-/tmp/octocosm-gpu-session}
+mkdir -p "$out" "$work"
+bench=$(command -v octocosm-bench-render || echo build/bench/octocosm-bench-render)
+octocosm=$(command -v octocosm || echo build/tools/octocosm)
+log() { echo "== $*" | tee -a "$out/session.log"; }
+
+log "$(date -u +%FT%TZ) $(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || echo no nvidia-smi)"
+log "render bench: $points points, overview at thresholds and budgets, mid and deep"
+"$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views overview \
+  --thresholds 16,8,4,2,1 --budgets 0,2e6 --coarse clusters 2>&1 | tee "$out/render_overview.txt"
+cp "$work/rb/render_bench.csv" "$out/render_overview.csv"
+"$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views mid,deep \
+  --thresholds 16,8,4 --budgets 0 --coarse clusters 2>&1 | tee "$out/render_zoomed.txt"
+cp "$work/rb/render_bench.csv" "$out/render_zoomed.csv"
+
+log "playback: a 128^3 particle-mesh series, 5 epochs, Hermite interpolation"
+if [ ! -f "$work/pm/store/manifest.json" ]; then
+  "$octocosm" synth pm -o "$work/pm/snapshots" --particles-per-side "${PM_SIDE:-128}" --outputs 5 > "$out/synth_pm.txt" 2>&1
+  "$octocosm" ingest "$work"/pm/snapshots/snap_00? -o "$work/pm/store" --capacity 4000 > "$out/ingest_pm.txt" 2>&1
+fi
+"$bench" --backend "$backend" --playback "$work/pm/store" --frames-per-epoch 60 2>&1 | tee "$out/playback.txt"
+log "$(date -u +%FT%TZ) done"
