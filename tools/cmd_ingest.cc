@@ -19,7 +19,7 @@ void AddIngestCommand(CLI::App& app) {
   struct Flags {
     IngestOptions options;
     ReadFlags read;
-    std::string memory, page_size = "4K", cube, coarse = "clusters";
+    std::string memory, page_size = "4K", cube, clip_box, coarse = "clusters";
   };
   auto flags = std::make_shared<Flags>();
   IngestOptions& o = flags->options;
@@ -54,7 +54,15 @@ void AddIngestCommand(CLI::App& app) {
   cmd->add_option("--temp-dir", o.temp_dir, "where the temporary directory goes (default: inside the output directory)");
   cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);
   cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M (its ID index: at least 64K)")->default_val("4K");
-  cmd->add_option("--cube", flags->cube, "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube)");
+  cmd->add_option("--cube", flags->cube,
+                  "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube); also accepts "
+                  "outliers knowingly, at the resolution this cube gives");
+  cmd->add_option("--clip-box", flags->clip_box,
+                  "keep only the particles inside this box, 'x0,y0,z0,x1,y1,z1' (bounds included), in every epoch; "
+                  "the others are counted in the report and the manifest");
+  cmd->add_flag("--drop-outliers", o.drop_outliers,
+                "where the cube is the bounding cube and a few far particles would cost the others their precision "
+                "(which ingest otherwise refuses, docs/INGEST.md), drop the particles outside the bulk instead");
   AddReadFlags(*cmd, flags->read);
   // What ingest does with what it does not read.
   cmd->get_option("--no-velocity")->description("do not store velocities");
@@ -77,16 +85,31 @@ void AddIngestCommand(CLI::App& app) {
       if (v.size() != 4) throw Error::InvalidArgument("--cube '" + flags->cube + "': expected x,y,z,size");
       options.cube = Cube{{v[0], v[1], v[2]}, v[3], false};
     }
+    if (!flags->clip_box.empty()) {
+      const auto v = ParseNumberList(flags->clip_box, "--clip-box");
+      if (v.size() != 6) throw Error::InvalidArgument("--clip-box '" + flags->clip_box + "': expected x0,y0,z0,x1,y1,z1");
+      options.clip_box = PositionBox{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
+    }
     const IngestReport report = Ingest(options);
     std::printf("ingested %s points in %zu epoch(s) into %s: %s, %.1f s, %.2f M points/s\n",
                 HumanCount(static_cast<double>(report.input_points)).c_str(), report.epochs.size(),
                 options.output.c_str(), HumanBytes(static_cast<double>(report.store_bytes)).c_str(), report.seconds,
                 report.seconds > 0 ? static_cast<double>(report.input_points) / report.seconds / 1e6 : 0.0);
+    if (report.dropped_points) {
+      std::printf("  read %llu points, dropped %llu (outside --clip-box or outliers), stored %llu\n",
+                  static_cast<unsigned long long>(report.read_points),
+                  static_cast<unsigned long long>(report.dropped_points),
+                  static_cast<unsigned long long>(report.input_points));
+    }
     for (std::size_t e = 0; e < report.epochs.size(); ++e) {
       const EpochReport& r = report.epochs[e];
       std::printf("  epoch %zu: %llu points, %llu nodes (%llu leaves), depth %d, %llu chunks, mass %.9g",
                   e, static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
                   static_cast<unsigned long long>(r.leaves), r.depth, static_cast<unsigned long long>(r.chunks), r.mass);
+      if (r.dropped_points) {
+        std::printf(", %llu of the %llu points read dropped", static_cast<unsigned long long>(r.dropped_points),
+                    static_cast<unsigned long long>(r.read_points));
+      }
       if (r.resident) std::printf(r.mapped ? ", held in memory whole (mapped from its files)" : ", held in memory whole");
       if (r.spilled_points) std::printf(", %llu points spilled to disk", static_cast<unsigned long long>(r.spilled_points));
       if (r.missing_in_next) std::printf(", %llu IDs missing in the next epoch", static_cast<unsigned long long>(r.missing_in_next));

@@ -28,9 +28,11 @@
 #include "tools/ingest/chunk_gatherer.h"
 #include "tools/ingest/chunk_queue.h"
 #include "tools/ingest/chunker.h"
+#include "tools/ingest/clipped_source.h"
 #include "tools/ingest/dense_id_table.h"
 #include "tools/ingest/epoch_join.h"
 #include "tools/ingest/external_sorter.h"
+#include "tools/ingest/outliers.h"
 #include "tools/ingest/resident_epoch.h"
 #include "tools/interrupt_cleanup.h"
 #include "tools/progress.h"
@@ -223,6 +225,54 @@ bool MapResident(const ParticleSource& source, const Cube& cube, const ParticleC
   return true;
 }
 
+// An epoch's source as ingest reads it, and what screening it found.
+struct ScreenedEpoch {
+  std::unique_ptr<ParticleSource> source;
+  // The bounds of the particles `source` hands out, where the cube is their
+  // bounding cube (the survey's pass found them).
+  std::optional<Bounds> bounds;
+  std::uint64_t read = 0;
+  std::uint64_t dropped = 0;
+  bool passes = false;  // whether screening read the snapshot
+};
+
+// Leaves out what --clip-box leaves out; then, where the cube is the
+// particles' bounding cube, looks for outliers (tools/ingest/outliers.h) and
+// refuses the epoch for them, or drops them with --drop-outliers. A given
+// cube or a periodic box needs no look: particles outside a periodic box are
+// the reader's error, and a given cube is the user's choice of resolution.
+ScreenedEpoch Screen(std::unique_ptr<ParticleSource> raw, const IngestOptions& options, const std::string& label) {
+  ScreenedEpoch out;
+  const SnapshotHeader header = raw->header();
+  out.read = header.total_count;
+  std::optional<PositionSurvey> survey;
+  if (options.clip_box) {
+    auto clipped = std::make_unique<ClippedSource>(std::move(raw), *options.clip_box, "--clip-box");
+    out.dropped += clipped->dropped();
+    out.passes = true;
+    survey = clipped->survey();
+    raw = std::move(clipped);
+  }
+  if (options.cube || header.box_size > 0) {
+    out.source = std::move(raw);
+    return out;
+  }
+  if (!survey) survey = SurveyPositions(*raw, label + ": bounds");
+  out.passes = true;
+  const OutlierVerdict verdict = JudgeOutliers(*survey);
+  if (!verdict.outliers) {
+    out.bounds = survey->bounds();
+    out.source = std::move(raw);
+    return out;
+  }
+  auto kept = std::make_unique<ClippedSource>(std::move(raw), verdict.bulk, "--drop-outliers");
+  if (!options.drop_outliers) RefuseOutliers(header, verdict, kept->dropped(), kept->farthest_dropped());
+  out.dropped += kept->dropped();
+  out.bounds = kept->survey().bounds();
+  out.source = std::move(kept);
+  return out;
+}
+
 // Wall time of consecutive phases.
 class PhaseClock {
  public:
@@ -378,6 +428,7 @@ IngestReport Ingest(const IngestOptions& options) {
   if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
   if (options.output.empty()) throw Error::InvalidArgument("ingest: no output store given (-o)");
   if (options.cube) options.cube->Validate();
+  if (options.clip_box) options.clip_box->Validate("--clip-box");
   Progress::SetQuiet(options.quiet);
 
   IngestReport report;
@@ -468,6 +519,17 @@ IngestReport Ingest(const IngestOptions& options) {
     return WithSmoothingLengths(std::move(raw), std::move(table));
   };
 
+  // Each epoch screened (Screen) before anything else reads it; the
+  // smoothing pass then sees only the particles kept.
+  std::vector<ScreenedEpoch> screened(options.inputs.size());
+  auto prepare = [&](std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock) {
+    ScreenedEpoch s = Screen(std::move(raw), options, "epoch " + std::to_string(e));
+    if (clock != nullptr && s.passes) clock->Lap("bounds");
+    std::unique_ptr<ParticleSource> prepared = smooth(std::move(s.source));
+    screened[e] = std::move(s);
+    return prepared;
+  };
+
   std::unique_ptr<SortedEpoch> sorted_current, sorted_next;
   std::uint64_t missing_in_prev = 0;  // of the epoch to come, counted by the join before it
   auto sort_epoch = [&](ParticleSource& s, std::size_t e) {
@@ -484,7 +546,7 @@ IngestReport Ingest(const IngestOptions& options) {
     EpochReport epoch_report;
     PhaseClock clock(epoch_report);
     if (!source_smoothed) {
-      source = smooth(std::move(source));
+      source = prepare(std::move(source), e, &clock);
       if (options.neighbours > 0) clock.Lap("smoothing");
     }
     const SnapshotHeader header = source->header();
@@ -501,23 +563,17 @@ IngestReport Ingest(const IngestOptions& options) {
       if (!sorted_current) sorted_current = sort_epoch(*source, e);
       if (e + 1 < options.inputs.size()) {
         if (options.neighbours > 0) clock.Lap("sort");
-        next_source = smooth(OpenSnapshot(options.inputs[e + 1], options.read));
+        next_source = prepare(OpenSnapshot(options.inputs[e + 1], options.read), e + 1, nullptr);
         if (options.neighbours > 0) clock.Lap("next smoothing");
         sorted_next = sort_epoch(*next_source, e + 1);
       }
       bounds = sorted_current->bounds();
       epoch_report.duplicate_ids = sorted_current->duplicate_ids();
-    } else if (!options.cube && header.box_size <= 0) {
-      Progress progress(label + ": bounds", header.total_count, "points");
-      source->Rewind();
-      ParticleChunk chunk;
-      while (source->Next(chunk)) {
-        bounds.Add(chunk);
-        progress.Add(chunk.size());
-      }
+    } else if (screened[e].bounds) {
+      bounds = *screened[e].bounds;  // the survey's, before the smoothing pass
     }
 
-    clock.Lap(join_epochs ? (next_source && options.neighbours > 0 ? "next sort" : "sort") : "bounds");
+    if (join_epochs) clock.Lap(next_source && options.neighbours > 0 ? "next sort" : "sort");
     Cube cube;
     if (options.cube) {
       cube = *options.cube;
@@ -617,6 +673,8 @@ IngestReport Ingest(const IngestOptions& options) {
     clock.Lap("read+chunk");
     if (has_id && id_census.repeated_id()) RefuseDuplicateIds(header, *id_census.repeated_id(), 0);
     for (const Chunk& c : chunks) epoch_report.points += c.point_count;
+    epoch_report.read_points = screened[e].read;
+    epoch_report.dropped_points = screened[e].dropped;
     epoch_report.chunks = chunks.size();
     if (!links_from_previous.empty()) std::remove(links_from_previous.c_str());
     epoch_report.missing_in_next = join_stats.missing_in_next;
@@ -718,6 +776,8 @@ IngestReport Ingest(const IngestOptions& options) {
     }
     dataset["epochs"].push_back(std::move(epoch_json));
     report.input_points += epoch_report.points;
+    report.read_points += epoch_report.read_points;
+    report.dropped_points += epoch_report.dropped_points;
     report.epochs.push_back(epoch_report);
 
     // The next epoch reuses what this one read ahead.

@@ -8,6 +8,10 @@
 //              (displacements and velocities, tools/ingest/epoch_join.h)
 //      bounds  (otherwise) one pass for the bounding box, unless the box is
 //              periodic or the cube is given
+//   Before either, where the cube is the bounding cube, the positions are
+//   surveyed for outliers that would cost the bulk its precision
+//   (tools/ingest/outliers.h; in the bounds pass without a sort), and
+//   particles outside --clip-box are left out (tools/ingest/clipped_source.h).
 //   2. chunk   count on a coarse grid, merge cells into chunks that fit in
 //              memory, distribute the points into chunk files (tools/ingest/chunker.h);
 //              an epoch that fits in its share of the budget whole is read into
@@ -34,6 +38,7 @@
 #include "index/neighbour_radius.h"
 #include "index/subtree_builder.h"
 #include "storage/page_file_format.h"
+#include "tools/ingest/outliers.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -52,6 +57,12 @@ struct IngestOptions {
   std::uint64_t memory_budget = 0;  // bytes; 0 = DefaultMemoryBudget()
   std::string temp_dir;             // parent of the temporary directory; "" = inside the output
   std::optional<Cube> cube;         // overrides the periodic box / bounding cube
+  // Keep only the particles inside this box, in every epoch (--clip-box).
+  std::optional<PositionBox> clip_box;
+  // Where an epoch's cube is its bounding cube and outliers would cost the
+  // bulk its precision (tools/ingest/outliers.h): drop the particles outside
+  // the bulk instead of refusing the epoch (--drop-outliers).
+  bool drop_outliers = false;
   unsigned threads = 0;             // 0 = all cores
   std::uint32_t page_size = kDefaultPageSize;
   std::uint64_t max_chunk_points = 0;  // 0 = derived from the memory budget; tests set it to force chunking
@@ -61,7 +72,9 @@ struct IngestOptions {
 };
 
 struct EpochReport {
-  std::uint64_t points = 0;
+  std::uint64_t points = 0;          // stored: read_points - dropped_points
+  std::uint64_t read_points = 0;     // in the snapshot (of the types read)
+  std::uint64_t dropped_points = 0;  // left out by clip_box or drop_outliers
   std::uint64_t nodes = 0;
   std::uint64_t leaves = 0;
   std::uint64_t chunks = 0;
@@ -88,7 +101,9 @@ struct EpochReport {
 
 struct IngestReport {
   std::vector<EpochReport> epochs;
-  std::uint64_t input_points = 0;
+  std::uint64_t input_points = 0;    // stored, over all epochs
+  std::uint64_t read_points = 0;     // read, over all epochs
+  std::uint64_t dropped_points = 0;  // read but left out (clip_box, drop_outliers)
   std::uint64_t store_bytes = 0;
   std::uint64_t max_chunk_points = 0;
   std::uint64_t memory_budget = 0;
