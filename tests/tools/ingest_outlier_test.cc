@@ -16,6 +16,7 @@
 
 #include "index/dataset.h"
 #include "storage/error.h"
+#include "tools/ingest/clipped_source.h"
 #include "tools/ingest/ingest.h"
 #include "tools/ingest/outliers.h"
 #include "tools/store_verify.h"
@@ -130,6 +131,82 @@ TEST(OutlierRule, FlagsAFarOutlierButNotOrdinaryOrModeratelyFarData) {
   std::vector<Particle> coincident(100, Particle{{5, 5, 5}, 1, 0});
   coincident[3].x[1] = 1e300;
   EXPECT_FALSE(JudgeOutliers(Survey(coincident)).outliers);
+}
+
+// One batch per call from memory, every column filled.
+class BatchSource : public ParticleSource {
+ public:
+  explicit BatchSource(std::vector<ParticleChunk> batches) : batches_(std::move(batches)) {
+    header_.files = {"memory"};
+    header_.count_per_type = {0, 0};
+    for (const ParticleChunk& b : batches_) {
+      for (std::uint8_t t : b.type) ++header_.count_per_type[t];
+      header_.total_count += b.size();
+    }
+    header_.has_id = header_.has_velocity = header_.has_smoothing = true;
+  }
+  const SnapshotHeader& header() const override { return header_; }
+  bool Next(ParticleChunk& chunk) override {
+    if (next_ == batches_.size()) {
+      chunk.clear();
+      return false;
+    }
+    chunk = batches_[next_++];
+    return true;
+  }
+  void Rewind() override { next_ = 0; }
+
+ private:
+  std::vector<ParticleChunk> batches_;
+  SnapshotHeader header_;
+  std::size_t next_ = 0;
+};
+
+TEST(ClippedSource, KeepsEveryColumnOfTheParticlesInsideAndCountsTheRest) {
+  std::vector<ParticleChunk> batches(3);
+  for (std::size_t b = 0; b < batches.size(); ++b) {
+    for (std::uint64_t i = 0; i < 10; ++i) {
+      const std::uint64_t id = b * 10 + i;
+      const double x = static_cast<double>(id);
+      batches[b].position.insert(batches[b].position.end(), {x, -x, 0.5});
+      batches[b].mass.push_back(x + 1);
+      batches[b].id.push_back(id);
+      batches[b].type.push_back(static_cast<std::uint8_t>(id % 2));
+      batches[b].smoothing.push_back(static_cast<float>(x) / 4);
+      batches[b].velocity.insert(batches[b].velocity.end(), {static_cast<float>(x), 1, 2});
+    }
+  }
+  // Keeps IDs 5..14 (bounds included), none of the last batch.
+  ClippedSource clipped(std::make_unique<BatchSource>(batches), PositionBox{{5, -14, 0}, {14, 0, 1}}, "test");
+  EXPECT_EQ(clipped.dropped(), 20u);
+  EXPECT_EQ(clipped.farthest_dropped(), 15);  // ID 29 lies 15 beyond x = 14
+  EXPECT_EQ(clipped.header().total_count, 10u);
+  EXPECT_EQ(clipped.header().count_per_type, (std::vector<std::uint64_t>{5, 5}));
+  EXPECT_EQ(clipped.survey().bounds().count, 10u);
+  const nlohmann::json& dropped = clipped.header().extra.at("dropped");
+  EXPECT_EQ(dropped.at(0).at("read"), 30);
+  EXPECT_EQ(dropped.at(0).at("dropped"), 20);
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<std::uint64_t> ids;
+    ParticleChunk chunk;
+    while (clipped.Next(chunk)) {
+      ASSERT_GT(chunk.size(), 0u);
+      for (std::size_t i = 0; i < chunk.size(); ++i) {
+        const double x = static_cast<double>(chunk.id[i]);
+        EXPECT_EQ(chunk.position[3 * i], x);
+        EXPECT_EQ(chunk.position[3 * i + 1], -x);
+        EXPECT_EQ(chunk.mass[i], x + 1);
+        EXPECT_EQ(chunk.type[i], chunk.id[i] % 2);
+        EXPECT_EQ(chunk.smoothing[i], static_cast<float>(x) / 4);
+        EXPECT_EQ(chunk.velocity[3 * i], static_cast<float>(x));
+        EXPECT_EQ(chunk.velocity[3 * i + 2], 2.0f);
+        ids.push_back(chunk.id[i]);
+      }
+    }
+    EXPECT_EQ(ids, (std::vector<std::uint64_t>{5, 6, 7, 8, 9, 10, 11, 12, 13, 14}));
+    clipped.Rewind();
+  }
+  EXPECT_EQ(clipped.dropped(), 20u);  // counted once, whatever the passes
 }
 
 TEST_F(IngestOutlierTest, AFarOutlierIsRefusedNamingTheFileTheCountAndTheWaysOut) {
