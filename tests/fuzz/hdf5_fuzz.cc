@@ -1,0 +1,159 @@
+// Fuzz target: the HDF5 snapshot reader (tools/snapshot/hdf5_source.h),
+// GADGET-4 / AREPO and SWIFT layouts, on one file. libhdf5 parses the file's
+// structure (superblock, object headers, B-trees, heaps, filters); the
+// fuzzer reaches our checks of attributes, shapes and values through it.
+#include <hdf5.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "tests/fuzz/fuzz_target.h"
+#include "tests/fuzz/snapshot_fuzz.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  octocosm::ReadOptions options;
+  options.format = "hdf5";
+  octocosm::fuzz::ReadSnapshotBytes(data, size, "snap.hdf5", options);
+  return 0;
+}
+
+namespace octocosm::fuzz {
+namespace {
+
+// Writes a small snapshot file with the C API. Chunked datasets (with
+// deflate) when `chunked`, contiguous ones otherwise.
+class Hdf5SeedWriter {
+ public:
+  Hdf5SeedWriter(const std::string& path, bool chunked) : chunked_(chunked) {
+    file_ = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  }
+  ~Hdf5SeedWriter() { H5Fclose(file_); }
+  Hdf5SeedWriter(const Hdf5SeedWriter&) = delete;
+  Hdf5SeedWriter& operator=(const Hdf5SeedWriter&) = delete;
+
+  template <typename T>
+  void Attribute(const char* group, const char* name, hid_t type, const std::vector<T>& values) {
+    const hid_t location = Group(group);
+    const hsize_t dims[1] = {values.size()};
+    const hid_t space = H5Screate_simple(1, dims, nullptr);
+    const hid_t attribute = H5Acreate2(location, name, type, space, H5P_DEFAULT, H5P_DEFAULT);
+    H5Awrite(attribute, type, values.data());
+    H5Aclose(attribute);
+    H5Sclose(space);
+    H5Gclose(location);
+  }
+  template <typename T>
+  void Dataset(const char* group, const char* name, hid_t type, const std::vector<T>& values, hsize_t columns) {
+    const hid_t location = Group(group);
+    const hsize_t dims[2] = {values.size() / columns, columns};
+    const int rank = columns == 1 ? 1 : 2;
+    const hid_t space = H5Screate_simple(rank, dims, nullptr);
+    const hid_t properties = H5Pcreate(H5P_DATASET_CREATE);
+    if (chunked_) {
+      const hsize_t chunk[2] = {2, columns};
+      H5Pset_chunk(properties, rank, chunk);
+      H5Pset_deflate(properties, 1);
+    }
+    const hid_t dataset = H5Dcreate2(location, name, type, space, H5P_DEFAULT, properties, H5P_DEFAULT);
+    H5Dwrite(dataset, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data());
+    H5Dclose(dataset);
+    H5Pclose(properties);
+    H5Sclose(space);
+    H5Gclose(location);
+  }
+
+ private:
+  hid_t Group(const char* name) {
+    if (H5Lexists(file_, name, H5P_DEFAULT) > 0) return H5Gopen2(file_, name, H5P_DEFAULT);
+    return H5Gcreate2(file_, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+  }
+  bool chunked_;
+  hid_t file_;
+};
+
+// The particles of one type: distinct positions inside a box of 100.
+void WriteParticles(Hdf5SeedWriter& w, const char* group, int n, std::uint64_t first_id, bool masses,
+                    const char* smoothing_name) {
+  std::vector<double> coordinates;
+  std::vector<float> velocities, mass, smoothing;
+  std::vector<std::uint64_t> ids;
+  for (int i = 0; i < n; ++i) {
+    for (int axis = 0; axis < 3; ++axis) {
+      coordinates.push_back(static_cast<double>((i * 29 + axis * 7) % 90) + 0.25);
+      velocities.push_back(static_cast<float>(axis - i));
+    }
+    ids.push_back(first_id + static_cast<std::uint64_t>(i));
+    mass.push_back(0.5f + static_cast<float>(i));
+    smoothing.push_back(0.125f * static_cast<float>(i + 1));
+  }
+  w.Dataset(group, "Coordinates", H5T_NATIVE_DOUBLE, coordinates, 3);
+  w.Dataset(group, "Velocities", H5T_NATIVE_FLOAT, velocities, 3);
+  w.Dataset(group, "ParticleIDs", H5T_NATIVE_UINT64, ids, 1);
+  if (masses) w.Dataset(group, "Masses", H5T_NATIVE_FLOAT, mass, 1);
+  if (smoothing_name != nullptr) w.Dataset(group, smoothing_name, H5T_NATIVE_FLOAT, smoothing, 1);
+}
+
+// GADGET-4 / AREPO: gas with masses and smoothing lengths, dark matter with a table mass.
+std::string Gadget4Seed(const std::string& path, bool chunked) {
+  {
+    Hdf5SeedWriter w(path, chunked);
+    w.Attribute<std::uint32_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT32, {3, 5});
+    w.Attribute<std::uint64_t>("Header", "NumPart_Total", H5T_NATIVE_UINT64, {3, 5});
+    w.Attribute<std::uint32_t>("Header", "NumPart_Total_HighWord", H5T_NATIVE_UINT32, {0, 0});
+    w.Attribute<double>("Header", "MassTable", H5T_NATIVE_DOUBLE, {0.0, 4.0});
+    w.Attribute<std::int32_t>("Header", "NumFilesPerSnapshot", H5T_NATIVE_INT32, {1});
+    w.Attribute<double>("Header", "Time", H5T_NATIVE_DOUBLE, {0.25});
+    w.Attribute<double>("Header", "Redshift", H5T_NATIVE_DOUBLE, {3.0});
+    w.Attribute<double>("Header", "BoxSize", H5T_NATIVE_DOUBLE, {100.0});
+    w.Attribute<double>("Header", "Omega0", H5T_NATIVE_DOUBLE, {0.31});
+    w.Attribute<double>("Header", "OmegaLambda", H5T_NATIVE_DOUBLE, {0.69});
+    w.Attribute<double>("Header", "HubbleParam", H5T_NATIVE_DOUBLE, {0.68});
+    w.Attribute<std::int32_t>("Header", "Flag_DoublePrecision", H5T_NATIVE_INT32, {1});
+    WriteParticles(w, "PartType0", 3, 1, true, "SmoothingLength");
+    WriteParticles(w, "PartType1", 5, 4, false, nullptr);
+  }
+  return ReadFileString(path);
+}
+
+// SWIFT: per-axis box, the cosmology in its own group, SmoothingLengths.
+std::string SwiftSeed(const std::string& path) {
+  {
+    Hdf5SeedWriter w(path, false);
+    w.Attribute<std::uint64_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT64, {4, 2});
+    w.Attribute<std::uint64_t>("Header", "NumPart_Total", H5T_NATIVE_UINT64, {4, 2});
+    w.Attribute<double>("Header", "BoxSize", H5T_NATIVE_DOUBLE, {100, 100, 100});
+    w.Attribute<double>("Header", "Time", H5T_NATIVE_DOUBLE, {0.5});
+    w.Attribute<std::int32_t>("Header", "NumFilesPerSnapshot", H5T_NATIVE_INT32, {1});
+    w.Attribute<double>("Cosmology", "Redshift", H5T_NATIVE_DOUBLE, {1.0});
+    w.Attribute<double>("Cosmology", "Scale-factor", H5T_NATIVE_DOUBLE, {0.5});
+    w.Attribute<double>("Cosmology", "Omega_m", H5T_NATIVE_DOUBLE, {0.3});
+    w.Attribute<double>("Cosmology", "h", H5T_NATIVE_DOUBLE, {0.68});
+    w.Attribute<std::int32_t>("Cosmology", "Cosmological run", H5T_NATIVE_INT32, {1});
+    w.Attribute<std::int32_t>("Code", "Version", H5T_NATIVE_INT32, {1});
+    w.Attribute<float>("HydroScheme", "Kernel target N_ngb", H5T_NATIVE_FLOAT, {48.0f});
+    w.Attribute<float>("HydroScheme", "Kernel eta", H5T_NATIVE_FLOAT, {1.2348f});
+    WriteParticles(w, "PartType0", 4, 1, true, "SmoothingLengths");
+    WriteParticles(w, "PartType1", 2, 5, true, nullptr);
+  }
+  return ReadFileString(path);
+}
+
+}  // namespace
+
+std::vector<Seed> Seeds(const std::string& shared_data) {
+  const std::string path = (ScratchDirectory() / "seed.hdf5").string();
+  std::vector<Seed> seeds = {{"gadget4.hdf5", Gadget4Seed(path, false)},
+                             {"gadget4-chunked.hdf5", Gadget4Seed(path, true)},
+                             {"swift.hdf5", SwiftSeed(path)}};
+  // The time series repeats one layout: its first and last snapshots suffice.
+  for (auto& seed : SharedDataSeeds(shared_data, "gadget4_hdf5_galaxy_collision_timeseries", [](const std::string& name) {
+         return name == "snapshot_000.hdf5" || name == "snapshot_020.hdf5";
+       })) {
+    seeds.push_back(std::move(seed));
+  }
+  return seeds;
+}
+
+}  // namespace octocosm::fuzz
