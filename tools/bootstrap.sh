@@ -29,6 +29,8 @@ packages=(
   libpcl-dev
   # benchmarks draw their plots with gnuplot
   gnuplot-nox
+  # Not here: clang and libclang-rt-14-dev, which only the long libFuzzer runs
+  # need (docs/TESTING.md); CI runs the fuzz targets under our own driver.
 )
 
 install_packages() {
