@@ -6,7 +6,10 @@
 //
 // The input is a little archive of the store's files: a flag byte, then
 // sections of a u32 little-endian length and that many bytes (the last one
-// may run short): manifest.json first, then the page file of epoch 0, 1, ...
+// may run short): the page file of epoch 0, 1, ..., then manifest.json. The
+// page files come first so that mutations near the start, where the driver
+// makes half of its own, reach a page-file header and the index rather than
+// break the manifest's JSON.
 // Flag bit 0 re-seals the manifest, bit 1 the page files (store_fuzz_util.h).
 #include <algorithm>
 #include <cstddef>
@@ -40,7 +43,7 @@ inline constexpr std::uint8_t kSealPageFiles = 2;
 
 struct StoreFiles {
   std::uint8_t flags = 0;
-  std::vector<std::string> files;  // manifest.json, then one page file per epoch
+  std::vector<std::string> files;  // one page file per epoch, then manifest.json
 };
 
 StoreFiles Unpack(const std::uint8_t* data, std::size_t size) {
@@ -139,8 +142,8 @@ std::string SeedStore(const std::string& name, std::uint32_t epochs, std::size_t
   }
   StoreFiles store;
   store.flags = kSealManifest | kSealPageFiles;
-  store.files.push_back(ReadFileString(directory / kManifestFileName));
   for (std::uint32_t e = 0; e < epochs; ++e) store.files.push_back(ReadFileString(directory / EpochFileName(e)));
+  store.files.push_back(ReadFileString(directory / kManifestFileName));
   std::filesystem::remove_all(directory);
   return Pack(store);
 }
@@ -164,14 +167,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::filesystem::path directory = ScratchDirectory() / "store";
   std::filesystem::remove_all(directory);
   std::filesystem::create_directories(directory);
-  if (store.flags & kSealManifest) SealManifestText(store.files[0]);
+  std::string& manifest = store.files.back();
+  if (store.flags & kSealManifest) SealManifestText(manifest);
   WriteFileBytes(directory / kManifestFileName,
-                 {reinterpret_cast<const std::uint8_t*>(store.files[0].data()), store.files[0].size()});
-  for (std::size_t e = 1; e < store.files.size(); ++e) {
+                 {reinterpret_cast<const std::uint8_t*>(manifest.data()), manifest.size()});
+  for (std::size_t e = 0; e + 1 < store.files.size(); ++e) {
     std::string& file = store.files[e];
     const std::span<std::uint8_t> bytes(reinterpret_cast<std::uint8_t*>(file.data()), file.size());
     if (store.flags & kSealPageFiles) SealPageFile(bytes);
-    WriteFileBytes(directory / EpochFileName(static_cast<std::uint32_t>(e - 1)), bytes);
+    WriteFileBytes(directory / EpochFileName(static_cast<std::uint32_t>(e)), bytes);
   }
   try {
     ReadEveryBlock(Dataset::Open(directory.string()));
