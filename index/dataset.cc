@@ -13,22 +13,6 @@ namespace {
 // factor this close (relative) to an epoch's is that epoch's.
 constexpr double kSameScaleFactor = 1e-7;
 
-// The scale factor that the ingest's record of an epoch's input header
-// gives: its time in a cosmological run (tools/snapshot/snapshot_source.h),
-// or 1 / (1 + z) where the time is missing.
-std::optional<double> RecordedScaleFactor(const nlohmann::json& epoch) {
-  const auto input = epoch.find("input");
-  if (input == epoch.end() || !input->is_object() || !input->value("cosmological", false)) return std::nullopt;
-  const auto number = [&](const char* name) -> std::optional<double> {
-    const auto it = input->find(name);
-    if (it == input->end() || !it->is_number() || !std::isfinite(it->get<double>())) return std::nullopt;
-    return it->get<double>();
-  };
-  if (const std::optional<double> time = number("time"); time && *time > 0) return time;
-  if (const std::optional<double> z = number("redshift"); z && *z > -1) return 1 / (1 + *z);
-  return std::nullopt;
-}
-
 std::string Number(double x) {
   char text[32];
   std::snprintf(text, sizeof text, "%.9g", x);
@@ -93,70 +77,25 @@ double Dataset::FractionalEpochAt(const PhysicalTime& time) const {
 
 Dataset Dataset::Open(const std::string& directory) {
   Dataset dataset(StoreReader::Open(directory));
-  const nlohmann::json& meta = dataset.store_.dataset();
   const std::string manifest = (std::filesystem::path(directory) / "manifest.json").string();
-  try {
-    dataset.capacity_ = meta.at("capacity").get<std::size_t>();
-    dataset.max_level_ = meta.at("max_level").get<int>();
-    if (meta.contains("sampler")) {
-      const auto& sampler = meta.at("sampler");
-      dataset.sampler_.alpha = sampler.value("alpha", dataset.sampler_.alpha);
-      dataset.sampler_.density_grid_bits = sampler.value("density_grid_bits", dataset.sampler_.density_grid_bits);
-      dataset.sampler_.seed = sampler.value("seed", dataset.sampler_.seed);
-    }
-    const auto& epochs = meta.at("epochs");
-    if (epochs.size() != dataset.store_.epoch_count()) {
-      throw Error::Corruption(manifest, "dataset metadata describes " + std::to_string(epochs.size()) +
-                                            " epochs but the store has " + std::to_string(dataset.store_.epoch_count()));
-    }
-    for (const auto& epoch : epochs) {
-      dataset.scale_factors_.push_back(RecordedScaleFactor(epoch));
-      const auto& c = epoch.at("cube");
-      Cube cube{c.at("origin").get<std::array<double, 3>>(), c.at("size").get<double>(), c.at("periodic").get<bool>()};
-      cube.Validate();
-      dataset.cubes_.push_back(cube);
-      EpochSummary summary;
-      summary.points = epoch.at("points").get<std::uint64_t>();
-      if (epoch.contains("mass")) summary.mass = epoch.at("mass").get<double>();
-      if (epoch.contains("nodes")) summary.nodes = epoch.at("nodes").get<std::uint64_t>();
-      if (epoch.contains("leaves")) summary.leaves = epoch.at("leaves").get<std::uint64_t>();
-      if (epoch.contains("depth")) summary.depth = epoch.at("depth").get<int>();
-      dataset.summaries_.push_back(summary);
-      std::optional<EpochLink> link;
-      if (epoch.contains("to_next")) {
-        const auto& to_next = epoch.at("to_next");
-        link = EpochLink{to_next.at("velocity_scale").get<double>(), to_next.at("fit_residual").get<double>(),
-                         to_next.at("least_squares_scale").get<double>(), to_next.at("inlier_fraction").get<double>(),
-                         to_next.at("matched").get<std::uint64_t>(), to_next.value("max_excursion", 0.0)};
-      }
-      dataset.links_.push_back(link);
-    }
-    // Flags a store may lack (written before the column existed) mean "absent".
-    const auto flag = [&](const char* name, ColumnId id) { return meta.value(name, false) ? ColumnBit(id) : 0; };
-    dataset.every_epoch_columns_ = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
-                                   ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType) |
-                                   flag("has_velocity", ColumnId::kVelocity) | flag("has_id", ColumnId::kId);
-    dataset.forward_columns_ =
-        flag("has_displacement", ColumnId::kDisplacement) | flag("has_next_velocity", ColumnId::kNextVelocity);
-    dataset.backward_columns_ =
-        flag("has_prev_displacement", ColumnId::kPrevDisplacement) | flag("has_prev_velocity", ColumnId::kPrevVelocity);
-    dataset.cluster_columns_ =
-        flag("has_velocity_dispersion", ColumnId::kVelocityDispersion) | flag("has_shape", ColumnId::kShape);
-    if ((dataset.cluster_columns_ & ColumnBit(ColumnId::kVelocityDispersion)) &&
-        !(dataset.every_epoch_columns_ & ColumnBit(ColumnId::kVelocity))) {
-      throw Error::Corruption(manifest, "dataset metadata declares velocity dispersions without velocities");
-    }
-    const std::string ids = meta.value("id_index", "");
-    if (!ids.empty()) dataset.id_index_ = (std::filesystem::path(directory) / ids).string();
-  } catch (const nlohmann::json::exception& e) {
-    throw Error::Corruption(manifest, std::string("dataset metadata is not what octocosm ingest writes: ") + e.what());
-  } catch (const Error& e) {
-    if (e.kind() == ErrorKind::kInvalidArgument) throw Error::Corruption(manifest, e.what());
-    throw;
+  dataset.manifest_ = DatasetManifest::FromJson(dataset.store_.dataset(), manifest);
+  const DatasetManifest& m = dataset.manifest_;
+  if (m.epochs.size() != dataset.store_.epoch_count()) {
+    throw Error::Corruption(manifest, "dataset metadata describes " + std::to_string(m.epochs.size()) +
+                                          " epochs but the store has " + std::to_string(dataset.store_.epoch_count()));
   }
-  if (dataset.max_level_ < 0 || dataset.max_level_ > kMaxLevel || dataset.capacity_ == 0) {
-    throw Error::Corruption(manifest, "dataset metadata has an impossible capacity or depth limit");
-  }
+  for (const EpochRecord& epoch : m.epochs) dataset.scale_factors_.push_back(epoch.ScaleFactor());
+  const auto flag = [](bool set, ColumnId id) { return set ? ColumnBit(id) : 0; };
+  dataset.every_epoch_columns_ = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                                 ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType) |
+                                 flag(m.has_velocity, ColumnId::kVelocity) | flag(m.has_id, ColumnId::kId);
+  dataset.forward_columns_ =
+      flag(m.has_displacement, ColumnId::kDisplacement) | flag(m.has_next_velocity, ColumnId::kNextVelocity);
+  dataset.backward_columns_ =
+      flag(m.has_prev_displacement, ColumnId::kPrevDisplacement) | flag(m.has_prev_velocity, ColumnId::kPrevVelocity);
+  dataset.cluster_columns_ =
+      flag(m.has_velocity_dispersion, ColumnId::kVelocityDispersion) | flag(m.has_shape, ColumnId::kShape);
+  if (!m.id_index.empty()) dataset.id_index_ = (std::filesystem::path(directory) / m.id_index).string();
   return dataset;
 }
 
