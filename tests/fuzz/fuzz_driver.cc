@@ -16,7 +16,8 @@
 // --shared-data adds the real snapshots of the shared data folder to the
 // seeds, and exits with status 77 (ctest's skip) when the folder is absent.
 // A failing input is a crash, a sanitizer report or an uncaught exception;
-// the driver then names the iteration that failed, to replay it.
+// the driver then names the iteration that failed, to replay it. A seed made
+// in code that the target refuses fails the run too (exit status 1).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -284,7 +285,16 @@ int main(int argc, char** argv) {
     return 0;
   }
   g_iterations = iterations;
-  for (const Seed& seed : seeds) Run(seed.bytes);
+  for (const Seed& seed : seeds) {
+    const std::size_t refusals = RefusalCount();
+    Run(seed.bytes);
+    // The real snapshots include files read alone that belong to a set.
+    if (RefusalCount() != refusals && !shared) {
+      std::fprintf(stderr, "fuzz driver: the target refused its seed %s (OCTOCOSM_FUZZ_PRINT_ERRORS=1 says why)\n",
+                   seed.name.c_str());
+      return 1;
+    }
+  }
   for (g_iteration = 0; g_iteration < iterations; ++g_iteration) {
     Run(Mutator(g_seed, static_cast<std::uint64_t>(g_iteration)).Mutate(seeds));
   }
