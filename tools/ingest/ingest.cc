@@ -16,12 +16,14 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <unordered_set>
 
 #include <nlohmann/json.hpp>
 
 #include "index/block_codec.h"
+#include "index/dataset_manifest.h"
 #include "index/id_index.h"
 #include "storage/error.h"
 #include "storage/store_writer.h"
@@ -58,9 +60,9 @@ constexpr std::uint64_t kMaxChunkBufferBytes = std::uint64_t{256} << 20;
 // gathered columns and placement records, about 90 bytes a point) are fresh
 // memory, whose first touch is the costliest memory access on the virtual
 // machines this runs on; chunks this small keep them small and near the
-// caches. At 10^7 points (chunks of 1.25 million points before) it cut the
-// ingest from 1.51-1.57 s to 1.23-1.45 s and its peak RSS by about 175 MiB;
-// at 10^8 it changed little (docs/BENCHMARKS.md).
+// caches. At 10^7 points the ingest took 1.23-1.45 s with them against
+// 1.51-1.57 s with chunks of 1.25 million points, and about 175 MiB less
+// peak RSS; at 10^8 the size matters little (docs/BENCHMARKS.md).
 constexpr std::uint64_t kMaxChunkPoints = std::uint64_t{1} << 18;
 // The build threads take chunks from a window of this many per thread
 // (tools/ingest/chunk_queue.h), so the last ones built are among the last
@@ -110,10 +112,6 @@ class OutputGuard {
   bool committed_ = false;
   std::optional<RemoveOnInterrupt> remove_on_interrupt_;
 };
-
-nlohmann::json CubeJson(const Cube& cube) {
-  return {{"origin", cube.origin}, {"size", cube.size}, {"periodic", cube.periodic}};
-}
 
 nlohmann::json HeaderJson(const SnapshotHeader& h) {
   return {{"format", h.format},
@@ -414,6 +412,475 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
   return merger.Finish();
 }
 
+// The memory budget's shares (docs/INGEST.md): the sorted current and next
+// epochs 15 % each, the (ID, leaf) pairs 10 %, chunk buffers 30 %, chunk
+// builds 30 %. Phases overlap only partly, so the sum is a bound, not a
+// forecast.
+struct MemoryShares {
+  MemoryShares(std::uint64_t total, unsigned threads, const IngestOptions& options)
+      : budget(total),
+        build_points(std::max<std::uint64_t>(total * 3 / 10 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity)),
+        sort_run_records(static_cast<std::size_t>(
+            options.sort_run_points ? options.sort_run_points
+                                    : std::max<std::uint64_t>(total * 15 / 100 / sizeof(ParticleRecord), 1024))),
+        id_run_records(static_cast<std::size_t>(std::max<std::uint64_t>(total / 30 / sizeof(IdLeafRecord), 1024))),
+        id_table_slots(total / 10 / sizeof(std::uint32_t)),
+        chunk_buffer_bytes(static_cast<std::size_t>(std::min<std::uint64_t>(total * 3 / 10, kMaxChunkBufferBytes))) {}
+
+  std::uint64_t budget;
+  std::uint64_t build_points;    // the builds' 30 %, a thread's share in points
+  std::size_t sort_run_records;  // a sorted epoch's 15 %
+  // A third of the pairs' 10 %: while one run is sorted (with a scratch as
+  // large) the workers fill the next (tools/ingest/external_sorter.h).
+  std::size_t id_run_records;
+  // Or, for unique IDs in a compact range, the pairs' whole share as one table.
+  std::uint64_t id_table_slots;
+  // The chunk buffers' 30 %, capped: measured on this project's machines,
+  // buffering gigabytes of points costs more in first-touch page faults
+  // than spilling them to temporary files that stay in the OS page cache
+  // (docs/BENCHMARKS.md).
+  std::size_t chunk_buffer_bytes;
+  // A point set that fits whole in the chunk buffers' share (and the sorted
+  // epochs' too when there are none) is held in memory and chunked in place
+  // (Chunker::SplitResident); the split's own memory must fit the builds'
+  // and the ID pairs' shares (40 %): its cells go before the builds start,
+  // its index lists as their chunks are built.
+  std::uint64_t ResidentBytes(bool sorted_epochs) const { return budget * (sorted_epochs ? 3 : 6) / 10; }
+  std::uint64_t ResidentScratchBytes() const { return budget * 4 / 10; }
+};
+
+// One epoch's particles as the steps after the first see them: a pass that
+// can be repeated, wrapped into a periodic box, joined to the next epoch in
+// a series with IDs.
+struct EpochPoints {
+  ParticleSource* source = nullptr;
+  const SortedEpoch* current = nullptr;  // a series with IDs: this epoch and the next, sorted
+  const SortedEpoch* next = nullptr;
+  Cube cube;
+  std::string links_from_previous, links_to_next;  // the join's files (tools/ingest/epoch_join.h)
+  std::size_t chunk_particles = 0;
+  JoinStats join_stats;  // of the latest joined pass
+
+  void Pass(const std::function<void(const ParticleChunk&)>& consume) {
+    auto forward = [&](const ParticleChunk& chunk) {
+      if (!cube.periodic || InsideBox(chunk, cube)) return consume(chunk);
+      ParticleChunk wrapped = chunk;
+      WrapIntoBox(wrapped, cube);
+      consume(wrapped);
+    };
+    if (current != nullptr) {
+      join_stats = JoinedPass(*current, next, links_from_previous, links_to_next, cube.periodic ? cube.size : 0.0,
+                              chunk_particles, forward);
+    } else {
+      source->Rewind();
+      ParticleChunk chunk;
+      while (source->Next(chunk)) forward(chunk);
+    }
+  }
+};
+
+// An epoch cut into chunks, with what the cutting counted.
+struct ChunkedEpoch {
+  std::vector<Chunk> chunks;
+  ResidentEpoch resident;  // the points, when held in memory whole
+  IdCensus ids;
+};
+
+// A whole ingest: the store being written and what carries from one epoch
+// to the next. Ingest() below reads as its steps.
+class IngestRun {
+ public:
+  explicit IngestRun(const IngestOptions& options);
+  void IngestEpoch(std::size_t e);
+  IngestReport Finish();
+
+ private:
+  std::unique_ptr<ParticleSource> Smooth(std::unique_ptr<ParticleSource> raw);
+  std::unique_ptr<ParticleSource> Prepare(std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock);
+  std::unique_ptr<SortedEpoch> SortEpoch(ParticleSource& source, std::size_t e);
+  Bounds SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report);
+  Cube ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const;
+  ChunkedEpoch ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
+                          EpochPoints& points, EpochReport& epoch_report);
+  void RecordLinks(const EpochPoints& points, EpochReport& epoch_report);
+  void BuildAndWrite(std::size_t e, const SnapshotHeader& header, const Cube& cube, ChunkedEpoch& chunked,
+                     EpochReport& epoch_report, PhaseClock& clock);
+  void WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_table, ExternalSorter<IdLeafRecord>* id_pairs);
+
+  const IngestOptions& options_;
+  const std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  IngestReport report_;
+  unsigned threads_;
+  MemoryShares shares_;
+  std::unique_ptr<ParticleSource> source_;  // the epoch to ingest next, when opened ahead
+  bool has_id_, has_velocity_, join_epochs_;
+  DatasetManifest manifest_;
+  // Declared in the order they must be made; destroyed the other way round.
+  OutputGuard output_guard_;
+  StoreWriter store_;
+  std::unique_ptr<StoreWriter> id_store_;
+  std::uint32_t id_index_page_size_;
+  std::optional<TempDirectory> temp_;
+  std::vector<ScreenedEpoch> screened_;
+  bool source_smoothed_ = false;
+  std::unique_ptr<SortedEpoch> sorted_current_, sorted_next_;
+  std::unique_ptr<ParticleSource> next_source_;
+  std::uint64_t missing_in_prev_ = 0;  // of the epoch to come, counted by the join before it
+};
+
+IngestReport StartReport(const IngestOptions& options) {
+  if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
+  if (options.output.empty()) throw Error::InvalidArgument("ingest: no output store given (-o)");
+  if (options.cube) options.cube->Validate();
+  if (options.clip_box) options.clip_box->Validate("--clip-box");
+  Progress::SetQuiet(options.quiet);
+  IngestReport report;
+  report.memory_budget = options.memory_budget ? options.memory_budget : DefaultMemoryBudget();
+  if (report.memory_budget < (std::uint64_t{32} << 20)) {
+    throw Error::InvalidArgument("ingest: a memory budget below 32 MiB is too small to work in");
+  }
+  return report;
+}
+
+DatasetManifest ManifestFor(const IngestOptions& options, bool has_id, bool has_velocity, bool join_epochs) {
+  DatasetManifest m;
+  m.capacity = options.tree.capacity;
+  m.max_level = options.tree.max_level;
+  m.coarse = options.tree.coarse == CoarsePoints::kClusters ? "clusters" : "sample";
+  m.smoothing_rule = options.neighbours > 0 ? "neighbours" : "density grid";
+  m.neighbours = std::max(options.neighbours, 0);
+  m.sampler = options.tree.sampler;
+  m.has_velocity = has_velocity;
+  m.has_id = has_id;
+  m.has_displacement = join_epochs;
+  m.has_next_velocity = join_epochs && has_velocity;
+  m.has_prev_displacement = join_epochs;
+  m.has_prev_velocity = join_epochs && has_velocity;
+  m.has_velocity_dispersion = InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse);
+  m.has_shape = options.tree.coarse == CoarsePoints::kClusters;
+  m.id_index = has_id ? "ids" : "";
+  return m;
+}
+
+StoreWriterOptions StoreOptions(const IngestOptions& options) {
+  StoreWriterOptions store_options;
+  store_options.page_size = options.page_size;
+  return store_options;
+}
+
+IngestRun::IngestRun(const IngestOptions& options)
+    : options_(options),
+      report_(StartReport(options)),
+      threads_(options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency())),
+      shares_(report_.memory_budget, threads_, options),
+      // The first epoch, opened to learn what the series carries.
+      source_(OpenSnapshot(options.inputs[0], options.read)),
+      has_id_(source_->header().has_id),
+      has_velocity_(source_->header().has_velocity),
+      join_epochs_(has_id_ && options.inputs.size() > 1),
+      manifest_(ManifestFor(options, has_id_, has_velocity_, join_epochs_)),
+      output_guard_(options.output),
+      store_(options.output, manifest_.ToJson(),
+             AttributeSchema(has_velocity_, has_id_, join_epochs_, manifest_.has_velocity_dispersion, manifest_.has_shape),
+             StoreOptions(options)),
+      id_index_page_size_(std::max(options.page_size, kIdIndexMinPageSize)),
+      screened_(options.inputs.size()) {
+  if (has_id_) {
+    StoreWriterOptions id_store_options = StoreOptions(options);
+    id_store_options.page_size = id_index_page_size_;
+    id_store_ = std::make_unique<StoreWriter>((fs::path(options.output) / "ids").string(),
+                                              nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
+                                              nlohmann::json::object(), id_store_options);
+  }
+  output_guard_.StoreLocked();
+  // Inside the output by default: where this run may surely write, and where
+  // a rerun finds it if a kill leaves it behind (TempDirectory). Made after
+  // the store writers, which clear away an abandoned store first.
+  temp_.emplace(options.temp_dir.empty() ? options.output : options.temp_dir, "octocosm-ingest");
+}
+
+// The leaves' smoothing lengths from neighbours (or the snapshot's own),
+// computed before anything else reads the epoch, in the whole budget (the
+// pass is done with its memory before the epoch's build takes it, but for
+// the lengths themselves: 4 bytes a particle, or a mapped file).
+std::unique_ptr<ParticleSource> IngestRun::Smooth(std::unique_ptr<ParticleSource> raw) {
+  if (options_.neighbours <= 0) return raw;
+  SmoothingPassOptions pass;
+  pass.neighbours = options_.neighbours;
+  // Neighbours across the faces where ingest wraps into a periodic box.
+  pass.box_size = options_.cube ? 0.0 : raw->header().box_size;
+  pass.memory_budget = shares_.budget;
+  pass.temp_dir = temp_->path();
+  pass.threads = threads_;
+  pass.quiet = options_.quiet;
+  std::shared_ptr<const SmoothingLengthTable> table = ComputeSmoothingLengths(*raw, pass);
+  return WithSmoothingLengths(std::move(raw), std::move(table));
+}
+
+// Each epoch screened (Screen) before anything else reads it; the smoothing
+// pass then sees only the particles kept.
+std::unique_ptr<ParticleSource> IngestRun::Prepare(std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock) {
+  ScreenedEpoch s = Screen(std::move(raw), options_, "epoch " + std::to_string(e));
+  if (clock != nullptr && s.passes) clock->Lap("bounds");
+  std::unique_ptr<ParticleSource> prepared = Smooth(std::move(s.source));
+  screened_[e] = std::move(s);
+  return prepared;
+}
+
+std::unique_ptr<SortedEpoch> IngestRun::SortEpoch(ParticleSource& source, std::size_t e) {
+  Progress progress("epoch " + std::to_string(e) + ": sort by ID", source.header().total_count, "points");
+  auto sorted = std::make_unique<SortedEpoch>(source, temp_->path() + "/sorted-" + std::to_string(e),
+                                              shares_.sort_run_records, [&](std::uint64_t n) { progress.Add(n); });
+  if (sorted->duplicate_ids() > 0) RefuseDuplicateIds(source.header(), sorted->first_duplicate_id(), sorted->duplicate_ids());
+  progress.Finish();
+  return sorted;
+}
+
+// Step 1: a series with IDs is sorted by ID, this epoch and the next (read
+// ahead, and kept for the next epoch); otherwise the bounds come from the
+// screening's survey.
+Bounds IngestRun::SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report) {
+  Bounds bounds;
+  if (join_epochs_) {
+    if (!sorted_current_) sorted_current_ = SortEpoch(*source_, e);
+    if (e + 1 < options_.inputs.size()) {
+      if (options_.neighbours > 0) clock.Lap("sort");
+      next_source_ = Prepare(OpenSnapshot(options_.inputs[e + 1], options_.read), e + 1, nullptr);
+      if (options_.neighbours > 0) clock.Lap("next smoothing");
+      sorted_next_ = SortEpoch(*next_source_, e + 1);
+    }
+    bounds = sorted_current_->bounds();
+    epoch_report.duplicate_ids = sorted_current_->duplicate_ids();
+    clock.Lap(next_source_ && options_.neighbours > 0 ? "next sort" : "sort");
+  } else if (screened_[e].bounds) {
+    bounds = *screened_[e].bounds;  // the survey's, before the smoothing pass
+  }
+  return bounds;
+}
+
+Cube IngestRun::ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const {
+  if (options_.cube) return *options_.cube;
+  if (header.box_size > 0) return {{0, 0, 0}, header.box_size, true};
+  if (!bounds.empty()) return Cube::FromBounds(bounds.lo, bounds.hi);
+  return {};
+}
+
+// Step 2: chunks small enough for memory and the caches, and numerous
+// enough (four per thread) that every core has work until the end.
+ChunkedEpoch IngestRun::ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
+                                   EpochPoints& points, EpochReport& epoch_report) {
+  const std::uint64_t max_chunk =
+      options_.max_chunk_points
+          ? options_.max_chunk_points
+          : std::min(shares_.build_points, std::max<std::uint64_t>(std::min(expected / (4 * threads_), kMaxChunkPoints),
+                                                                   4 * options_.tree.capacity));
+  report_.max_chunk_points = std::max(report_.max_chunk_points, max_chunk);
+  ChunkerOptions chunker_options;
+  chunker_options.max_chunk_points = max_chunk;
+  chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
+  chunker_options.max_level = options_.tree.max_level;
+  chunker_options.leaf_capacity = options_.tree.capacity;
+  chunker_options.memory_bytes = shares_.chunk_buffer_bytes;
+  chunker_options.temp_dir = temp_->path();
+  chunker_options.threads = static_cast<int>(threads_);
+  chunker_options.columns.id = has_id_;
+  // Epoch by epoch: a series may give smoothing lengths in some snapshots only.
+  chunker_options.columns.smoothing = header.has_smoothing;
+  chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity_;
+  chunker_options.columns.vector(VectorColumn::kDisplacement) = points.next != nullptr;
+  chunker_options.columns.vector(VectorColumn::kNextVelocity) = points.next != nullptr && has_velocity_;
+  chunker_options.columns.vector(VectorColumn::kPrevDisplacement) = !points.links_from_previous.empty();
+  chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !points.links_from_previous.empty() && has_velocity_;
+  const bool resident = !options_.stream_chunks && expected < UINT32_MAX &&
+                        expected * chunker_options.columns.BytesPerPoint() <= shares_.ResidentBytes(join_epochs_) &&
+                        expected * Chunker::kResidentScratchBytesPerPoint <= shares_.ResidentScratchBytes();
+  ChunkedEpoch chunked{{}, ResidentEpoch(), IdCensus(shares_.id_table_slots)};
+  Progress progress(label + ": read + chunk", expected, "points");
+  PointPass counted = [&](const std::function<void(const ParticleChunk&)>& consume) {
+    points.Pass([&](const ParticleChunk& chunk) {
+      consume(chunk);
+      chunked.ids.Add(chunk.id);
+      progress.Add(chunk.size());
+    });
+  };
+  Chunker chunker(points.cube, chunker_options);
+  if (resident) {
+    const bool mapped = !join_epochs_ && MapResident(*points.source, points.cube, chunker_options.columns, threads_,
+                                                     chunked.resident, chunked.ids, progress);
+    if (!mapped) chunked.resident.Read(counted, expected, chunker_options.columns);
+    chunked.chunks = chunker.SplitTail(chunker.SplitResident(NodeKey::Root(), chunked.resident), chunked.resident,
+                                       kQueueWindowPerThread * threads_, max_chunk / kTailChunkFraction);
+  } else {
+    chunked.chunks = chunker.Split(NodeKey::Root(), counted);
+  }
+  epoch_report.spilled_points = chunker.spilled_points();
+  epoch_report.resident = resident;
+  epoch_report.mapped = chunked.resident.mapped();
+  return chunked;
+}
+
+// What the join to the next epoch found: missing particles and the fit of
+// the curves between the two.
+void IngestRun::RecordLinks(const EpochPoints& points, EpochReport& epoch_report) {
+  const JoinStats& join = points.join_stats;
+  epoch_report.missing_in_next = join.missing_in_next;
+  epoch_report.missing_in_prev = missing_in_prev_;
+  missing_in_prev_ = join.new_in_next;
+  if (points.next == nullptr) return;
+  const VelocityScaleFit& fit = join.fit;
+  // A Hermite curve strays from its chord by at most 4/27 of each tangent
+  // (the peak of the basis functions h10 and h11).
+  const double excursion = join.max_displacement + 4.0 / 27.0 * std::fabs(fit.velocity_scale()) * join.max_speed_sum;
+  epoch_report.to_next = EpochLink{fit.velocity_scale(), fit.fit_residual(), fit.least_squares_scale(),
+                                   fit.inlier_fraction(), join.matched, excursion};
+}
+
+// Step 5, the ID index. It needs only the leaves, so it is written on a
+// thread of its own from when the last chunk is built, while the merger
+// closes the nodes above it, and while the epoch's page file is finished
+// (mostly waiting for fsync). The store and the ID store share no state.
+void IngestRun::WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_table,
+                             ExternalSorter<IdLeafRecord>* id_pairs) {
+  if (id_pairs != nullptr) id_pairs->Finish();
+  id_store_->BeginEpoch(header.time, header.redshift);
+  IdIndexEpochWriter ids(*id_store_, id_index_page_size_);
+  if (id_table != nullptr) {
+    if (id_table->narrow()) {
+      ids.AddTable(id_table->first(), id_table->narrow_slots(), id_table->leaves());
+    } else {
+      ids.AddTable(id_table->first(), id_table->wide_slots(), id_table->leaves());
+    }
+  } else {
+    auto reader = id_pairs->Open();
+    IdLeafRecord r{};
+    for (std::uint64_t n = 0, previous = 0; reader.Next(r); ++n, previous = r.key) {
+      // What the census could not see: a repeat among IDs too far apart for its table.
+      if (n > 0 && r.key == previous) RefuseDuplicateIds(header, r.key, 0);
+      ids.Add(r.key, NodeKey::FromValue(r.leaf));
+    }
+  }
+  ids.Finish();
+  id_store_->EndEpoch();
+}
+
+// Steps 3 and 4: the chunks' subtrees and the levels above them into the
+// store; step 5 beside them.
+void IngestRun::BuildAndWrite(std::size_t e, const SnapshotHeader& header, const Cube& cube, ChunkedEpoch& chunked,
+                              EpochReport& epoch_report, PhaseClock& clock) {
+  store_.BeginEpoch(header.time, header.redshift);
+  std::unique_ptr<DenseIdTable> id_table;
+  std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
+  if (has_id_ && chunked.ids.dense() && chunked.ids.count() == epoch_report.points) {
+    id_table = std::make_unique<DenseIdTable>(chunked.ids.first(), chunked.ids.span());
+  } else if (has_id_) {
+    epoch_report.ids_sorted = true;
+    id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp_->path() + "/ids-" + std::to_string(e),
+                                                             shares_.id_run_records);
+    id_pairs->Reserve(static_cast<std::size_t>(epoch_report.points));
+  }
+  EpochBuild build;
+  build.cube = &cube;
+  build.tree = &options_.tree;
+  build.store = &store_;
+  build.id_table = id_table.get();
+  build.id_pairs = id_pairs.get();
+  build.report = &epoch_report;
+  std::future<void> id_index_written;
+  {
+    Progress progress("epoch " + std::to_string(e) + ": build", epoch_report.points, "points");
+    build.progress = &progress;
+    const NodePoints root = BuildChunks(std::move(chunked.chunks), chunked.resident, build, threads_, [&] {
+      if (has_id_) {
+        id_index_written = std::async(std::launch::async, [&] { WriteIdIndex(header, id_table.get(), id_pairs.get()); });
+      }
+    });
+    chunked.resident = ResidentEpoch();
+    for (double w : root.weight) epoch_report.mass += w;
+    progress.Finish();
+  }
+  clock.Lap("build");
+  std::future<void> epoch_written = std::async(std::launch::async, [this] { store_.EndEpoch(); });
+  if (has_id_) {
+    id_index_written.get();
+    clock.Lap("ids");
+  }
+  epoch_written.get();
+  clock.Lap("write");
+}
+
+EpochRecord RecordOf(const SnapshotHeader& header, const Cube& cube, const EpochReport& r) {
+  EpochRecord record;
+  record.input = HeaderJson(header);
+  record.cube = cube;
+  record.summary.points = r.points;
+  record.summary.mass = r.mass;
+  record.summary.nodes = r.nodes;
+  record.summary.leaves = r.leaves;
+  record.summary.depth = r.depth;
+  record.missing_in_next = r.missing_in_next;
+  record.missing_in_prev = r.missing_in_prev;
+  record.duplicate_ids = r.duplicate_ids;
+  record.to_next = r.to_next;
+  return record;
+}
+
+void IngestRun::IngestEpoch(std::size_t e) {
+  if (!source_) source_ = OpenSnapshot(options_.inputs[e], options_.read);
+  EpochReport epoch_report;
+  PhaseClock clock(epoch_report);
+  if (!source_smoothed_) {
+    source_ = Prepare(std::move(source_), e, &clock);
+    if (options_.neighbours > 0) clock.Lap("smoothing");
+  }
+  const SnapshotHeader header = source_->header();
+  if (header.has_id != has_id_ || header.has_velocity != has_velocity_) {
+    throw Error::BadInput(header.files.front(), "this epoch " + std::string(header.has_id ? "has" : "lacks") +
+                                                    " IDs / velocities unlike epoch 0; all epochs of a series must carry the same columns");
+  }
+  const Bounds bounds = SortOrBound(e, clock, epoch_report);
+  EpochPoints points;
+  points.source = source_.get();
+  points.current = join_epochs_ ? sorted_current_.get() : nullptr;
+  points.next = sorted_next_.get();
+  points.cube = ChooseCube(header, bounds);
+  points.links_from_previous = join_epochs_ && e > 0 ? LinkFilePath(temp_->path(), e) : "";
+  points.links_to_next = points.next != nullptr ? LinkFilePath(temp_->path(), e + 1) : "";
+  points.chunk_particles = options_.read.chunk_particles;
+
+  const std::uint64_t expected = join_epochs_ ? bounds.count : header.total_count;
+  ChunkedEpoch chunked = ChunkEpoch("epoch " + std::to_string(e), header, expected, points, epoch_report);
+  clock.Lap("read+chunk");
+  if (has_id_ && chunked.ids.repeated_id()) RefuseDuplicateIds(header, *chunked.ids.repeated_id(), 0);
+  for (const Chunk& c : chunked.chunks) epoch_report.points += c.point_count;
+  epoch_report.read_points = screened_[e].read;
+  epoch_report.dropped_points = screened_[e].dropped;
+  epoch_report.chunks = chunked.chunks.size();
+  if (!points.links_from_previous.empty()) std::remove(points.links_from_previous.c_str());
+  RecordLinks(points, epoch_report);
+
+  BuildAndWrite(e, header, points.cube, chunked, epoch_report, clock);
+  manifest_.epochs.push_back(RecordOf(header, points.cube, epoch_report));
+  report_.input_points += epoch_report.points;
+  report_.read_points += epoch_report.read_points;
+  report_.dropped_points += epoch_report.dropped_points;
+  report_.epochs.push_back(epoch_report);
+
+  // The next epoch reuses what this one read ahead.
+  sorted_current_ = std::move(sorted_next_);
+  source_ = std::move(next_source_);
+  source_smoothed_ = source_ != nullptr;
+}
+
+IngestReport IngestRun::Finish() {
+  if (id_store_) id_store_->Finish();
+  store_.SetDataset(manifest_.ToJson());
+  store_.Finish();
+  output_guard_.Commit();
+  report_.store_bytes = store_.bytes_written() + (id_store_ ? id_store_->bytes_written() : 0);
+  report_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return report_;
+}
+
 }  // namespace
 
 std::uint64_t DefaultMemoryBudget() {
@@ -423,376 +890,12 @@ std::uint64_t DefaultMemoryBudget() {
   return std::max<std::uint64_t>(physical / 2, std::uint64_t{256} << 20);
 }
 
+// The pipeline: for each epoch, screen and smooth, sort or bound, chunk,
+// build, write (IngestRun::IngestEpoch); then the manifest.
 IngestReport Ingest(const IngestOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
-  if (options.output.empty()) throw Error::InvalidArgument("ingest: no output store given (-o)");
-  if (options.cube) options.cube->Validate();
-  if (options.clip_box) options.clip_box->Validate("--clip-box");
-  Progress::SetQuiet(options.quiet);
-
-  IngestReport report;
-  report.memory_budget = options.memory_budget ? options.memory_budget : DefaultMemoryBudget();
-  if (report.memory_budget < (std::uint64_t{32} << 20)) {
-    throw Error::InvalidArgument("ingest: a memory budget below 32 MiB is too small to work in");
-  }
-  const unsigned threads = options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
-  const std::uint64_t budget = report.memory_budget;
-  // The budget's shares (docs/INGEST.md): the sorted current and next epochs
-  // 15 % each, the (ID, leaf) pairs 10 %, chunk buffers 30 %, chunk builds
-  // 30 %. Phases overlap only partly, so the sum is a bound, not a forecast.
-  const std::uint64_t build_budget_points =
-      std::max<std::uint64_t>(budget * 3 / 10 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity);
-  const std::size_t sort_run_records = static_cast<std::size_t>(
-      options.sort_run_points ? options.sort_run_points : std::max<std::uint64_t>(budget * 15 / 100 / sizeof(ParticleRecord), 1024));
-  // A third of the pairs' share: while one run is sorted (with a scratch as
-  // large) the workers fill the next (tools/ingest/external_sorter.h).
-  const std::size_t id_run_records = static_cast<std::size_t>(std::max<std::uint64_t>(budget / 30 / sizeof(IdLeafRecord), 1024));
-  // Or, for unique IDs in a compact range, the whole share as one table.
-  const std::uint64_t id_table_slots = budget / 10 / sizeof(std::uint32_t);
-
-  // Open the first epoch to learn what the series carries.
-  std::unique_ptr<ParticleSource> source = OpenSnapshot(options.inputs[0], options.read);
-  bool source_smoothed = false;
-  const bool has_id = source->header().has_id;
-  const bool has_velocity = source->header().has_velocity;
-  const bool join_epochs = has_id && options.inputs.size() > 1;
-
-  OutputGuard output_guard(options.output);
-
-  nlohmann::json dataset = {{"generator", "octocosm ingest"},
-                            {"capacity", options.tree.capacity},
-                            {"max_level", options.tree.max_level},
-                            {"coarse", options.tree.coarse == CoarsePoints::kClusters ? "clusters" : "sample"},
-                            {"smoothing", {{"rule", options.neighbours > 0 ? "neighbours" : "density grid"},
-                                           {"neighbours", std::max(options.neighbours, 0)}}},
-                            {"sampler", {{"alpha", options.tree.sampler.alpha},
-                                         {"density_grid_bits", options.tree.sampler.density_grid_bits},
-                                         {"seed", options.tree.sampler.seed}}},
-                            {"has_velocity", has_velocity},
-                            {"has_id", has_id},
-                            {"has_displacement", join_epochs},
-                            {"has_next_velocity", join_epochs && has_velocity},
-                            {"has_prev_displacement", join_epochs},
-                            {"has_prev_velocity", join_epochs && has_velocity},
-                            {"has_velocity_dispersion", InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse)},
-                            {"has_shape", options.tree.coarse == CoarsePoints::kClusters},
-                            {"id_index", has_id ? "ids" : ""},
-                            {"epochs", nlohmann::json::array()}};
-  StoreWriterOptions store_options;
-  store_options.page_size = options.page_size;
-  StoreWriter store(options.output, dataset,
-                    AttributeSchema(has_velocity, has_id, join_epochs,
-                                    InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse),
-                                    options.tree.coarse == CoarsePoints::kClusters),
-                    store_options);
-  std::unique_ptr<StoreWriter> id_store;
-  const std::uint32_t id_index_page_size = std::max(options.page_size, kIdIndexMinPageSize);
-  if (has_id) {
-    StoreWriterOptions id_store_options = store_options;
-    id_store_options.page_size = id_index_page_size;
-    id_store = std::make_unique<StoreWriter>((fs::path(options.output) / "ids").string(),
-                                             nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
-                                             nlohmann::json::object(), id_store_options);
-  }
-  output_guard.StoreLocked();
-  // Inside the output by default: where this run may surely write, and where
-  // a rerun finds it if a kill leaves it behind (TempDirectory). Made after
-  // the store writers, which clear away an abandoned store first.
-  TempDirectory temp(options.temp_dir.empty() ? options.output : options.temp_dir, "octocosm-ingest");
-
-  // The leaves' smoothing lengths from neighbours (or the snapshot's own),
-  // computed before anything else reads the epoch, in the whole budget (the
-  // pass is done with its memory before the epoch's build takes it, but for
-  // the lengths themselves: 4 bytes a particle, or a mapped file).
-  auto smooth = [&](std::unique_ptr<ParticleSource> raw) -> std::unique_ptr<ParticleSource> {
-    if (options.neighbours <= 0) return raw;
-    SmoothingPassOptions pass;
-    pass.neighbours = options.neighbours;
-    // Neighbours across the faces where ingest wraps into a periodic box.
-    pass.box_size = options.cube ? 0.0 : raw->header().box_size;
-    pass.memory_budget = budget;
-    pass.temp_dir = temp.path();
-    pass.threads = threads;
-    pass.quiet = options.quiet;
-    std::shared_ptr<const SmoothingLengthTable> table = ComputeSmoothingLengths(*raw, pass);
-    return WithSmoothingLengths(std::move(raw), std::move(table));
-  };
-
-  // Each epoch screened (Screen) before anything else reads it; the
-  // smoothing pass then sees only the particles kept.
-  std::vector<ScreenedEpoch> screened(options.inputs.size());
-  auto prepare = [&](std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock) {
-    ScreenedEpoch s = Screen(std::move(raw), options, "epoch " + std::to_string(e));
-    if (clock != nullptr && s.passes) clock->Lap("bounds");
-    std::unique_ptr<ParticleSource> prepared = smooth(std::move(s.source));
-    screened[e] = std::move(s);
-    return prepared;
-  };
-
-  std::unique_ptr<SortedEpoch> sorted_current, sorted_next;
-  std::uint64_t missing_in_prev = 0;  // of the epoch to come, counted by the join before it
-  auto sort_epoch = [&](ParticleSource& s, std::size_t e) {
-    Progress progress("epoch " + std::to_string(e) + ": sort by ID", s.header().total_count, "points");
-    auto sorted = std::make_unique<SortedEpoch>(s, temp.path() + "/sorted-" + std::to_string(e), sort_run_records,
-                                                [&](std::uint64_t n) { progress.Add(n); });
-    if (sorted->duplicate_ids() > 0) RefuseDuplicateIds(s.header(), sorted->first_duplicate_id(), sorted->duplicate_ids());
-    progress.Finish();
-    return sorted;
-  };
-
-  for (std::size_t e = 0; e < options.inputs.size(); ++e) {
-    if (!source) source = OpenSnapshot(options.inputs[e], options.read);
-    EpochReport epoch_report;
-    PhaseClock clock(epoch_report);
-    if (!source_smoothed) {
-      source = prepare(std::move(source), e, &clock);
-      if (options.neighbours > 0) clock.Lap("smoothing");
-    }
-    const SnapshotHeader header = source->header();
-    if (header.has_id != has_id || header.has_velocity != has_velocity) {
-      throw Error::BadInput(header.files.front(), "this epoch " + std::string(header.has_id ? "has" : "lacks") +
-                                                      " IDs / velocities unlike epoch 0; all epochs of a series must carry the same columns");
-    }
-    const std::string label = "epoch " + std::to_string(e);
-
-    // 1. sort (series with IDs) or bounds.
-    std::unique_ptr<ParticleSource> next_source;
-    Bounds bounds;
-    if (join_epochs) {
-      if (!sorted_current) sorted_current = sort_epoch(*source, e);
-      if (e + 1 < options.inputs.size()) {
-        if (options.neighbours > 0) clock.Lap("sort");
-        next_source = prepare(OpenSnapshot(options.inputs[e + 1], options.read), e + 1, nullptr);
-        if (options.neighbours > 0) clock.Lap("next smoothing");
-        sorted_next = sort_epoch(*next_source, e + 1);
-      }
-      bounds = sorted_current->bounds();
-      epoch_report.duplicate_ids = sorted_current->duplicate_ids();
-    } else if (screened[e].bounds) {
-      bounds = *screened[e].bounds;  // the survey's, before the smoothing pass
-    }
-
-    if (join_epochs) clock.Lap(next_source && options.neighbours > 0 ? "next sort" : "sort");
-    Cube cube;
-    if (options.cube) {
-      cube = *options.cube;
-    } else if (header.box_size > 0) {
-      cube = {{0, 0, 0}, header.box_size, true};
-    } else if (!bounds.empty()) {
-      cube = Cube::FromBounds(bounds.lo, bounds.hi);
-    }
-
-    // The epoch's points as a repeatable pass, wrapped into a periodic box.
-    const SortedEpoch* next_sorted = sorted_next.get();
-    const double box = cube.periodic ? cube.size : 0.0;
-    const std::string links_from_previous = join_epochs && e > 0 ? LinkFilePath(temp.path(), e) : "";
-    const std::string links_to_next = next_sorted != nullptr ? LinkFilePath(temp.path(), e + 1) : "";
-    JoinStats join_stats;
-    PointPass pass = [&](const std::function<void(const ParticleChunk&)>& consume) {
-      auto forward = [&](const ParticleChunk& chunk) {
-        if (!cube.periodic || InsideBox(chunk, cube)) return consume(chunk);
-        ParticleChunk wrapped = chunk;
-        WrapIntoBox(wrapped, cube);
-        consume(wrapped);
-      };
-      if (join_epochs) {
-        join_stats = JoinedPass(*sorted_current, next_sorted, links_from_previous, links_to_next, box,
-                                options.read.chunk_particles, forward);
-      } else {
-        source->Rewind();
-        ParticleChunk chunk;
-        while (source->Next(chunk)) forward(chunk);
-      }
-    };
-
-    // 2. chunk. Chunks small enough for memory and the caches, and numerous
-    // enough (four per thread) that every core has work until the end.
-    const std::uint64_t expected = join_epochs ? bounds.count : header.total_count;
-    const std::uint64_t max_chunk =
-        options.max_chunk_points
-            ? options.max_chunk_points
-            : std::min(build_budget_points,
-                       std::max<std::uint64_t>(std::min(expected / (4 * threads), kMaxChunkPoints), 4 * options.tree.capacity));
-    report.max_chunk_points = std::max(report.max_chunk_points, max_chunk);
-    ChunkerOptions chunker_options;
-    chunker_options.max_chunk_points = max_chunk;
-    chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
-    chunker_options.max_level = options.tree.max_level;
-    chunker_options.leaf_capacity = options.tree.capacity;
-    // Capped: measured on this project's machines, buffering gigabytes of
-    // points costs more in first-touch page faults than spilling them to
-    // temporary files that stay in the OS page cache (docs/BENCHMARKS.md).
-    chunker_options.memory_bytes = static_cast<std::size_t>(std::min<std::uint64_t>(budget * 3 / 10, kMaxChunkBufferBytes));
-    chunker_options.temp_dir = temp.path();
-    chunker_options.threads = static_cast<int>(threads);
-    chunker_options.columns.id = has_id;
-    // Epoch by epoch: a series may give smoothing lengths in some snapshots only.
-    chunker_options.columns.smoothing = header.has_smoothing;
-    chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity;
-    chunker_options.columns.vector(VectorColumn::kDisplacement) = next_sorted != nullptr;
-    chunker_options.columns.vector(VectorColumn::kNextVelocity) = next_sorted != nullptr && has_velocity;
-    chunker_options.columns.vector(VectorColumn::kPrevDisplacement) = !links_from_previous.empty();
-    chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !links_from_previous.empty() && has_velocity;
-    // A point set that fits in its share of the budget whole (the chunk
-    // buffers' share, and the sorted epochs' too when there are none) is read
-    // into memory once and chunked in place (Chunker::SplitResident). The
-    // split's own memory must fit the builds' and the ID pairs' shares: its
-    // cells go before the builds start, its index lists as their chunks are
-    // built.
-    const std::uint64_t resident_share = budget * (join_epochs ? 3 : 6) / 10;
-    const bool resident = !options.stream_chunks && expected < UINT32_MAX &&
-                          expected * chunker_options.columns.BytesPerPoint() <= resident_share &&
-                          expected * Chunker::kResidentScratchBytesPerPoint <= budget * 4 / 10;
-    ResidentEpoch resident_points;
-    std::vector<Chunk> chunks;
-    IdCensus id_census(id_table_slots);
-    {
-      Progress progress(label + ": read + chunk", expected, "points");
-      PointPass counted = [&](const std::function<void(const ParticleChunk&)>& consume) {
-        pass([&](const ParticleChunk& chunk) {
-          consume(chunk);
-          id_census.Add(chunk.id);
-          progress.Add(chunk.size());
-        });
-      };
-      Chunker chunker(cube, chunker_options);
-      if (resident) {
-        const bool mapped = !join_epochs && MapResident(*source, cube, chunker_options.columns, threads, resident_points,
-                                                        id_census, progress);
-        if (!mapped) resident_points.Read(counted, expected, chunker_options.columns);
-        chunks = chunker.SplitTail(chunker.SplitResident(NodeKey::Root(), resident_points), resident_points,
-                                   kQueueWindowPerThread * threads, max_chunk / kTailChunkFraction);
-      } else {
-        chunks = chunker.Split(NodeKey::Root(), counted);
-      }
-      epoch_report.spilled_points = chunker.spilled_points();
-      epoch_report.resident = resident;
-      epoch_report.mapped = resident_points.mapped();
-    }
-    clock.Lap("read+chunk");
-    if (has_id && id_census.repeated_id()) RefuseDuplicateIds(header, *id_census.repeated_id(), 0);
-    for (const Chunk& c : chunks) epoch_report.points += c.point_count;
-    epoch_report.read_points = screened[e].read;
-    epoch_report.dropped_points = screened[e].dropped;
-    epoch_report.chunks = chunks.size();
-    if (!links_from_previous.empty()) std::remove(links_from_previous.c_str());
-    epoch_report.missing_in_next = join_stats.missing_in_next;
-    epoch_report.missing_in_prev = missing_in_prev;
-    missing_in_prev = join_stats.new_in_next;
-    if (next_sorted != nullptr) {
-      const VelocityScaleFit& fit = join_stats.fit;
-      // A Hermite curve strays from its chord by at most 4/27 of each
-      // tangent (the peak of the basis functions h10 and h11).
-      const double excursion = join_stats.max_displacement +
-                               4.0 / 27.0 * std::fabs(fit.velocity_scale()) * join_stats.max_speed_sum;
-      epoch_report.to_next = EpochLink{fit.velocity_scale(), fit.fit_residual(), fit.least_squares_scale(),
-                                       fit.inlier_fraction(), join_stats.matched, excursion};
-    }
-
-    // 3. build, 4. top levels.
-    store.BeginEpoch(header.time, header.redshift);
-    std::unique_ptr<DenseIdTable> id_table;
-    std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
-    if (has_id && id_census.dense() && id_census.count() == epoch_report.points) {
-      id_table = std::make_unique<DenseIdTable>(id_census.first(), id_census.span());
-    } else if (has_id) {
-      epoch_report.ids_sorted = true;
-      id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp.path() + "/ids-" + std::to_string(e), id_run_records);
-      id_pairs->Reserve(static_cast<std::size_t>(epoch_report.points));
-    }
-    EpochBuild build;
-    build.cube = &cube;
-    build.tree = &options.tree;
-    build.store = &store;
-    build.id_table = id_table.get();
-    build.id_pairs = id_pairs.get();
-    build.report = &epoch_report;
-    // 5. ID index. It needs only the leaves, so it is written on a thread of
-    // its own from when the last chunk is built, while the merger closes the
-    // nodes above it, and while the epoch's page file is finished (mostly
-    // waiting for fsync). The store and the ID store share no state.
-    auto write_id_index = [&] {
-      if (id_pairs) id_pairs->Finish();
-      id_store->BeginEpoch(header.time, header.redshift);
-      IdIndexEpochWriter ids(*id_store, id_index_page_size);
-      if (id_table) {
-        if (id_table->narrow()) {
-          ids.AddTable(id_table->first(), id_table->narrow_slots(), id_table->leaves());
-        } else {
-          ids.AddTable(id_table->first(), id_table->wide_slots(), id_table->leaves());
-        }
-      } else {
-        auto reader = id_pairs->Open();
-        IdLeafRecord r{};
-        for (std::uint64_t n = 0, previous = 0; reader.Next(r); ++n, previous = r.key) {
-          // What the census could not see: a repeat among IDs too far apart for its table.
-          if (n > 0 && r.key == previous) RefuseDuplicateIds(header, r.key, 0);
-          ids.Add(r.key, NodeKey::FromValue(r.leaf));
-        }
-      }
-      ids.Finish();
-      id_store->EndEpoch();
-    };
-    std::future<void> id_index_written;
-    {
-      Progress progress(label + ": build", epoch_report.points, "points");
-      build.progress = &progress;
-      const NodePoints root = BuildChunks(std::move(chunks), resident_points, build, threads, [&] {
-        if (has_id) id_index_written = std::async(std::launch::async, write_id_index);
-      });
-      resident_points = ResidentEpoch();
-      for (double w : root.weight) epoch_report.mass += w;
-      progress.Finish();
-    }
-    clock.Lap("build");
-    std::future<void> epoch_written = std::async(std::launch::async, [&store] { store.EndEpoch(); });
-    if (has_id) {
-      id_index_written.get();
-      clock.Lap("ids");
-    }
-    epoch_written.get();
-    clock.Lap("write");
-
-    nlohmann::json epoch_json = {{"epoch", e},
-                                 {"input", HeaderJson(header)},
-                                 {"cube", CubeJson(cube)},
-                                 {"points", epoch_report.points},
-                                 {"mass", epoch_report.mass},
-                                 {"nodes", epoch_report.nodes},
-                                 {"leaves", epoch_report.leaves},
-                                 {"depth", epoch_report.depth},
-                                 {"missing_in_next", epoch_report.missing_in_next},
-                                 {"missing_in_prev", epoch_report.missing_in_prev},
-                                 {"duplicate_ids", epoch_report.duplicate_ids}};
-    if (epoch_report.to_next) {
-      const EpochLink& link = *epoch_report.to_next;
-      epoch_json["to_next"] = {{"velocity_scale", link.velocity_scale},
-                               {"fit_residual", link.fit_residual},
-                               {"least_squares_scale", link.least_squares_scale},
-                               {"inlier_fraction", link.inlier_fraction},
-                               {"matched", link.matched},
-                               {"max_excursion", link.max_excursion}};
-    }
-    dataset["epochs"].push_back(std::move(epoch_json));
-    report.input_points += epoch_report.points;
-    report.read_points += epoch_report.read_points;
-    report.dropped_points += epoch_report.dropped_points;
-    report.epochs.push_back(epoch_report);
-
-    // The next epoch reuses what this one read ahead.
-    sorted_current = std::move(sorted_next);
-    source = std::move(next_source);
-    source_smoothed = source != nullptr;
-  }
-
-  if (id_store) id_store->Finish();
-  store.SetDataset(dataset);
-  store.Finish();
-  output_guard.Commit();
-  report.store_bytes = store.bytes_written() + (id_store ? id_store->bytes_written() : 0);
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  return report;
+  IngestRun run(options);
+  for (std::size_t e = 0; e < options.inputs.size(); ++e) run.IngestEpoch(e);
+  return run.Finish();
 }
 
 }  // namespace octocosm
