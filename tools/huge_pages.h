@@ -2,8 +2,8 @@
 //
 // Ingest touches gigabytes of fresh memory (chunk buffers, node points,
 // encoded blocks). With 4 KiB pages every first touch is a page fault: about
-// 400,000 of them for 10^7 points, a fifth of the run's wall time on this
-// project's machines (docs/BENCHMARKS.md). glibc's tunable
+// 409,000 of them for 10^7 points, 44,000 with huge pages, and at 10^8 the
+// ingest takes about a tenth less time with them (docs/BENCHMARKS.md). glibc's tunable
 // `glibc.malloc.hugetlb=1` makes malloc advise the kernel to back its memory
 // with 2 MiB transparent huge pages (where THP is set to "madvise", the
 // common default), but glibc reads tunables only from the environment at
