@@ -2,8 +2,6 @@
 
 #include <bit>
 #include <cmath>
-#include <cstring>
-#include <optional>
 #include <utility>
 #include <string>
 #include <vector>

@@ -29,12 +29,6 @@ namespace {
 namespace fs = std::filesystem;
 using namespace testing_support;
 
-struct Particle {
-  double x[3];
-  double mass;
-  std::uint64_t id;
-};
-
 // Clustered points in [origin, origin + size)^3: Gaussian halos on a uniform background.
 std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double origin, double size) {
   std::mt19937_64 rng(seed);
@@ -53,16 +47,6 @@ std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double origin
     p.id = 7 + i;
   }
   return particles;
-}
-
-std::string WriteRaw(const fs::path& path, const std::vector<Particle>& particles) {
-  std::ofstream out(path, std::ios::binary);
-  for (const Particle& p : particles) {
-    out.write(reinterpret_cast<const char*>(p.x), sizeof p.x);
-    out.write(reinterpret_cast<const char*>(&p.mass), sizeof p.mass);
-    out.write(reinterpret_cast<const char*>(&p.id), sizeof p.id);
-  }
-  return path.string();
 }
 
 PositionSurvey Survey(const std::vector<Particle>& particles) {

@@ -35,12 +35,6 @@ namespace fs = std::filesystem;
 using namespace testing_support;
 
 
-struct Particle {
-  double x[3];
-  double mass;
-  std::uint64_t id;
-};
-
 // Clustered points: a few Gaussian halos on a uniform background.
 std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double box) {
   std::mt19937_64 rng(seed);
@@ -61,16 +55,6 @@ std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double box) {
     p.id = 1000 + i * 3;
   }
   return particles;
-}
-
-std::string WriteRaw(const fs::path& path, const std::vector<Particle>& particles) {
-  std::ofstream out(path, std::ios::binary);
-  for (const Particle& p : particles) {
-    out.write(reinterpret_cast<const char*>(p.x), sizeof p.x);
-    out.write(reinterpret_cast<const char*>(&p.mass), sizeof p.mass);
-    out.write(reinterpret_cast<const char*>(&p.id), sizeof p.id);
-  }
-  return path.string();
 }
 
 class IngestTest : public IngestFixture {
