@@ -1,7 +1,8 @@
 #!/bin/bash
 # The whole GPU measurement in one run, for a machine lent for minutes: the
 # render bench's sweep at 10^8 points (overview, mid, deep; every stage's
-# time), then playback through a particle-mesh series. Writes its tables and
+# time) on the raster and the compute splat paths, the compute path's blob
+# radius, then playback through a particle-mesh series on both paths. Writes its tables and
 # logs under OUT. Run from the repository root on the GPU machine, after
 # ../shared/gpu/bundle.sh packed build/ (docs/BENCHMARKS.md):
 #
@@ -22,17 +23,23 @@ log() { echo "== $*" | tee -a "$out/session.log"; }
 
 log "$(date -u +%FT%TZ) $(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || echo no nvidia-smi)"
 log "render bench: $points points, overview at thresholds and budgets, mid and deep"
-"$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views overview \
+"$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views overview --splat raster,compute \
   --thresholds 16,8,4,2,1 --budgets 0,2e6 --coarse clusters 2>&1 | tee "$out/render_overview.txt"
 cp "$work/rb/render_bench.csv" "$out/render_overview.csv"
-"$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views mid,deep \
+"$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views mid,deep --splat raster,compute \
   --thresholds 16,8,4 --budgets 0 --coarse clusters 2>&1 | tee "$out/render_zoomed.txt"
 cp "$work/rb/render_bench.csv" "$out/render_zoomed.csv"
 
-log "playback: a 128^3 particle-mesh series, 5 epochs, Hermite interpolation"
+log "playback: a 128^3 particle-mesh series, 5 epochs, Hermite interpolation, raster and compute"
 if [ ! -f "$work/pm/store/manifest.json" ]; then
   "$octocosm" synth pm -o "$work/pm/snapshots" --particles-per-side "${PM_SIDE:-128}" --outputs 5 > "$out/synth_pm.txt" 2>&1
   "$octocosm" ingest "$work"/pm/snapshots/snap_00? -o "$work/pm/store" --capacity 4000 > "$out/ingest_pm.txt" 2>&1
 fi
-"$bench" --backend "$backend" --playback "$work/pm/store" --frames-per-epoch 60 2>&1 | tee "$out/playback.txt"
+"$bench" --backend "$backend" --playback "$work/pm/store" --frames-per-epoch 60 --splat raster,compute 2>&1 |
+  tee "$out/playback.txt"
+log "compute path: largest blob drawn by the compute shader, 2 and 8 pixels (4 above)"
+for radius in 2 8; do
+  "$bench" --backend "$backend" --dir "$work/rb" --points "$points" --views overview,deep --splat compute \
+    --compute-radius $radius --thresholds 4 --budgets 0 --no-full --coarse clusters 2>&1 | tee "$out/render_radius_$radius.txt"
+done
 log "$(date -u +%FT%TZ) done"

@@ -62,6 +62,8 @@ struct Flags {
   std::string snapshot;                    // an existing snapshot instead of a generated one
   std::size_t capacity = 0;                // points a node holds (0: ingest's default)
   std::string backend = "osmesa";
+  std::string splat = "auto";  // splat paths to time (render/compute_splatter.h), the first also cold
+  double compute_radius = 4;   // the compute path's largest blob, pixels
   bool full = true, selection = false, prepare_only = false;
   unsigned threads = 0;
   std::string playback;  // a multi-epoch store: measure playback instead
@@ -137,7 +139,7 @@ std::vector<std::string> Split(const std::string& text) {
 }
 
 struct Row {
-  std::string view, mode;
+  std::string view, mode, path;
   double threshold = 0;
   std::uint64_t budget = 0, points = 0, nodes = 0, bytes = 0;
   double cold = 0, warm = 0, psnr = 0, ssim = 0;
@@ -148,44 +150,56 @@ struct Row {
          readback_ms = 0;
 };
 
-// Renders `view` twice with fresh caches: cold (nothing in memory, the OS
-// page cache of the store dropped) and warm (every block on the GPU).
-Row Measure(const Dataset& dataset, const SceneOptions& options, const RenderView& view, HeadlessBackend backend,
-            const ToneMapParameters& tone, const DisplayImage& reference) {
+// Renders `view` with fresh caches, cold (nothing in memory, the OS page
+// cache of the store dropped) and warm (every block on the GPU), on the first
+// of `paths`; then warm on each other path with the same blocks. A row per
+// path (the others' cold time and bytes are the first's).
+std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const RenderView& view, HeadlessBackend backend,
+                         const ToneMapParameters& tone, const DisplayImage& reference, const std::vector<SplatPath>& paths,
+                         double compute_radius) {
   dataset.store().DropCaches();
+  options.splat_path = paths.front();
+  options.compute_radius = compute_radius;
   OffscreenRenderer renderer(dataset, backend, options);
   ToneMapSettings settings;
   settings.exposure = tone.exposure;
   const Picture cold = renderer.Render(view, 0, settings, false);
   const std::uint64_t bytes = renderer.scene().disk_reads().bytes;
-  const Picture warm = renderer.Render(view, 0, settings, true);
-  Row row;
-  row.points = warm.stats.points_drawn;
-  row.nodes = warm.stats.nodes_selected;
-  row.bytes = bytes;
-  row.cold = cold.seconds;
-  row.warm = warm.seconds;
-  row.select_ms = warm.stats.select_ms;
-  row.upload_ms = warm.stats.upload_ms;
-  row.submit_ms = warm.stats.draw_ms;
-  if (warm.gpu_times) {
-    row.gpu_draw_ms = warm.gpu_times->draw_ms;
-    row.gpu_measure_ms = warm.gpu_times->measure_ms;
-    row.gpu_tone_map_ms = warm.gpu_times->tone_map_ms;
+  std::vector<Row> rows;
+  for (SplatPath path : paths) {
+    renderer.scene().SetSplatPath(path);
+    renderer.Render(view, 0, settings, false);  // builds the path's programs
+    const Picture warm = renderer.Render(view, 0, settings, true);
+    Row row;
+    row.path = SplatPathName(renderer.splat().frame_path());
+    row.points = warm.stats.points_drawn;
+    row.nodes = warm.stats.nodes_selected;
+    row.bytes = bytes;
+    row.cold = cold.seconds;
+    row.warm = warm.seconds;
+    row.select_ms = warm.stats.select_ms;
+    row.upload_ms = warm.stats.upload_ms;
+    row.submit_ms = warm.stats.draw_ms;
+    if (warm.gpu_times) {
+      row.gpu_draw_ms = warm.gpu_times->draw_ms;
+      row.gpu_measure_ms = warm.gpu_times->measure_ms;
+      row.gpu_tone_map_ms = warm.gpu_times->tone_map_ms;
+    }
+    row.readback_ms = warm.readback_ms;
+    const DisplayImage picture = ToneMap(*warm.hdr, tone);
+    row.psnr = Psnr(picture, reference);
+    row.ssim = Ssim(picture, reference);
+    rows.push_back(row);
   }
-  row.readback_ms = warm.readback_ms;
-  const DisplayImage picture = ToneMap(*warm.hdr, tone);
-  row.psnr = Psnr(picture, reference);
-  row.ssim = Ssim(picture, reference);
-  return row;
+  return rows;
 }
 
 void PrintRow(const Row& r) {
-  std::printf("%-9s %-6s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f %7.1f %7.1f %7.1f %8.1f %7.1f %7.1f %7.1f\n",
+  std::printf("%-9s %-6s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f %7.1f %7.1f %7.1f %8.1f %7.1f %7.1f %7.1f %-7s\n",
               r.view.c_str(), r.mode.c_str(), r.threshold, static_cast<unsigned long long>(r.budget),
               static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
               HumanBytes(static_cast<double>(r.bytes)).c_str(), r.cold, r.warm, r.psnr, r.ssim, r.select_ms, r.upload_ms,
-              r.submit_ms, r.gpu_draw_ms, r.gpu_measure_ms, r.gpu_tone_map_ms, r.readback_ms);
+              r.submit_ms, r.gpu_draw_ms, r.gpu_measure_ms, r.gpu_tone_map_ms, r.readback_ms, r.path.c_str());
   std::fflush(stdout);
 }
 
@@ -194,16 +208,17 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
   {
     std::ofstream csv(data);
     csv << "view,mode,threshold,budget,points,nodes,bytes_read,cold_s,warm_s,psnr_db,ssim,select_ms,upload_ms,submit_ms,"
-           "gpu_draw_ms,gpu_measure_ms,gpu_tone_map_ms,readback_ms\n";
+           "gpu_draw_ms,gpu_measure_ms,gpu_tone_map_ms,readback_ms,path\n";
     for (const Row& r : rows) {
       csv << r.view << ',' << r.mode << ',' << r.threshold << ',' << r.budget << ',' << r.points << ',' << r.nodes << ','
           << r.bytes << ',' << r.cold << ',' << r.warm << ',' << r.psnr << ',' << r.ssim << ',' << r.select_ms << ','
           << r.upload_ms << ',' << r.submit_ms << ',' << r.gpu_draw_ms << ',' << r.gpu_measure_ms << ','
-          << r.gpu_tone_map_ms << ',' << r.readback_ms << '\n';
+          << r.gpu_tone_map_ms << ',' << r.readback_ms << ',' << r.path << '\n';
     }
   }
   // Per view a colour, per representation a point shape; the x axis of the
   // left panels is points drawn as a share of the view's full-detail frame.
+  // The first splat path's rows (the others draw the same points).
   std::vector<std::string> modes;
   for (const Row& r : rows) {
     if (r.mode != "full" && std::find(modes.begin(), modes.end(), r.mode) == modes.end()) modes.push_back(r.mode);
@@ -218,13 +233,14 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
       const std::string name = "'" + views[v].name + "'";
       double full_points = 0;
       for (const Row& r : rows) {
-        if (r.view == views[v].name && r.mode == "full") full_points = static_cast<double>(r.points);
+        if (r.view == views[v].name && r.mode == "full" && r.path == rows.front().path) full_points = static_cast<double>(r.points);
       }
       const std::string x = x_column == 5 ? (full_points > 0 ? "($5 / " + std::to_string(full_points) + ")" : "($5)")
                                           : "($" + std::to_string(x_column) + ")";
       for (std::size_t m = 0; m < modes.size(); ++m) {
         if (plot.size() > 5) plot += ", ";
-        plot += "'" + data.string() + "' using (strcol(1) eq " + name + " && strcol(2) eq '" + modes[m] + "' ? " + x +
+        plot += "'" + data.string() + "' using (strcol(1) eq " + name + " && strcol(2) eq '" + modes[m] +
+                "' && strcol(19) eq '" + rows.front().path + "' ? " + x +
                 " : 1/0):" + y_column + " with linespoints pt " + std::to_string(m == 0 ? 7 : 4) + " ps 1.2 lc " +
                 std::to_string(v + 1) + " title '" + views[v].name + ", " + modes[m] + "'";
       }
@@ -253,7 +269,7 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
 // playhead advancing 1/frames_per_epoch of an epoch a frame, each frame
 // measured and tone mapped on the GPU. Reports frames per second and how
 // many frames drew stand-ins because blocks had not arrived.
-void Playback(const Flags& f) {
+void Playback(const Flags& f, SplatPath path) {
   const Dataset dataset = Dataset::Open(f.playback);
   if (dataset.epoch_count() < 2) {
     throw Error::InvalidArgument("--playback: " + f.playback + " holds one epoch; playback needs a series");
@@ -268,10 +284,12 @@ void Playback(const Flags& f) {
   const RenderView view(camera, f.width, f.height);
   SceneOptions options;
   options.lod.pixel_threshold = f.playback_threshold;
+  options.splat_path = path;
+  options.compute_radius = f.compute_radius;
   OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
-  std::printf("playback: %s, %u epochs, %dx%d, threshold %g px, %d frames per epoch, %s\n", f.playback.c_str(),
-              dataset.epoch_count(), f.width, f.height, f.playback_threshold, f.frames_per_epoch,
-              renderer.description().c_str());
+  std::printf("playback: %s, %u epochs, %dx%d, threshold %g px, %d frames per epoch, %s, splat path %s\n",
+              f.playback.c_str(), dataset.epoch_count(), f.width, f.height, f.playback_threshold, f.frames_per_epoch,
+              renderer.description().c_str(), SplatPathName(path));
   const int frames = static_cast<int>(dataset.epoch_count() - 1) * f.frames_per_epoch + 1;
   ExposureSmoother smoother;
   double total = 0, worst = 0;
@@ -370,9 +388,12 @@ std::vector<HdrImage> PrepareReferences(const Flags& f, const std::string& snaps
 std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, const std::vector<std::string>& representations,
                        const std::vector<NamedView>& views, const std::vector<RenderView>& render_views,
                        const std::vector<HdrImage>& references, HeadlessBackend backend) {
-  std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s %7s %7s %7s %8s %7s %7s %7s\n", "view", "mode",
+  std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s %7s %7s %7s %8s %7s %7s %7s %-7s\n", "view", "mode",
               "threshold", "budget", "points", "nodes", "read", "cold s", "warm s", "PSNR", "SSIM", "sel ms", "upl ms",
-              "call ms", "gpu draw", "measure", "tone", "read ms");
+              "call ms", "gpu draw", "measure", "tone", "read ms", "path");
+  std::vector<SplatPath> paths;
+  for (const std::string& p : Split(f.splat)) paths.push_back(ParseSplatPath(p));
+  if (paths.empty()) throw Error::InvalidArgument("--splat names no path");
   std::vector<Row> rows;
   const std::vector<std::string> thresholds = Split(f.thresholds), budgets = Split(f.budgets);
   for (std::size_t v = 0; v < views.size(); ++v) {
@@ -383,11 +404,12 @@ std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, con
       SceneOptions options;
       options.lod.pixel_threshold = 1e-9;
       options.gpu_cache_bytes = std::size_t{64} << 30;
-      Row row = Measure(datasets.front(), options, render_views[v], backend, tone, reference);
-      row.view = views[v].name;
-      row.mode = "full";
-      rows.push_back(row);
-      PrintRow(row);
+      for (Row& row : Measure(datasets.front(), options, render_views[v], backend, tone, reference, paths, f.compute_radius)) {
+        row.view = views[v].name;
+        row.mode = "full";
+        rows.push_back(row);
+        PrintRow(row);
+      }
     }
     for (std::size_t r = 0; r < representations.size(); ++r) {
       for (const std::string& t : thresholds) {
@@ -396,13 +418,14 @@ std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, con
           options.lod.pixel_threshold = std::stod(t);
           options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
           options.cluster_shapes = representations[r] != "round";
-          Row row = Measure(datasets[r], options, render_views[v], backend, tone, reference);
-          row.view = views[v].name;
-          row.mode = representations[r];
-          row.threshold = options.lod.pixel_threshold;
-          row.budget = options.lod.point_budget;
-          rows.push_back(row);
-          PrintRow(row);
+          for (Row& row : Measure(datasets[r], options, render_views[v], backend, tone, reference, paths, f.compute_radius)) {
+            row.view = views[v].name;
+            row.mode = representations[r];
+            row.threshold = options.lod.pixel_threshold;
+            row.budget = options.lod.point_budget;
+            rows.push_back(row);
+            PrintRow(row);
+          }
         }
       }
     }
@@ -416,29 +439,35 @@ void PrintTargets(const std::vector<Row>& rows, const std::vector<NamedView>& vi
                   const std::vector<std::string>& representations, double reference_seconds) {
   std::printf("\nreference: %.1f s a view (CPU, all points, double precision)\n", reference_seconds);
   std::printf("targets: PSNR >= 40 dB and SSIM >= 0.98 at >= 20x less time than the full rendering\n");
+  std::vector<std::string> paths;
+  for (const Row& r : rows) {
+    if (std::find(paths.begin(), paths.end(), r.path) == paths.end()) paths.push_back(r.path);
+  }
   for (const NamedView& v : views) {
     for (const std::string& representation : representations) {
-      const Row* full = nullptr;
-      const Row* best = nullptr;  // fastest LOD row meeting the quality targets
-      for (const Row& r : rows) {
-        if (r.view != v.name) continue;
-        if (r.mode == "full") full = &r;
-        if (r.mode == representation && r.psnr >= 40 && r.ssim >= 0.98 && (!best || r.warm < best->warm)) best = &r;
+      for (const std::string& path : paths) {
+        const Row* full = nullptr;
+        const Row* best = nullptr;  // fastest LOD row meeting the quality targets
+        for (const Row& r : rows) {
+          if (r.view != v.name || r.path != path) continue;
+          if (r.mode == "full") full = &r;
+          if (r.mode == representation && r.psnr >= 40 && r.ssim >= 0.98 && (!best || r.warm < best->warm)) best = &r;
+        }
+        if (!best) {
+          std::printf("  %-9s %-8s %-7s no level of detail in the sweep meets PSNR 40 dB and SSIM 0.98\n", v.name.c_str(),
+                      representation.c_str(), path.c_str());
+          continue;
+        }
+        std::printf("  %-9s %-8s %-7s threshold %g, budget %llu: PSNR %.1f dB, SSIM %.4f, %llu points", v.name.c_str(),
+                    representation.c_str(), path.c_str(), best->threshold, static_cast<unsigned long long>(best->budget),
+                    best->psnr, best->ssim, static_cast<unsigned long long>(best->points));
+        if (full) {
+          std::printf(" (%.1f%% of full detail's), %.3f s warm: %.1fx less than the full GPU rendering (%.2f s)",
+                      100.0 * static_cast<double>(best->points) / static_cast<double>(std::max<std::uint64_t>(full->points, 1)),
+                      best->warm, full->warm / best->warm, full->warm);
+        }
+        std::printf(", %.0fx less than the reference\n", reference_seconds / best->warm);
       }
-      if (!best) {
-        std::printf("  %-9s %-8s no level of detail in the sweep meets PSNR 40 dB and SSIM 0.98\n", v.name.c_str(),
-                    representation.c_str());
-        continue;
-      }
-      std::printf("  %-9s %-8s threshold %g, budget %llu: PSNR %.1f dB, SSIM %.4f, %llu points", v.name.c_str(),
-                  representation.c_str(), best->threshold, static_cast<unsigned long long>(best->budget), best->psnr,
-                  best->ssim, static_cast<unsigned long long>(best->points));
-      if (full) {
-        std::printf(" (%.1f%% of full detail's), %.3f s warm: %.1fx less than the full GPU rendering (%.2f s)",
-                    100.0 * static_cast<double>(best->points) / static_cast<double>(std::max<std::uint64_t>(full->points, 1)),
-                    best->warm, full->warm / best->warm, full->warm);
-      }
-      std::printf(", %.0fx less than the reference\n", reference_seconds / best->warm);
     }
   }
 }
@@ -464,7 +493,7 @@ void MeasureSelection(const Dataset& dataset, const NamedView& named_view, const
 
 void Run(const Flags& f) {
   if (!f.playback.empty()) {
-    Playback(f);
+    for (const std::string& path : Split(f.splat)) Playback(f, ParseSplatPath(path));
     return;
   }
   fs::create_directories(f.dir);
@@ -509,6 +538,12 @@ int main(int argc, char** argv) {
   app.add_option("--capacity", f.capacity, "points a node holds in the stores (default: ingest's)");
   app.add_option("--backend", f.backend, "osmesa or egl")->default_val("osmesa");
   app.add_option("--threads", f.threads, "threads of the reference renderer (default: all)");
+  app.add_option("--splat", f.splat,
+                 "splat paths to time, comma-separated: raster, compute, auto (the first cold and warm, the others warm "
+                 "on the same blocks; --playback plays through each)")
+      ->default_val("auto");
+  app.add_option("--compute-radius", f.compute_radius, "compute path: blobs up to this radius (pixels) by the compute shader")
+      ->default_val(4);
   app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");
   app.add_flag("--selection", f.selection, "also time a frame with 10^6 selected IDs");
   app.add_option("--playback", f.playback, "measure playback through the epochs of this store instead (frames per second)");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -63,7 +64,9 @@ GlProgram BuildGlProgram(const std::string& name, std::initializer_list<ShaderSt
   for (const ShaderStage& stage : stages) {
     const GLuint shader = glCreateShader(stage.type);
     shaders.push_back(shader);
-    glShaderSource(shader, 1, &stage.source, nullptr);
+    std::vector<const char*> sources{"#version 450 core\n"};
+    sources.insert(sources.end(), stage.sources.begin(), stage.sources.end());
+    glShaderSource(shader, static_cast<GLsizei>(sources.size()), sources.data(), nullptr);
     glCompileShader(shader);
     GLint ok = GL_FALSE;
     glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
@@ -81,6 +84,16 @@ GlProgram BuildGlProgram(const std::string& name, std::initializer_list<ShaderSt
   cleanup();
   if (!ok) throw Error::NotSupported("OpenGL", "the program '" + name + "' does not link: " + ProgramLog(program.get()));
   return program;
+}
+
+bool GlHasExtension(const char* name) {
+  GLint count = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &count);
+  for (GLint i = 0; i < count; ++i) {
+    const auto* extension = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, static_cast<GLuint>(i)));
+    if (extension != nullptr && std::strcmp(extension, name) == 0) return true;
+  }
+  return false;
 }
 
 void CheckGlError(const std::string& what) {

@@ -9,6 +9,7 @@
 #include <initializer_list>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace octocosm {
 
@@ -57,15 +58,21 @@ using GlProgram = GlName<DeleteGlProgram>;
 // initialised from `data` when not null.
 GlBuffer MakeGlBuffer(std::size_t bytes, const void* data, GLbitfield flags);
 
+// A shader stage: its sources (from render_shaders.h, shared files first),
+// compiled as one text after "#version 450 core".
 struct ShaderStage {
-  GLenum type;         // GL_VERTEX_SHADER, GL_FRAGMENT_SHADER, GL_COMPUTE_SHADER
-  const char* source;  // from render_shaders.h
+  GLenum type;  // GL_VERTEX_SHADER, GL_FRAGMENT_SHADER, GL_COMPUTE_SHADER
+  std::vector<const char*> sources;
 };
 
 // Compiles and links a program. Throws Error::NotSupported("OpenGL", ...)
 // naming `name`, the stage and the driver's log: a shader that does not build
 // on a 4.5 core driver is a bug or an unusable driver, not a user error.
 GlProgram BuildGlProgram(const std::string& name, std::initializer_list<ShaderStage> stages);
+
+// Whether the current context offers the extension `name` (e.g.
+// "GL_NV_shader_atomic_float").
+bool GlHasExtension(const char* name);
 
 // Throws Error::NotSupported naming `what` when glGetError reports an error
 // (GL_OUT_OF_MEMORY most likely: textures or buffers too large for the device).

@@ -70,11 +70,12 @@ ColumnFormat FormatOf(ColumnId id, bool id_offsets) {
 }
 
 // A pool's key: its columns, and whether its IDs are u32 offsets.
+constexpr std::uint64_t kIdOffsetsBit = std::uint64_t{1} << 40;
 std::uint64_t LayoutKey(std::span<const GpuColumnBytes> columns) {
   std::uint64_t key = 0;
   for (const GpuColumnBytes& c : columns) {
     key |= ColumnBit(c.id);
-    if (c.id == ColumnId::kId && c.encoding == kEncodingIdOffsets) key |= std::uint64_t{1} << 40;
+    if (c.id == ColumnId::kId && c.encoding == kEncodingIdOffsets) key |= kIdOffsetsBit;
   }
   return key;
 }
@@ -97,11 +98,27 @@ struct GpuBlockArena::Pool {
   std::map<std::uint32_t, std::uint32_t> free;  // first point -> count, disjoint, not adjacent
 };
 
-GpuBlockArena::GpuBlockArena() { ReserveDrawIndices(1024); }
+// Staging for uploads: a quarter of it holds a frame's typical arrivals (a
+// few blocks of 16000 points).
+constexpr std::size_t kUploadRingBytes = std::size_t{32} << 20;
+
+GpuBlockArena::GpuBlockArena() : uploads_(kUploadRingBytes) { ReserveDrawIndices(1024); }
 
 GpuBlockArena::~GpuBlockArena() = default;
 
 GLuint GpuBlockArena::vertex_array(std::uint32_t pool) const { return pools_.at(pool)->vertex_array.get(); }
+
+std::vector<GpuBlockArena::ColumnBuffer> GpuBlockArena::column_buffers(std::uint32_t pool) const {
+  std::vector<ColumnBuffer> columns;
+  for (const Pool::Lane& lane : pools_.at(pool)->lanes) {
+    columns.push_back({lane.id, lane.buffer.get(), static_cast<std::uint32_t>(lane.format.stride)});
+  }
+  return columns;
+}
+
+std::uint32_t GpuBlockArena::capacity(std::uint32_t pool) const { return pools_.at(pool)->capacity; }
+
+bool GpuBlockArena::id_offsets(std::uint32_t pool) const { return (pools_.at(pool)->key & kIdOffsetsBit) != 0; }
 
 std::size_t GpuBlockArena::gpu_bytes() const {
   std::size_t bytes = std::size_t{slot_capacity_} * sizeof(GpuBlockParameters) + draw_index_capacity_ * 4;
@@ -241,11 +258,10 @@ GpuBlockArena::Placement GpuBlockArena::Place(std::span<const GpuColumnBytes> co
                                    std::to_string(column->bytes.size()) + " bytes, fewer than " + std::to_string(count) +
                                    " points take");
     }
-    glNamedBufferSubData(lane.buffer.get(), static_cast<GLintptr>(std::size_t{placement.first} * stride),
-                         static_cast<GLsizeiptr>(bytes), column->bytes.data());
+    uploads_.Upload(column->bytes.first(bytes), lane.buffer.get(), std::size_t{placement.first} * stride);
   }
-  glNamedBufferSubData(parameters_.get(), static_cast<GLintptr>(std::size_t{placement.slot} * sizeof(GpuBlockParameters)),
-                       sizeof(GpuBlockParameters), &parameters);
+  uploads_.Upload({reinterpret_cast<const std::uint8_t*>(&parameters), sizeof parameters}, parameters_.get(),
+                  std::size_t{placement.slot} * sizeof(GpuBlockParameters));
   CheckGlError("uploading a block");
   return placement;
 }

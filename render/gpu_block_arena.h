@@ -12,7 +12,9 @@
 // columns (clusters carry shapes and dispersions), so a frame uses two or
 // three pools.
 //
-// Every vertex array also reads a per-instance draw index (0, 1, 2, ...):
+// Blocks are uploaded through a persistently mapped staging ring
+// (render/upload_ring.h). Every vertex array also reads a per-instance draw
+// index (0, 1, 2, ...):
 // a draw's base instance picks its record in the "Draws" storage buffer
 // (render/splat_renderer.h), which core OpenGL 4.5 allows without
 // gl_DrawID.
@@ -26,6 +28,7 @@
 
 #include "index/block_codec.h"
 #include "render/gl_objects.h"
+#include "render/upload_ring.h"
 
 namespace octocosm {
 
@@ -70,6 +73,19 @@ class GpuBlockArena {
 
   std::size_t pool_count() const { return pools_.size(); }
   GLuint vertex_array(std::uint32_t pool) const;
+  // A pool's column buffers, for reading them as storage buffers (the
+  // compute path, render/compute_splatter.h): point i of a column starts at
+  // byte stride * i of its buffer, which holds capacity points.
+  struct ColumnBuffer {
+    ColumnId id;
+    GLuint buffer;
+    std::uint32_t stride;
+  };
+  std::vector<ColumnBuffer> column_buffers(std::uint32_t pool) const;
+  std::uint32_t capacity(std::uint32_t pool) const;
+  // Whether the pool's IDs are u32 offsets from each block's base (one word
+  // a point) rather than whole u64 IDs (two).
+  bool id_offsets(std::uint32_t pool) const;
   GLuint parameters() const { return parameters_.get(); }
   // Makes the per-instance draw index count at least `draws`.
   void ReserveDrawIndices(std::size_t draws);
@@ -91,6 +107,7 @@ class GpuBlockArena {
   std::uint32_t slots_used_ = 0;
   GlBuffer draw_indices_;
   std::size_t draw_index_capacity_ = 0;
+  UploadRing uploads_;  // every block's bytes and parameters reach the GPU through it
 };
 
 }  // namespace octocosm

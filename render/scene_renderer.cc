@@ -315,6 +315,8 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
                                const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats) {
   FrameSettings settings;
   settings.color = options_.color;
+  settings.path = options_.splat_path;
+  settings.compute_radius = options_.compute_radius;
   settings.mass_unit = mass_unit_;
   settings.interpolation = stats.interpolation;
   settings.t = copies.size() == 2 ? copies[1].weight : 0;

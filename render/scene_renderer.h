@@ -63,6 +63,9 @@ struct SceneOptions {
   // Clusters drawn with their shapes (index/cluster_shape.h), where the store
   // has them; false: as round blobs of the same size.
   bool cluster_shapes = true;
+  // Point sprites, or small blobs by a compute shader (render/compute_splatter.h).
+  SplatPath splat_path = SplatPath::kAuto;
+  double compute_radius = 4;  // pixels: larger blobs are drawn as sprites on the compute path
   std::size_t cpu_cache_bytes = std::size_t{1} << 30;     // blocks read from disk, in memory
   std::size_t gpu_cache_bytes = std::size_t{2} << 30;     // blocks on the GPU
   std::size_t io_threads = 2;
@@ -114,6 +117,7 @@ class SceneRenderer {
   std::size_t selection_size() const { return selection_ ? selection_->size() : 0; }
   void SetColorMode(ColorMode color);
   void SetLod(const LodOptions& lod) { options_.lod = lod; }
+  void SetSplatPath(SplatPath path) { options_.splat_path = path; }
   const SceneOptions& options() const { return options_; }
 
   // The mass that the GPU's accumulation counts as 1 (render/splat_renderer.h).

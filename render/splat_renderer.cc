@@ -14,27 +14,7 @@
 namespace octocosm {
 namespace {
 
-constexpr const char* kVersion = "#version 450 core\n";
 constexpr std::size_t kStatisticsWords = 4 + 2 * kHistogramBins;
-
-GlProgram Build(const std::string& name, std::initializer_list<std::pair<GLenum, std::vector<const char*>>> stages) {
-  // Every stage is "#version" + its sources, concatenated.
-  std::vector<std::string> joined;
-  joined.reserve(stages.size());
-  for (const auto& [type, sources] : stages) {
-    std::string text = kVersion;
-    for (const char* s : sources) text += s;
-    joined.push_back(std::move(text));
-  }
-  std::vector<ShaderStage> built;
-  std::size_t i = 0;
-  for (const auto& stage : stages) built.push_back({stage.first, joined[i++].c_str()});
-  switch (built.size()) {
-    case 1: return BuildGlProgram(name, {built[0]});
-    case 2: return BuildGlProgram(name, {built[0], built[1]});
-    default: throw Error::InvalidArgument("a program has one or two stages here");
-  }
-}
 
 GLint Location(const GlProgram& program, const char* name) { return glGetUniformLocation(program.get(), name); }
 
@@ -56,11 +36,12 @@ float Unordered(std::uint32_t u) {
 }  // namespace
 
 SplatRenderer::SplatRenderer() {
-  splat_ = Build("splat", {{GL_VERTEX_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatVert}},
-                           {GL_FRAGMENT_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatFrag}}});
-  tone_map_ = Build("tone map", {{GL_VERTEX_SHADER, {shaders::kShaderFullscreenVert}},
-                                 {GL_FRAGMENT_SHADER, {shaders::kShaderToneMapFrag}}});
-  statistics_ = Build("image statistics", {{GL_COMPUTE_SHADER, {shaders::kShaderImageStatsComp}}});
+  splat_ = BuildGlProgram(
+      "splat", {{GL_VERTEX_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatPoint, shaders::kShaderSplatVert}},
+                {GL_FRAGMENT_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatFrag}}});
+  tone_map_ = BuildGlProgram("tone map", {{GL_VERTEX_SHADER, {shaders::kShaderFullscreenVert}},
+                                          {GL_FRAGMENT_SHADER, {shaders::kShaderToneMapFrag}}});
+  statistics_ = BuildGlProgram("image statistics", {{GL_COMPUTE_SHADER, {shaders::kShaderImageStatsComp}}});
 
   GLuint vao = 0;
   glCreateVertexArrays(1, &vao);
@@ -80,7 +61,30 @@ SplatRenderer::SplatRenderer() {
   glGetFloatv(GL_POINT_SIZE_RANGE, range);
   // A sprite of side SpriteSize(R) must fit the largest point size.
   max_blob_radius_ = std::max(kMinBlobRadius, std::floor((double{range[1]} - kSpriteGuard) / 2));
+  compute_supported_ = ComputeSplatter::Supported();
   CheckGlError("setting up the splat renderer");
+}
+
+const char* SplatPathName(SplatPath path) {
+  switch (path) {
+    case SplatPath::kRaster: return "raster";
+    case SplatPath::kCompute: return "compute";
+    case SplatPath::kAuto: return "auto";
+  }
+  return "?";
+}
+
+SplatPath ParseSplatPath(const std::string& name) {
+  for (SplatPath path : {SplatPath::kRaster, SplatPath::kCompute, SplatPath::kAuto}) {
+    if (name == SplatPathName(path)) return path;
+  }
+  throw Error::InvalidArgument("unknown splat path '" + name + "' (raster, compute or auto)");
+}
+
+void SplatRenderer::SetLargeBlobCapacity(std::uint32_t blobs) {
+  if (!compute_supported_) return;
+  if (!compute_) compute_ = std::make_unique<ComputeSplatter>();
+  compute_->set_large_blob_capacity(blobs);
 }
 
 SplatRenderer::~SplatRenderer() {
@@ -121,17 +125,28 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
     throw Error::InvalidArgument("the mass unit must be finite and > 0");
   }
   if (!(settings.t >= 0 && settings.t <= 1)) throw Error::InvalidArgument("interpolation time must be in [0, 1]");
+  if (!(settings.compute_radius >= 0) || !std::isfinite(settings.compute_radius)) {
+    throw Error::InvalidArgument("the compute path's blob radius must be finite and >= 0");
+  }
   if (!(settings.box_size >= 0) || !std::isfinite(settings.box_size) ||
       !std::all_of(settings.box_origin.begin(), settings.box_origin.end(), [](double x) { return std::isfinite(x); })) {
     throw Error::InvalidArgument("the periodic box must be finite, of size >= 0");
   }
   margin_ = GuardMargin(view.max_blob_radius());
   const int tw = view.width() + 2 * margin_, th = view.height() + 2 * margin_;
-  Flush();  // a frame left unfinished: its draws go where they were meant to
+  // A frame left unfinished: its draws go where they were meant to.
+  Flush();
+  Resolve();
   records_.clear();
   records_uploaded_ = 0;
   commands_used_ = 0;
   Allocate(accumulation_, GL_RGBA32F, tw, th, "the accumulation buffer");
+  compute_frame_ = false;
+  if (compute_supported_ && settings.path != SplatPath::kRaster) {
+    if (!compute_) compute_ = std::make_unique<ComputeSplatter>();
+    compute_->set_compute_radius(settings.compute_radius);
+    compute_frame_ = compute_->Prepare(tw, th);
+  }
   in_frame_ = true;
   width_ = view.width();
   height_ = view.height();
@@ -219,15 +234,12 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
     SetDifference(record.origin_above, node.origin, size, camera_position_);
   }
   record.block[0] = placement.slot;
-  if (commands_.size() <= placement.pool) commands_.resize(placement.pool + 1);
-  commands_[placement.pool].push_back({count, 1, placement.first + first, static_cast<GLuint>(records_.size())});
-  records_.push_back(record);
+  if (queued_.size() <= placement.pool) queued_.resize(placement.pool + 1);
+  queued_[placement.pool].push_back({record, placement.first + first, count});
 }
 
 void SplatRenderer::Flush() {
-  std::size_t pending = 0;
-  for (const auto& pool : commands_) pending += pool.size();
-  if (pending == 0) return;
+  if (std::all_of(queued_.begin(), queued_.end(), [](const auto& pool) { return pool.empty(); })) return;
   glBindFramebuffer(GL_FRAMEBUFFER, accumulation_.framebuffer.get());
   glViewport(0, 0, accumulation_.width, accumulation_.height);
   if (!draw_state_set_) {
@@ -242,6 +254,15 @@ void SplatRenderer::Flush() {
     glBindBufferBase(GL_UNIFORM_BUFFER, 0, frame_uniforms_.get());
     draw_state_set_ = true;
   }
+  if (compute_frame_) {
+    FlushCompute();
+  } else {
+    FlushRaster();
+  }
+  CheckGlError("drawing blocks");
+}
+
+void SplatRenderer::UploadRecords() {
   // The frame's draw records so far: new ones appended, or all of them into
   // a larger buffer (draws issued earlier keep the one they read).
   arena_.ReserveDrawIndices(records_.size());
@@ -254,13 +275,28 @@ void SplatRenderer::Flush() {
                        static_cast<GLsizeiptr>((records_.size() - records_uploaded_) * sizeof(DrawRecord)),
                        records_.data() + records_uploaded_);
   records_uploaded_ = records_.size();
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, arena_.parameters());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, records_buffer_.get());
+}
+
+void SplatRenderer::FlushRaster() {
+  // One indirect command per draw, its base instance its record.
+  commands_.resize(queued_.size());
+  std::size_t pending = 0;
+  for (std::size_t pool = 0; pool < queued_.size(); ++pool) {
+    for (const QueuedDraw& q : queued_[pool]) {
+      commands_[pool].push_back({q.count, 1, q.first, static_cast<GLuint>(records_.size())});
+      records_.push_back(q.record);
+    }
+    pending += queued_[pool].size();
+    queued_[pool].clear();
+  }
+  UploadRecords();
   if (commands_used_ + pending > commands_capacity_) {
     commands_capacity_ = std::max({pending, 2 * commands_capacity_, std::size_t{1024}});
     commands_buffer_ = MakeGlBuffer(commands_capacity_ * sizeof(DrawCommand), nullptr, GL_DYNAMIC_STORAGE_BIT);
     commands_used_ = 0;
   }
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 3, arena_.parameters());
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 4, records_buffer_.get());
   glBindBuffer(GL_DRAW_INDIRECT_BUFFER, commands_buffer_.get());
   for (std::uint32_t pool = 0; pool < commands_.size(); ++pool) {
     std::vector<DrawCommand>& commands = commands_[pool];
@@ -273,11 +309,63 @@ void SplatRenderer::Flush() {
     commands_used_ += commands.size();
     commands.clear();
   }
-  CheckGlError("drawing blocks");
+}
+
+void SplatRenderer::FlushCompute() {
+  // One dispatch per pool (more where its draws span more points than one
+  // storage binding holds), its draws' records contiguous and in pool order.
+  struct Dispatch {
+    std::uint32_t pool, first_draw, draw_count, points, base;
+  };
+  std::vector<Dispatch> dispatches;
+  const std::uint32_t align = compute_->base_alignment(), span = compute_->max_span_points();
+  for (std::uint32_t pool = 0; pool < queued_.size(); ++pool) {
+    std::vector<QueuedDraw>& queued = queued_[pool];
+    std::sort(queued.begin(), queued.end(), [](const QueuedDraw& a, const QueuedDraw& b) { return a.first < b.first; });
+    for (std::size_t i = 0; i < queued.size();) {
+      Dispatch d{pool, static_cast<std::uint32_t>(records_.size()), 0, 0, queued[i].first / align * align};
+      while (i < queued.size() && std::uint64_t{queued[i].first} + queued[i].count - d.base <= span) {
+        DrawRecord record = queued[i].record;
+        record.block[1] = queued[i].first;
+        record.block[2] = queued[i].count;
+        record.block[3] = d.points;
+        records_.push_back(record);
+        d.points += queued[i].count;
+        ++d.draw_count;
+        ++i;
+      }
+      if (d.draw_count == 0) {
+        throw Error::NotSupported("OpenGL", "a block of " + std::to_string(queued[i].count) +
+                                                " points exceeds what one storage buffer of the compute path holds");
+      }
+      dispatches.push_back(d);
+    }
+    queued.clear();
+  }
+  UploadRecords();
+  const int mode = uniforms_.modes[0], interpolation = uniforms_.modes[1];
+  ComputeColumns columns;
+  columns.velocity = (mode >= 1 && mode <= 3) || interpolation == 2;
+  columns.dispersion = mode >= 1 && mode <= 3;
+  columns.type = mode == 4;
+  columns.id = uniforms_.modes[2] == 1;
+  columns.links = interpolation != 0;
+  columns.hermite = interpolation == 2;
+  for (const Dispatch& d : dispatches) {
+    compute_->Splat(arena_, d.pool, d.first_draw, d.draw_count, d.points, d.base, columns);
+  }
+  draw_state_set_ = false;  // the compute path bound its own programs
+}
+
+void SplatRenderer::Resolve() {
+  if (!compute_ || !compute_->pending()) return;
+  compute_->Resolve(accumulation_.texture.get());
+  draw_state_set_ = false;
 }
 
 void SplatRenderer::StartMeasure() {
   Flush();
+  Resolve();
   draw_state_set_ = false;
   timer_.Record(GpuStageTimer::Mark::kMeasureStart);
   PendingStatistics& pending = measures_[measure_next_];
@@ -349,6 +437,7 @@ ImageStatistics SplatRenderer::Measure() {
 
 void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
   Flush();
+  Resolve();
   draw_state_set_ = false;
   const GLuint program = tone_map_.get();
   glProgramUniform2i(program, Location(tone_map_, "u_offset"), margin_, margin_);
@@ -391,6 +480,7 @@ void SplatRenderer::ToneMapToViewport(const ToneMapParameters& parameters, int x
 
 HdrImage SplatRenderer::ReadHdr() {
   Flush();
+  Resolve();
   HdrImage image{width_, height_, {}};
   std::vector<float> texels(4 * static_cast<std::size_t>(width_) * height_);
   glMemoryBarrier(GL_FRAMEBUFFER_BARRIER_BIT | GL_TEXTURE_UPDATE_BARRIER_BIT);
@@ -417,6 +507,7 @@ RgbImage SplatRenderer::ReadDisplay() {
 
 void SplatRenderer::Finish() {
   Flush();
+  Resolve();
   glFinish();
 }
 

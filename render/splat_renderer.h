@@ -16,9 +16,12 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <optional>
+#include <string>
 #include <vector>
 
+#include "render/compute_splatter.h"
 #include "render/gl_objects.h"
 #include "render/gpu_block.h"
 #include "render/gpu_stage_timer.h"
@@ -36,8 +39,21 @@ enum class Interpolation {
   kHermite,  // the cubic Hermite curve with tangents scale * v at both ends
 };
 
+// How blobs reach the accumulation buffer (render/compute_splatter.h).
+enum class SplatPath {
+  kRaster,   // every point a point sprite, blended
+  kCompute,  // small blobs added by a compute shader, large ones drawn as sprites
+  kAuto,     // compute where the GPU can (SplatRenderer::compute_supported), else raster
+};
+
+// "raster", "compute", "auto"; and back (throws Error::InvalidArgument).
+const char* SplatPathName(SplatPath path);
+SplatPath ParseSplatPath(const std::string& name);
+
 struct FrameSettings {
   ColorMode color = ColorMode::kDensity;
+  SplatPath path = SplatPath::kAuto;
+  double compute_radius = 4;  // pixels: the compute path's largest blob (larger ones are drawn as sprites)
   double mass_unit = 1;  // > 0: the GPU accumulates mass / mass_unit
   Interpolation interpolation = Interpolation::kNone;
   double t = 0;              // in [0, 1]
@@ -58,6 +74,14 @@ class SplatRenderer {
 
   // The largest blob radius this GL implementation can draw (its point size limit).
   double max_blob_radius() const { return max_blob_radius_; }
+  // Whether this GL can take the compute path (render/compute_splatter.h).
+  bool compute_supported() const { return compute_supported_; }
+  // The path the current (or last) frame takes: kRaster or kCompute. A frame
+  // asking for kCompute takes the raster path where the compute path cannot
+  // hold its image (one storage buffer's size) or the GL lacks it.
+  SplatPath frame_path() const { return compute_frame_ ? SplatPath::kCompute : SplatPath::kRaster; }
+  // Room for so many blobs above the compute radius a dispatch; tests shrink it.
+  void SetLargeBlobCapacity(std::uint32_t blobs);
 
   // Starts a frame: sizes the accumulation buffer for the view and clears it.
   // Throws Error::InvalidArgument when the view's largest blob radius exceeds
@@ -111,6 +135,10 @@ class SplatRenderer {
   void UploadFrameUniforms();
   // Issues the queued draws.
   void Flush();
+  void FlushRaster();
+  void FlushCompute();
+  // Adds what the compute path accumulated into the accumulation texture.
+  void Resolve();
   void ToneMap(const ToneMapParameters& parameters, int x, int y);
 
   GlProgram splat_;
@@ -177,15 +205,27 @@ class SplatRenderer {
   struct DrawCommand {
     GLuint count, instance_count, first, base_instance;
   };
+  // A draw queued: its record (all but block.yzw) and points of its pool.
+  struct QueuedDraw {
+    DrawRecord record;
+    std::uint32_t first, count;
+  };
   GpuBlockArena arena_;
   std::vector<DrawRecord> records_;                 // this frame's, in order
   std::size_t records_uploaded_ = 0;
-  std::vector<std::vector<DrawCommand>> commands_;  // queued, by pool
+  std::vector<std::vector<QueuedDraw>> queued_;     // by pool
+  std::vector<std::vector<DrawCommand>> commands_;  // by pool, while flushing
+  // Uploads records_ past records_uploaded_, into a larger buffer if need be.
+  void UploadRecords();
   GlBuffer records_buffer_;
   std::size_t records_capacity_ = 0;
   GlBuffer commands_buffer_;
   std::size_t commands_capacity_ = 0;
   std::size_t commands_used_ = 0;  // this frame
+
+  bool compute_supported_ = false;
+  std::unique_ptr<ComputeSplatter> compute_;  // made on the first frame that takes the compute path
+  bool compute_frame_ = false;                // this frame takes it
 };
 
 }  // namespace octocosm

@@ -172,7 +172,11 @@ ToneMapParameters ResolveToneMap(const ToneMapSettings& settings, const ImageSta
       p.attribute_low = -m;
       p.attribute_high = m;
     }
-    if (!(p.attribute_high > p.attribute_low)) p.attribute_high = p.attribute_low + 1;
+    // A range within float rounding of its values is one value (every
+    // particle of one type, say, whose per-pixel mean the GPU's sums give as
+    // 1 +- 1e-7): spread over the colour map it would only show rounding.
+    const double magnitude = std::max(std::fabs(p.attribute_low), std::fabs(p.attribute_high));
+    if (!(p.attribute_high - p.attribute_low > 1e-5 * magnitude)) p.attribute_high = p.attribute_low + std::max(1.0, magnitude);
   }
   return p;
 }

@@ -38,6 +38,12 @@ void AddSceneFlags(CLI::App& cmd, SceneFlags& f) {
   cmd.add_option("--decades", f.decades, "log curve: decades of density below the exposure that stay visible")->default_val(4);
   cmd.add_option("--softening", f.softening, "asinh curve: linear below exposure * softening")->default_val(1e-3);
   cmd.add_option("--max-radius", f.max_radius, "largest blob radius, pixels")->default_val(kDefaultMaxBlobRadius);
+  cmd.add_option("--splat", f.splat,
+                 "how blobs are drawn: raster (point sprites), compute (small blobs by a compute shader, large ones as "
+                 "sprites) or auto (compute where the GPU has float atomics)")
+      ->default_val("auto");
+  cmd.add_option("--compute-radius", f.compute_radius, "compute path: blobs up to this radius (pixels) by the compute shader")
+      ->default_val(4);
   cmd.add_option("--select", f.select, "highlight the particle IDs listed in this file (one per line)");
   cmd.add_option("--select-box", f.select_box, "highlight the particles in the box x0,y0,z0,x1,y1,z1 (in the epoch nearest the time shown)");
   cmd.add_option("--cache", f.cache, "memory for blocks read from the store")->default_val("1G");
@@ -85,6 +91,11 @@ SceneOptions SceneOptionsFrom(const SceneFlags& f) {
   options.lod.pixel_threshold = f.full ? 1e-9 : f.error;
   options.lod.point_budget = f.full ? 0 : f.budget;
   options.color = ParseColorMode(f.color);
+  options.splat_path = ParseSplatPath(f.splat);
+  if (!(f.compute_radius >= 0) || !std::isfinite(f.compute_radius)) {
+    throw Error::InvalidArgument("--compute-radius must be finite and >= 0 pixels");
+  }
+  options.compute_radius = f.compute_radius;
   options.cpu_cache_bytes = static_cast<std::size_t>(ParseByteSize(f.cache, "--cache"));
   return options;
 }

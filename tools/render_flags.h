@@ -34,6 +34,9 @@ struct SceneFlags {
   std::string color = "density", colormap = "magma", attribute_colormap, color_range, curve = "log";
   double exposure = 0, percentile = 99.5, decades = 4, softening = 1e-3;
   double max_radius = kDefaultMaxBlobRadius;
+  // How blobs are drawn (render/compute_splatter.h).
+  std::string splat = "auto";
+  double compute_radius = 4;
   // Highlighted particles.
   std::string select, select_box;
   std::string cache = "1G";
@@ -42,8 +45,8 @@ struct SceneFlags {
 // Registers the camera flags (tools/camera_flags.h) and --time, --redshift,
 // --scale-factor (one of the three), --error, --budget, --full, --color,
 // --colormap, --attribute-colormap, --color-range, --curve, --exposure,
-// --percentile, --decades, --softening, --max-radius, --select, --select-box,
-// --cache.
+// --percentile, --decades, --softening, --max-radius, --splat,
+// --compute-radius, --select, --select-box, --cache.
 void AddSceneFlags(CLI::App& command, SceneFlags& flags);
 
 // Sets `time` from --redshift or --scale-factor (Dataset::FractionalEpochAt),

@@ -1,81 +1,7 @@
-// One point of a block -> one blob (render/splat_kernel.h). The block's
-// columns are on the GPU as stored (index/block_codec.h), fetched as vertex
-// attributes (render/gpu_block.h) and decoded here. Positions are relative to
-// the camera, so floats keep their precision near it however far the data
-// lie from the origin.
-//
-// In a periodic box, a point moved between epochs past a face of the box is
-// drawn at its image inside the box, near the opposite face. Which image is
-// decided on its position relative to its node's corner (small numbers: the
-// box's faces relative to the corner come from the CPU, subtracted in
-// double), and the image is drawn from a corner the CPU moved by one box
-// length, also in double: no float ever holds the difference of two large
-// coordinates.
+// The raster path: one vertex per point, fetched as vertex attributes from
+// the block's columns (render/gpu_block_arena.h), drawn as a point sprite
+// that splat_frag.glsl fills with the blob of splat_point.glsl.
 
-layout(std140, binding = 0) uniform Frame {
-  vec4 u_right;     // camera basis (xyz)
-  vec4 u_up;
-  vec4 u_forward;
-  vec4 u_viewport;  // image width, height (pixels), guard margin (pixels), focal length (pixels)
-  vec4 u_limits;    // near, far, largest blob radius, 1 / mass unit
-  ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), highlight (0 none, 1 selected IDs, 2 every point, alone), copy direction (+1 / -1)
-  vec4 u_time;      // t in [0, 1], weight of this copy, Hermite velocity scale, unused
-  ivec4 u_wrap;     // 1: moved points are wrapped into the periodic box (the draw's box_*), 0: not; unused x 3
-};
-
-// A block's decode parameters (render/gpu_block_arena.h, GpuBlockParameters).
-struct BlockParams {
-  vec4 node;        // quantum (node edge / 65536), weight unit, log2 of the smallest smoothing, 1 / codes per octave
-  ivec4 columns0;   // present (>= 0) or absent (-1): position, weight, smoothing, type
-  ivec4 columns1;   // velocity, id, displacement, next_velocity
-  ivec4 columns2;   // prev_displacement, prev_velocity, velocity_dispersion, shape
-  vec4 velocity[2];           // minimum, step ((max - min) / 65535)
-  vec4 displacement[2];
-  vec4 next_velocity[2];
-  vec4 prev_displacement[2];
-  vec4 prev_velocity[2];
-  uvec4 id_base;    // added to a_id: the id column's base (u32 offsets), 0 for whole u64 IDs; low word first
-  vec4 dispersion;  // velocity dispersion: minimum, step
-};
-layout(std430, binding = 3) readonly buffer Blocks { BlockParams blocks[]; };
-
-// One draw of a block's points (render/splat_renderer.h): its node's corner
-// minus the camera position, in double on the CPU before the float, so that
-// the precision that matters is near the camera. With u_wrap.x: the
-// periodic box relative to the node's corner, [low, high) per axis, and the
-// node's corner one box length lower (for points past the upper face) and
-// higher (for points below the lower face), minus the camera.
-struct DrawParams {
-  vec4 origin;
-  vec4 box_low;
-  vec4 box_high;
-  vec4 origin_below;
-  vec4 origin_above;
-  uvec4 block;  // x: the block's slot in Blocks
-};
-layout(std430, binding = 4) readonly buffer Draws { DrawParams draws[]; };
-
-// This vertex's draw and block: fields read where used, not whole structs
-// (a per-vertex copy of 352 bytes costs a software rasterizer dearly).
-#define this_draw draws[a_draw]
-#define this_block blocks[draws[a_draw].block.x]
-#define b_node this_block.node
-#define b_columns0 this_block.columns0
-#define b_columns1 this_block.columns1
-#define b_columns2 this_block.columns2
-#define b_velocity this_block.velocity
-#define b_displacement this_block.displacement
-#define b_next_velocity this_block.next_velocity
-#define b_prev_displacement this_block.prev_displacement
-#define b_prev_velocity this_block.prev_velocity
-#define b_id_base this_block.id_base
-#define b_dispersion this_block.dispersion
-
-// The columns, as stored: u16 x 3 positions and ranged vectors (as floats
-// 0..65535), u32 weight units, u16 smoothing codes, u8 types, u64 IDs (as
-// two words, low first) or u32 ID offsets (the high word reads as 0). Absent
-// columns read as zero and are not used. A shape (index/cluster_shape.h) is
-// six byte codes, read as two triples.
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in uint a_weight;
 layout(location = 2) in float a_smoothing;
@@ -87,173 +13,43 @@ layout(location = 7) in vec3 a_next_velocity;
 layout(location = 8) in vec3 a_prev_displacement;
 layout(location = 9) in vec3 a_prev_velocity;
 layout(location = 10) in float a_velocity_dispersion;
-layout(location = 11) in vec3 a_shape_diagonal;      // xx, yy, zz codes
-layout(location = 12) in vec3 a_shape_off_diagonal;  // xy, xz, yz codes
+layout(location = 11) in vec3 a_shape_diagonal;
+layout(location = 12) in vec3 a_shape_off_diagonal;
 layout(location = 13) in uint a_draw;  // the draw's index in Draws: its base instance
 
-layout(std430, binding = 1) readonly buffer Selection {
-  uint selection_mask;   // slots - 1 (slots a power of two)
-  uint selection_count;
-  uint selection_pad0;
-  uint selection_pad1;
-  uvec2 selection_slots[];  // (low, high) words of a selected ID; (~0, ~0) empty
-};
-
 flat out vec2 v_center;  // framebuffer coordinates
-flat out vec3 v_conic;   // the footprint: a pixel offset d is at q^2 = conic.x dx^2 + 2 conic.y dx dy + conic.z dy^2
-flat out vec4 v_value;   // the blob's amplitude times (1, a, a^2, selected)
-
-vec3 Ranged(vec3 code, vec4 range[2]) { return range[0].xyz + code * range[1].xyz; }
-
-// The lowbias32 integer hash; the same as SelectionSet's on the CPU.
-uint Mix32(uint x) {
-  x ^= x >> 16u;
-  x *= 0x7feb352du;
-  x ^= x >> 15u;
-  x *= 0x846ca68bu;
-  x ^= x >> 16u;
-  return x;
-}
-
-// The point's 64-bit ID, low word first: the stored value plus the block's
-// base, with the carry.
-uvec2 ParticleId() {
-  uint low = a_id.x + b_id_base.x;
-  uint carry = low < b_id_base.x ? 1u : 0u;
-  return uvec2(low, a_id.y + b_id_base.y + carry);
-}
-
-bool IsSelected(uvec2 id) {
-  uint slot = Mix32(id.x ^ Mix32(id.y)) & selection_mask;
-  for (uint probe = 0u; probe <= selection_mask; ++probe) {
-    uvec2 s = selection_slots[slot];
-    if (s == id) return true;
-    if (s == uvec2(0xFFFFFFFFu)) return false;
-    slot = (slot + 1u) & selection_mask;
-  }
-  return false;
-}
-
-// The kernel summed over the pixel centres of the footprint, which lies
-// within `extent` pixels of c.
-float PixelSum(vec2 c, vec3 conic, float extent) {
-  float sum = 0.0;
-  int i0 = int(ceil(c.x - extent - 0.5)), i1 = int(floor(c.x + extent - 0.5));
-  int j0 = int(ceil(c.y - extent - 0.5)), j1 = int(floor(c.y + extent - 0.5));
-  for (int j = j0; j <= j1; ++j) {
-    float dy = float(j) + 0.5 - c.y;
-    for (int i = i0; i <= i1; ++i) {
-      float dx = float(i) + 0.5 - c.x;
-      sum += CubicKernel(sqrt(conic.x * dx * dx + 2.0 * conic.y * dx * dy + conic.z * dy * dy));
-    }
-  }
-  return sum;
-}
-
-// The footprint of a blob of `scale` pixels (its round radius) and 3-D shape
-// S: the ellipse of S's projection onto the image plane, S restricted to the
-// camera's right and up axes (the same local approximation as the round
-// blob's radius h * focal / depth), scaled by scale^2. Its two radii are held
-// between 1 pixel and the largest blob radius, as a round blob's radius is.
-// Returns the conic (the clamped matrix's inverse) and the two radii.
-void Footprint(float scale, out vec3 conic, out float major, out float minor) {
-  vec3 m = vec3(scale * scale, 0.0, scale * scale);  // xx, xy, yy in pixels^2
-  if (b_columns2.w >= 0) {
-    vec3 d = a_shape_diagonal / 85.0;
-    vec3 o = (a_shape_off_diagonal - 127.0) * (3.0 / 254.0);
-    mat3 shape = mat3(d.x, o.x, o.y, o.x, d.y, o.z, o.y, o.z, d.z);
-    vec3 r = shape * u_right.xyz, u = shape * u_up.xyz;
-    m = scale * scale * vec3(dot(u_right.xyz, r), dot(u_right.xyz, u), dot(u_up.xyz, u));
-  }
-  float mean = 0.5 * (m.x + m.z), half_difference = 0.5 * (m.x - m.z);
-  float root = sqrt(half_difference * half_difference + m.y * m.y);
-  // The major axis, computed without cancellation; any axis for a circle.
-  vec2 axis = half_difference >= 0.0 ? vec2(half_difference + root, m.y) : vec2(m.y, root - half_difference);
-  axis = dot(axis, axis) > 0.0 ? normalize(axis) : vec2(1.0, 0.0);
-  float limit = u_limits.z * u_limits.z;
-  float l1 = clamp(mean + root, 1.0, limit), l2 = clamp(mean - root, 1.0, limit);
-  vec2 other = vec2(-axis.y, axis.x);
-  conic = vec3(axis.x * axis.x, axis.x * axis.y, axis.y * axis.y) / l1 +
-          vec3(other.x * other.x, other.x * other.y, other.y * other.y) / l2;
-  major = sqrt(l1);
-  minor = sqrt(l2);
-}
-
-void Discard() {
-  gl_Position = vec4(2.0, 2.0, 2.0, 1.0);  // outside the clip volume: no fragments
-  gl_PointSize = 1.0;
-  v_center = vec2(0.0);
-  v_conic = vec3(1.0, 0.0, 1.0);
-  v_value = vec4(0.0);
-}
+flat out vec3 v_conic;
+flat out vec4 v_value;
 
 void main() {
-  // Relative to the node's corner until the end of the move.
-  vec3 p = (a_position + 0.5) * b_node.x;
-  vec3 velocity = b_columns1.x >= 0 ? Ranged(a_velocity, b_velocity) : vec3(0.0);
-
-  vec3 origin = this_draw.origin.xyz;
-  if (u_modes.y != 0) {
-    // Both epochs of an interval follow the same curve from p_e to p_e+1, so
-    // the two copies of a particle coincide at every t.
-    float t = u_time.x;
-    float t2 = t * t, t3 = t2 * t;
-    float h01 = u_modes.y == 2 ? 3.0 * t2 - 2.0 * t3 : t;
-    float h10 = t3 - 2.0 * t2 + t, h11 = t3 - t2;
-    if (u_modes.w > 0) {
-      p += h01 * Ranged(a_displacement, b_displacement);
-      if (u_modes.y == 2) p += u_time.z * (h10 * velocity + h11 * Ranged(a_next_velocity, b_next_velocity));
-    } else {
-      p += (1.0 - h01) * Ranged(a_prev_displacement, b_prev_displacement);
-      if (u_modes.y == 2) p += u_time.z * (h10 * Ranged(a_prev_velocity, b_prev_velocity) + h11 * velocity);
-    }
-    if (u_wrap.x != 0) {
-      // A path strays less than a box length from its ends, so one image is enough.
-      origin = mix(origin, this_draw.origin_below.xyz, greaterThanEqual(p, this_draw.box_high.xyz));
-      origin = mix(origin, this_draw.origin_above.xyz, lessThan(p, this_draw.box_low.xyz));
-    }
-  }
-  p += origin;
-
-  float depth = dot(p, u_forward.xyz);
-  if (!(depth >= u_limits.x && depth <= u_limits.y)) {
-    Discard();
+  Point pt;
+  pt.position = a_position;
+  pt.weight = a_weight;
+  pt.smoothing = a_smoothing;
+  pt.type = a_type;
+  pt.velocity = a_velocity;
+  pt.id = a_id;
+  pt.displacement = a_displacement;
+  pt.next_velocity = a_next_velocity;
+  pt.prev_displacement = a_prev_displacement;
+  pt.prev_velocity = a_prev_velocity;
+  pt.velocity_dispersion = a_velocity_dispersion;
+  pt.shape_diagonal = a_shape_diagonal;
+  pt.shape_off_diagonal = a_shape_off_diagonal;
+  pt.draw = a_draw;
+  Blob blob;
+  if (!MakeBlob(pt, blob)) {
+    gl_Position = vec4(2.0, 2.0, 2.0, 1.0);  // outside the clip volume: no fragments
+    gl_PointSize = 1.0;
+    v_center = vec2(0.0);
+    v_conic = vec3(1.0, 0.0, 1.0);
+    v_value = vec4(0.0);
     return;
   }
-  vec2 image = u_viewport.xy;
-  float margin = u_viewport.z, focal = u_viewport.w;
-  vec2 center = 0.5 * image + focal * vec2(dot(p, u_right.xyz), dot(p, u_up.xyz)) / depth;
-  float smoothing = exp2(b_node.z + a_smoothing * b_node.w);
-  vec3 conic;
-  float major, minor;
-  Footprint(smoothing * focal / depth, conic, major, minor);
-  float weight = float(a_weight) * b_node.y * u_limits.w * u_time.y;
-  // Summed over the pixels where the integral would miss by more than a
-  // fraction of a percent: small blobs, and thin ones.
-  float normalization = major < kExactNormalizationRadius || minor < kExactNormalizationMinor
-                            ? PixelSum(center, conic, major)
-                            : kKernelIntegral * major * minor;
-
-  // Where a point stands for many particles, their velocity dispersion
-  // sigma (per axis) adds to the spread of speeds and of line-of-sight
-  // velocities: speed is taken as the rms speed, and the line of sight's
-  // second moment gains sigma^2.
-  float sigma = b_columns2.z >= 0 ? b_dispersion.x + a_velocity_dispersion * b_dispersion.y : 0.0;
-  float a = 0.0, spread = 0.0;
-  int mode = u_modes.x;
-  if (mode == 1) a = sqrt(dot(velocity, velocity) + 3.0 * sigma * sigma);
-  else if (mode == 2 || mode == 3) {
-    a = dot(velocity, u_forward.xyz);
-    spread = sigma * sigma;
-  } else if (mode == 4) a = float(a_type);
-  float selected = 0.0;
-  if (u_modes.z == 1 && b_columns1.y >= 0) selected = IsSelected(ParticleId()) ? 1.0 : 0.0;
-
-  vec2 framebuffer = image + 2.0 * margin;
-  v_center = center + margin;
-  v_conic = conic;
-  v_value = u_modes.z == 2 ? vec4(0.0, 0.0, 0.0, weight / normalization)
-                           : (weight / normalization) * vec4(1.0, a, a * a + spread, selected);
-  gl_Position = vec4(v_center / framebuffer * 2.0 - 1.0, 0.0, 1.0);
-  gl_PointSize = 2.0 * major + kSpriteGuard;
+  vec2 framebuffer = u_viewport.xy + 2.0 * u_viewport.z;
+  v_center = blob.center;
+  v_conic = blob.conic;
+  v_value = blob.value;
+  gl_Position = vec4(blob.center / framebuffer * 2.0 - 1.0, 0.0, 1.0);
+  gl_PointSize = 2.0 * blob.major + kSpriteGuard;
 }

@@ -83,6 +83,29 @@ TEST(ToneMapTest, AutomaticAttributeRangeIsSymmetricForLineOfSightVelocity) {
   EXPECT_LT(q.attribute_low, q.attribute_high);
 }
 
+// Every pixel's attribute 1 to float rounding (one particle type, summed by
+// float atomics in no fixed order): the automatic range is not stretched over
+// the rounding, so every pixel gets the same colour.
+TEST(ToneMapTest, AnAttributeRangeWithinRoundingIsOneValue) {
+  HdrImage image{64, 1, std::vector<double>(4 * 64)};
+  for (std::size_t x = 0; x < 64; ++x) {
+    const double mass = 1.0 + static_cast<double>(x), mean = x % 2 == 0 ? 1.0 : 1.0 + 1.2e-7;
+    image.rgba[4 * x] = mass;
+    image.rgba[4 * x + 1] = mass * mean;
+    image.rgba[4 * x + 2] = mass * mean * mean;
+  }
+  ToneMapSettings settings;
+  settings.color = ColorMode::kType;
+  const ToneMapParameters p = ResolveToneMap(settings, MeasureImage(image, settings.color));
+  EXPECT_GE(p.attribute_high - p.attribute_low, 1);
+  // The colour's share of green, whatever the brightness.
+  auto green = [&](std::size_t x) {
+    const std::array<double, 3> rgb = ToneMapPixel(p, &image.rgba[4 * x]);
+    return rgb[1] / (rgb[0] + rgb[1] + rgb[2]);
+  };
+  for (std::size_t x = 1; x < 64; ++x) EXPECT_NEAR(green(x), green(0), 1e-5) << x;
+}
+
 TEST(ToneMapTest, SelectedMassIsPaintedInTheHighlightColour) {
   ToneMapParameters p;
   p.exposure = 1;

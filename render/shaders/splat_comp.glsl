@@ -1,0 +1,178 @@
+// The compute path (render/compute_splatter.h): one invocation per point,
+// read from its block's columns as storage buffers, turned into its blob by
+// splat_point.glsl, and added pixel by pixel into a float buffer with atomic
+// adds (GL_NV_shader_atomic_float) where the blob is small. A blob larger
+// than u_compute_radius goes to a list that the raster path draws after the
+// dispatch (splat_blob_vert.glsl), where a GPU's blending beats a thread's
+// loop; if the list is full the thread adds it itself, so no blob is lost.
+//
+// Before this file the program defines which columns it reads (the frame's
+// colour mode, interpolation and selection decide): HAS_VELOCITY,
+// HAS_DISPERSION, HAS_TYPE, HAS_ID, HAS_LINKS (displacements), HAS_HERMITE
+// (the neighbours' velocities). The others are not bound and read as zero,
+// so a program binds at most 16 storage buffers.
+
+layout(local_size_x = 256) in;
+
+// The dispatch: draws [u_first_draw, u_first_draw + u_draw_count) of Draws,
+// all of one pool, u_points points in all; the columns are bound from pool
+// point u_base on. Ids are u32 offsets (1 word) or whole u64 IDs (2 words).
+uniform uint u_first_draw;
+uniform uint u_draw_count;
+uniform uint u_points;
+uniform uint u_base;
+uniform uint u_id_words;
+uniform float u_compute_radius;  // pixels: larger blobs go to the list
+uniform ivec2 u_target_size;     // the accumulation buffer, guard margin included
+
+// Columns as words; element i of a column of s-byte elements starts at byte s i.
+layout(std430, binding = 5) readonly buffer PositionColumn { uint position_words[]; };
+layout(std430, binding = 6) readonly buffer WeightColumn { uint weight_words[]; };
+layout(std430, binding = 7) readonly buffer SmoothingColumn { uint smoothing_words[]; };
+layout(std430, binding = 8) readonly buffer ShapeColumn { uint shape_words[]; };
+#ifdef HAS_VELOCITY
+layout(std430, binding = 9) readonly buffer VelocityColumn { uint velocity_words[]; };
+#endif
+#ifdef HAS_DISPERSION
+layout(std430, binding = 10) readonly buffer DispersionColumn { uint dispersion_words[]; };
+#endif
+#ifdef HAS_TYPE
+layout(std430, binding = 11) readonly buffer TypeColumn { uint type_words[]; };
+#endif
+#ifdef HAS_ID
+layout(std430, binding = 12) readonly buffer IdColumn { uint id_words[]; };
+#endif
+#ifdef HAS_LINKS
+layout(std430, binding = 13) readonly buffer DisplacementColumn { uint displacement_words[]; };
+layout(std430, binding = 14) readonly buffer PrevDisplacementColumn { uint prev_displacement_words[]; };
+#endif
+#ifdef HAS_HERMITE
+layout(std430, binding = 15) readonly buffer NextVelocityColumn { uint next_velocity_words[]; };
+layout(std430, binding = 16) readonly buffer PrevVelocityColumn { uint prev_velocity_words[]; };
+#endif
+
+// The accumulation: four floats per pixel, rows from the bottom, as the
+// accumulation texture (render/splat_renderer.h).
+layout(std430, binding = 17) buffer Accumulation { float accumulation[]; };
+
+struct LargeBlob {
+  vec4 center_major;  // centre (x, y), larger radius, unused
+  vec4 conic;         // xyz
+  vec4 value;
+};
+// A DrawArraysIndirectCommand (its count the blobs listed, possibly more
+// than fit: those past the capacity were added here), then the blobs.
+layout(std430, binding = 18) buffer LargeBlobs {
+  uint large_count;
+  uint large_instances;
+  uint large_first;
+  uint large_base_instance;
+  LargeBlob large_blobs[];
+};
+
+#define U16(words, index) ((words[(index) >> 1u] >> (((index) & 1u) << 4u)) & 0xFFFFu)
+#define U8(words, index) ((words[(index) >> 2u] >> (((index) & 3u) << 3u)) & 0xFFu)
+#define U16X3(words, i) vec3(float(U16(words, 3u * (i))), float(U16(words, 3u * (i) + 1u)), float(U16(words, 3u * (i) + 2u)))
+
+// The draw that point `k` of the dispatch belongs to: the last whose first
+// point (block.w) is at most k.
+uint DrawOf(uint k) {
+  uint low = 0u, high = u_draw_count - 1u;
+  while (low < high) {
+    uint middle = (low + high + 1u) >> 1u;
+    if (draws[u_first_draw + middle].block.w <= k) low = middle;
+    else high = middle - 1u;
+  }
+  return u_first_draw + low;
+}
+
+Point Load(uint draw, uint i) {
+  Point pt;
+  pt.draw = draw;
+  pt.position = U16X3(position_words, i);
+  pt.weight = weight_words[i];
+  pt.smoothing = float(U16(smoothing_words, i));
+  pt.type = 0u;
+  pt.velocity = vec3(0.0);
+  pt.id = uvec2(0u);
+  pt.displacement = vec3(0.0);
+  pt.next_velocity = vec3(0.0);
+  pt.prev_displacement = vec3(0.0);
+  pt.prev_velocity = vec3(0.0);
+  pt.velocity_dispersion = 0.0;
+  pt.shape_diagonal = vec3(0.0);
+  pt.shape_off_diagonal = vec3(0.0);
+  if (b_columns2.w >= 0) {
+    pt.shape_diagonal = vec3(float(U8(shape_words, 6u * i)), float(U8(shape_words, 6u * i + 1u)),
+                             float(U8(shape_words, 6u * i + 2u)));
+    pt.shape_off_diagonal = vec3(float(U8(shape_words, 6u * i + 3u)), float(U8(shape_words, 6u * i + 4u)),
+                                 float(U8(shape_words, 6u * i + 5u)));
+  }
+#ifdef HAS_VELOCITY
+  if (b_columns1.x >= 0) pt.velocity = U16X3(velocity_words, i);
+#endif
+#ifdef HAS_DISPERSION
+  if (b_columns2.z >= 0) pt.velocity_dispersion = float(U16(dispersion_words, i));
+#endif
+#ifdef HAS_TYPE
+  if (b_columns0.w >= 0) pt.type = U8(type_words, i);
+#endif
+#ifdef HAS_ID
+  if (b_columns1.y >= 0) pt.id = u_id_words == 2u ? uvec2(id_words[2u * i], id_words[2u * i + 1u]) : uvec2(id_words[i], 0u);
+#endif
+#ifdef HAS_LINKS
+  if (b_columns1.z >= 0) pt.displacement = U16X3(displacement_words, i);
+  if (b_columns2.x >= 0) pt.prev_displacement = U16X3(prev_displacement_words, i);
+#endif
+#ifdef HAS_HERMITE
+  if (b_columns1.w >= 0) pt.next_velocity = U16X3(next_velocity_words, i);
+  if (b_columns2.y >= 0) pt.prev_velocity = U16X3(prev_velocity_words, i);
+#endif
+  return pt;
+}
+
+void Add(uint at, float value) {
+  if (value != 0.0) atomicAdd(accumulation[at], value);
+}
+
+// Adds the blob to every pixel whose centre its footprint covers: the pixels
+// splat_frag.glsl would shade, with the same weights.
+void AddPixels(Blob blob) {
+  ivec2 low = max(ivec2(ceil(blob.center - blob.major - 0.5)), ivec2(0));
+  ivec2 high = min(ivec2(floor(blob.center + blob.major - 0.5)), u_target_size - 1);
+  for (int j = low.y; j <= high.y; ++j) {
+    for (int i = low.x; i <= high.x; ++i) {
+      float w = CubicKernel(FootprintDistance(blob.conic, vec2(float(i) + 0.5, float(j) + 0.5) - blob.center));
+      if (w <= 0.0) continue;
+      uint at = 4u * (uint(j) * uint(u_target_size.x) + uint(i));
+      vec4 v = blob.value * w;
+      Add(at, v.x);
+      Add(at + 1u, v.y);
+      Add(at + 2u, v.z);
+      Add(at + 3u, v.w);
+    }
+  }
+}
+
+void main() {
+  uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+  for (uint k = gl_GlobalInvocationID.x; k < u_points; k += stride) {
+    uint draw = DrawOf(k);
+    uint i = draws[draw].block.y + (k - draws[draw].block.w) - u_base;
+    Blob blob;
+    if (!MakeBlob(Load(draw, i), blob)) continue;
+    // The raster path draws a point only if its centre is in the
+    // framebuffer; so does this one.
+    if (!(all(greaterThanEqual(blob.center, vec2(0.0))) && all(lessThan(blob.center, vec2(u_target_size))))) continue;
+    if (blob.major > u_compute_radius) {
+      uint slot = atomicAdd(large_count, 1u);
+      if (slot < uint(large_blobs.length())) {
+        large_blobs[slot].center_major = vec4(blob.center, blob.major, 0.0);
+        large_blobs[slot].conic = vec4(blob.conic, 0.0);
+        large_blobs[slot].value = blob.value;
+        continue;
+      }
+    }
+    AddPixels(blob);
+  }
+}
