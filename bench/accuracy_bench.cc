@@ -50,8 +50,8 @@
 #include "accuracy/pcl_octree_leaves.h"
 #include "accuracy/position_errors.h"
 #include "accuracy/snapshot_points.h"
+#include "base/error.h"
 #include "index/dataset.h"
-#include "storage/error.h"
 #include "tools/ingest/ingest.h"
 #include "tools/synth/scale_generator.h"
 

@@ -8,9 +8,9 @@
 #include <memory>
 #include <vector>
 
+#include "base/error.h"
 #include "index/particle_chunk.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 #include "storage/file.h"
 #include "tools/ingest/epoch_join.h"
 #include "tools/snapshot/snapshot_source.h"

@@ -21,10 +21,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "index/dataset.h"
 #include "index/query.h"
 #include "index/region.h"
-#include "storage/error.h"
 #include "tools/cli_util.h"
 #include "tools/ingest/ingest.h"
 #include "tools/snapshot/snapshot_source.h"

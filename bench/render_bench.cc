@@ -36,10 +36,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "index/node_hierarchy.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
-#include "storage/error.h"
 #include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/image_io.h"

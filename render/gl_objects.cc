@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

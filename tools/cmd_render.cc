@@ -11,7 +11,7 @@
 
 #include "render/offscreen_renderer.h"
 #include "render/render_view.h"
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/camera_flags.h"
 #include "tools/camera_path.h"
 #include "tools/commands.h"

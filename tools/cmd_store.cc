@@ -6,11 +6,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
+#include "base/progress.h"
 #include "index/dataset.h"
-#include "storage/error.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
-#include "tools/progress.h"
 #include "tools/store_verify.h"
 
 namespace octocosm {

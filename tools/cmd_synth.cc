@@ -8,7 +8,7 @@
 
 #include <CLI/CLI.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
 #include "tools/synth/particle_mesh.h"

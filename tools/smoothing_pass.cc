@@ -14,13 +14,13 @@
 #include <mutex>
 #include <vector>
 
+#include "base/error.h"
+#include "base/parallel_for.h"
+#include "base/progress.h"
+#include "base/temp_directory.h"
 #include "index/cube.h"
 #include "index/morton.h"
-#include "storage/error.h"
 #include "tools/ingest/record_file.h"
-#include "tools/parallel_for.h"
-#include "tools/progress.h"
-#include "tools/temp_directory.h"
 
 namespace octocosm {
 namespace {

@@ -11,11 +11,11 @@
 #include <unordered_set>
 #include <vector>
 
+#include "base/error.h"
 #include "index/block_codec.h"
 #include "index/dataset.h"
 #include "index/id_index.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/fuzz/fuzz_target.h"
 #include "tests/fuzz/snapshot_fuzz.h"
 

@@ -5,8 +5,8 @@
 #include <cstdint>
 #include <string>
 
+#include "base/error.h"
 #include "index/particle_chunk.h"
-#include "storage/error.h"
 #include "tests/fuzz/fuzz_target.h"
 #include "tools/snapshot/snapshot_source.h"
 

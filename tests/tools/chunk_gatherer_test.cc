@@ -12,8 +12,8 @@
 #include <random>
 #include <string>
 
+#include "base/error.h"
 #include "index/subtree_builder.h"
-#include "storage/error.h"
 #include "tools/ingest/chunk_gatherer.h"
 
 namespace octocosm {

@@ -13,7 +13,7 @@
 #include <utility>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/ingest/dense_id_table.h"
 
 namespace octocosm {

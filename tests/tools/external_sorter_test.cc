@@ -11,7 +11,7 @@
 #include <thread>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/support/temp_dir.h"
 #include "tools/ingest/external_sorter.h"
 

@@ -14,8 +14,8 @@
 #include <sstream>
 #include <unistd.h>
 
+#include "base/error.h"
 #include "index/particle_lookup.h"
-#include "storage/error.h"
 #include "tools/ingest/ingest.h"
 #include "tools/query_output.h"
 #include "tools/snapshot/snapshot_source.h"

@@ -15,7 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "index/dataset.h"
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/ingest/clipped_source.h"
 #include "tools/ingest/ingest.h"
 #include "tools/ingest/outliers.h"

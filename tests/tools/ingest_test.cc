@@ -19,7 +19,7 @@
 #include "index/dataset.h"
 #include "index/id_index.h"
 #include "index/subtree_builder.h"
-#include "storage/error.h"
+#include "base/error.h"
 #include "storage/store_reader.h"
 #include "tools/read_flags.h"
 #include "tools/snapshot/snapshot_source.h"

@@ -12,7 +12,7 @@
 #include <numeric>
 #include <random>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm {

@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm {

@@ -11,7 +11,7 @@
 
 #include <gtest/gtest.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/tools/snapshot_test_util.h"
 #include "tools/snapshot/snapshot_source.h"
 

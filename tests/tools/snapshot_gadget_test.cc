@@ -13,7 +13,7 @@
 
 #include <gtest/gtest.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/tools/gadget_test_file.h"
 #include "tests/tools/snapshot_test_util.h"
 #include "tools/snapshot/snapshot_source.h"

@@ -9,8 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "base/error.h"
 #include "index/particle_chunk.h"
-#include "storage/error.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {

@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "index/particle_chunk.h"
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/snapshot_source.h"
 #include "tools/synth/cosmic_web.h"
 #include "tools/synth/nfw_profile.h"

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/synth/cosmology.h"
 #include "tools/synth/gadget_writer.h"
 #include "tools/synth/linear_power.h"

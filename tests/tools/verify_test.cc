@@ -14,7 +14,7 @@
 
 #include "index/block_codec.h"
 #include "index/dataset.h"
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/support/temp_dir.h"
 #include "storage/manifest.h"
 #include "storage/store_reader.h"

@@ -4,8 +4,8 @@
 #include <cstddef>
 #include <string>
 
+#include "base/error.h"
 #include "index/cells_below.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -12,10 +12,10 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "base/error.h"
+#include "base/huge_pages.h"
+#include "base/parallel_for.h"
 #include "index/cells_below.h"
-#include "storage/error.h"
-#include "tools/huge_pages.h"
-#include "tools/parallel_for.h"
 
 namespace octocosm {
 namespace {
@@ -126,7 +126,7 @@ CellOrder OrderByCell(std::size_t n, std::size_t cells, int threads, const CellO
   order.begin[cells] = placed;
   order.points = std::make_unique_for_overwrite<std::uint32_t[]>(n);
   // Memory filled once and kept is cheaper to fault in on small pages
-  // (tools/huge_pages.h); what is freed soon stays on huge pages, which the
+  // (base/huge_pages.h); what is freed soon stays on huge pages, which the
   // build's allocations then reuse (the resident cells too: with them on
   // small pages as well, the split's CPU fell by as much as the build's rose).
   if (kept) PreferSmallPages(order.points.get(), n * sizeof(std::uint32_t));

@@ -5,7 +5,7 @@
 #include <new>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

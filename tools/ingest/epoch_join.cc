@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/ingest/record_file.h"
 
 namespace octocosm {

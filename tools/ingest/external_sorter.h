@@ -25,8 +25,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "base/error.h"
 #include "index/radix_sort.h"
-#include "storage/error.h"
 #include "tools/ingest/record_file.h"
 
 namespace octocosm {

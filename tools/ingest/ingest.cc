@@ -22,10 +22,13 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/error.h"
+#include "base/interrupt_cleanup.h"
+#include "base/progress.h"
+#include "base/temp_directory.h"
 #include "index/block_codec.h"
 #include "index/dataset_manifest.h"
 #include "index/id_index.h"
-#include "storage/error.h"
 #include "storage/store_writer.h"
 #include "tools/ingest/chunk_gatherer.h"
 #include "tools/ingest/chunk_queue.h"
@@ -36,10 +39,7 @@
 #include "tools/ingest/external_sorter.h"
 #include "tools/ingest/outliers.h"
 #include "tools/ingest/resident_epoch.h"
-#include "tools/interrupt_cleanup.h"
-#include "tools/progress.h"
 #include "tools/smoothing_pass.h"
-#include "tools/temp_directory.h"
 
 namespace octocosm {
 namespace {
@@ -77,7 +77,7 @@ struct IdLeafRecord {
 };
 
 // Removes the output directory on failure, and when a signal ends the
-// program (tools/interrupt_cleanup.h), but only if this run created it; in
+// program (base/interrupt_cleanup.h), but only if this run created it; in
 // a directory that was there before, only the unfinished store's files.
 class OutputGuard {
  public:

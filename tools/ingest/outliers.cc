@@ -4,9 +4,9 @@
 #include <cmath>
 #include <cstdio>
 
+#include "base/error.h"
+#include "base/progress.h"
 #include "index/cube.h"
-#include "storage/error.h"
-#include "tools/progress.h"
 
 namespace octocosm {
 namespace {

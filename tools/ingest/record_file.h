@@ -15,7 +15,7 @@
 #include <utility>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

@@ -16,9 +16,9 @@
 #include <string>
 #include <type_traits>
 
-#include "storage/error.h"
-#include "tools/huge_pages.h"
-#include "tools/parallel_for.h"
+#include "base/error.h"
+#include "base/huge_pages.h"
+#include "base/parallel_for.h"
 
 namespace octocosm {
 namespace {

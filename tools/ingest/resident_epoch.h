@@ -12,7 +12,7 @@
 //
 // Why: this is the only memory an ingest fills that grows with the whole
 // epoch, and on the virtual machines this runs on the first touch of fresh
-// memory is the read's largest cost (PageWarmer, tools/page_warmer.h).
+// memory is the read's largest cost (PageWarmer, base/page_warmer.h).
 // Narrow, a GADGET point with velocity and ID takes 29 bytes instead of 53.
 //
 // Better still, an epoch whose files hold every column as a plain array in
@@ -34,10 +34,10 @@
 #include <string>
 #include <vector>
 
+#include "base/page_warmer.h"
 #include "index/cube.h"
 #include "index/particle_chunk.h"
 #include "tools/ingest/particle_file.h"
-#include "tools/page_warmer.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -81,7 +81,7 @@ class ResidentEpoch {
 
   // Room for `points` in the columns `columns` names (position, mass and
   // type always), in their narrow forms, on small pages (filled once and
-  // kept: tools/huge_pages.h). Every appended batch must carry exactly these
+  // kept: base/huge_pages.h). Every appended batch must carry exactly these
   // optional columns. Returns the reserved memory, not yet touched, for a
   // PageWarmer.
   std::vector<PageWarmer::Range> Reserve(std::size_t points, const ParticleColumns& columns);

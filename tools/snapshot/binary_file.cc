@@ -9,7 +9,7 @@
 #include <cstring>
 #include <utility>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/file_set.h"
 
 namespace octocosm {

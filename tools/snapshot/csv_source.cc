@@ -8,7 +8,7 @@
 #include <fstream>
 #include <map>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/file_set.h"
 #include "tools/snapshot/segmented_source.h"
 

@@ -5,7 +5,7 @@
 #include <cctype>
 #include <cerrno>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

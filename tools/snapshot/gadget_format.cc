@@ -2,7 +2,7 @@
 
 #include <cstring>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -7,7 +7,7 @@
 #include <optional>
 #include <sstream>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/binary_file.h"
 #include "tools/snapshot/file_set.h"
 #include "tools/snapshot/gadget_format.h"

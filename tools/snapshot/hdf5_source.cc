@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/binary_file.h"
 #include "tools/snapshot/file_set.h"
 #include "tools/snapshot/segmented_source.h"

@@ -2,7 +2,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/binary_file.h"
 #include "tools/snapshot/csv_source.h"
 #include "tools/snapshot/file_set.h"

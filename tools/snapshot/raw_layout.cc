@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <map>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {

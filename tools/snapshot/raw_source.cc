@@ -3,7 +3,7 @@
 #include <bit>
 #include <cstring>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/snapshot/binary_file.h"
 #include "tools/snapshot/segmented_source.h"
 

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -6,8 +6,8 @@
 #include <mutex>
 #include <string>
 
-#include "storage/error.h"
-#include "tools/parallel_for.h"
+#include "base/error.h"
+#include "base/parallel_for.h"
 
 namespace octocosm::synth {
 namespace {

@@ -10,8 +10,8 @@
 #include <cstring>
 #include <limits>
 
+#include "base/error.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 
 namespace octocosm::synth {
 namespace {

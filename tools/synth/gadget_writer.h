@@ -30,7 +30,7 @@
 #include <string>
 #include <vector>
 
-#include "tools/interrupt_cleanup.h"
+#include "base/interrupt_cleanup.h"
 
 namespace octocosm::synth {
 
@@ -87,7 +87,7 @@ class GadgetFileWriter {
   // mass-table entry > 0); id_bytes is 4 or 8.
   GadgetFileWriter(std::string path, const GadgetHeader& header, GadgetFormat format, int id_bytes);
   // Removes the temporary file unless Commit() ran; so does SIGINT, SIGTERM
-  // or SIGHUP (tools/interrupt_cleanup.h).
+  // or SIGHUP (base/interrupt_cleanup.h).
   ~GadgetFileWriter();
   GadgetFileWriter(const GadgetFileWriter&) = delete;
   GadgetFileWriter& operator=(const GadgetFileWriter&) = delete;

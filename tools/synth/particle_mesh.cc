@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/synth/pm_simulation.h"
 
 namespace octocosm::synth {

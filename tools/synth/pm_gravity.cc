@@ -2,9 +2,9 @@
 
 #include <numbers>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/synth/cloud_in_cell.h"
-#include "tools/parallel_for.h"
+#include "base/parallel_for.h"
 
 namespace octocosm::synth {
 

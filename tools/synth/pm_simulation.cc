@@ -3,8 +3,8 @@
 #include <cmath>
 #include <string>
 
-#include "storage/error.h"
-#include "tools/parallel_for.h"
+#include "base/error.h"
+#include "base/parallel_for.h"
 #include "tools/synth/zeldovich.h"
 
 namespace octocosm::synth {

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/synth/cloud_in_cell.h"
 #include "tools/synth/fourier_grid.h"
 

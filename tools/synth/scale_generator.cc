@@ -10,10 +10,10 @@
 #include <system_error>
 #include <thread>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/synth/cosmic_web.h"
 #include "tools/synth/gadget_writer.h"
-#include "tools/parallel_for.h"
+#include "base/parallel_for.h"
 #include "tools/synth/scale_sampler.h"
 
 namespace octocosm::synth {

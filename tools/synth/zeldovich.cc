@@ -3,9 +3,9 @@
 #include <cmath>
 #include <numbers>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/synth/fourier_grid.h"
-#include "tools/parallel_for.h"
+#include "base/parallel_for.h"
 #include "tools/synth/random.h"
 
 namespace octocosm::synth {

@@ -1,6 +1,6 @@
-// ParallelFor and ParallelForDynamic (tools/parallel_for.h): every item once,
+// ParallelFor and ParallelForDynamic (base/parallel_for.h): every item once,
 // in the documented ranges, and errors back on the calling thread.
-#include "tools/parallel_for.h"
+#include "base/parallel_for.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "tools/interrupt_cleanup.h"
+#include "base/interrupt_cleanup.h"
 
 #include <pthread.h>
 #include <signal.h>

@@ -1,6 +1,6 @@
 // A directory for temporary files, removed with everything in it when the
 // object dies, whether the work that used it succeeded or threw, and when
-// SIGINT, SIGTERM or SIGHUP ends the program (tools/interrupt_cleanup.h).
+// SIGINT, SIGTERM or SIGHUP ends the program (base/interrupt_cleanup.h).
 //
 // A process killed outright (kill -9, a crash, the OOM killer) removes
 // nothing. So each directory holds a lock file that its owner keeps locked
@@ -12,7 +12,7 @@
 #include <optional>
 #include <string>
 
-#include "tools/interrupt_cleanup.h"
+#include "base/interrupt_cleanup.h"
 
 namespace octocosm {
 

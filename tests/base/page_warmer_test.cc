@@ -1,6 +1,6 @@
-// PageWarmer (tools/page_warmer.h): it faults in the whole pages of its
+// PageWarmer (base/page_warmer.h): it faults in the whole pages of its
 // ranges and never changes a byte, also while another thread fills them.
-#include "tools/page_warmer.h"
+#include "base/page_warmer.h"
 
 #include <gtest/gtest.h>
 #include <sys/mman.h>

@@ -1,5 +1,5 @@
 // The GLIBC_TUNABLES value `octocosm ingest` re-executes itself with
-// (tools/huge_pages.h): the huge-page tunable added to what is there, and
+// (base/huge_pages.h): the huge-page tunable added to what is there, and
 // nothing done when it is already set either way; and PreferSmallPages
 // marking exactly the whole pages of a range, contents untouched.
 #include <sys/mman.h>
@@ -13,7 +13,7 @@
 #include <sstream>
 #include <string>
 
-#include "tools/huge_pages.h"
+#include "base/huge_pages.h"
 
 namespace octocosm {
 namespace {

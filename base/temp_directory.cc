@@ -1,4 +1,4 @@
-#include "tools/temp_directory.h"
+#include "base/temp_directory.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -9,7 +9,7 @@
 #include <filesystem>
 #include <system_error>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -1,4 +1,4 @@
-#include "tools/page_warmer.h"
+#include "base/page_warmer.h"
 
 #include <sys/mman.h>
 #include <unistd.h>

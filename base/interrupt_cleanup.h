@@ -12,7 +12,7 @@
 // The other threads run on while it removes. A file one of them creates in the
 // moment between the removal and the end can remain; temporary directories
 // and unfinished stores carry locks that the owner's death releases
-// (tools/temp_directory.h, storage/store_writer.h), by which a later run
+// (base/temp_directory.h, storage/store_writer.h), by which a later run
 // recognises such remains, and those that kill -9 leaves, as abandoned.
 #pragma once
 
