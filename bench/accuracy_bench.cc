@@ -52,7 +52,7 @@
 #include "accuracy/snapshot_points.h"
 #include "base/error.h"
 #include "index/dataset.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 #include "tools/synth/scale_generator.h"
 
 namespace octocosm {

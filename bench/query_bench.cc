@@ -26,8 +26,8 @@
 #include "index/query.h"
 #include "index/region.h"
 #include "tools/cli_util.h"
-#include "tools/ingest/ingest.h"
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/ingest.h"
+#include "ingest/snapshot/snapshot_source.h"
 #include "tools/synth/scale_generator.h"
 
 namespace octocosm {

@@ -43,7 +43,7 @@
 #include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/image_io.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 #include "tools/reference_render.h"
 #include "tools/synth/scale_generator.h"
 

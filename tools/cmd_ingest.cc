@@ -10,7 +10,7 @@
 #include "storage/page_file_format.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 #include "tools/read_flags.h"
 
 namespace octocosm {

@@ -17,7 +17,7 @@
 #include "tools/commands.h"
 #include "tools/cli_util.h"
 #include "tools/image_io.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 #include "tools/read_flags.h"
 #include "tools/reference_render.h"
 #include "tools/render_flags.h"

@@ -8,7 +8,7 @@
 #include "base/error.h"
 #include "index/particle_chunk.h"
 #include "tests/fuzz/fuzz_target.h"
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm::fuzz {
 

@@ -24,7 +24,7 @@
 #include "index/node_selection.h"
 #include "index/particle_lookup.h"
 #include "index/region.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 
 namespace octocosm {
 namespace {

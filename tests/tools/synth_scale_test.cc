@@ -1,5 +1,5 @@
 // Tests of `synth scale`: the NFW sampling tables, and whole snapshots read
-// back through the project's snapshot reader (tools/snapshot) — counts, IDs,
+// back through the project's snapshot reader (ingest/snapshot) — counts, IDs,
 // headers, periodic bounds, determinism across runs and thread counts, the
 // radial profile of an isolated halo, and the clustering of the default mix.
 #include <gtest/gtest.h>
@@ -19,7 +19,7 @@
 
 #include "index/particle_chunk.h"
 #include "base/error.h"
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/snapshot/snapshot_source.h"
 #include "tools/synth/cosmic_web.h"
 #include "tools/synth/nfw_profile.h"
 #include "tools/synth/scale_generator.h"

@@ -19,7 +19,7 @@
 #include "storage/manifest.h"
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 
 namespace octocosm {
 namespace {
