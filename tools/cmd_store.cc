@@ -1,5 +1,5 @@
 // octocosm info and octocosm verify: what a store holds, and whether it is whole
-// (the checks themselves are in tools/store_verify.h).
+// (the checks themselves are in index/store_verify.h).
 #include <cstdio>
 #include <map>
 #include <string>
@@ -11,7 +11,7 @@
 #include "index/dataset.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
-#include "tools/store_verify.h"
+#include "index/store_verify.h"
 
 namespace octocosm {
 namespace {

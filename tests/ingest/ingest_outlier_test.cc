@@ -19,7 +19,7 @@
 #include "ingest/clipped_source.h"
 #include "ingest/ingest.h"
 #include "ingest/outliers.h"
-#include "tools/store_verify.h"
+#include "index/store_verify.h"
 #include "tests/ingest/ingest_fixture.h"
 #include "tests/ingest/store_check.h"
 

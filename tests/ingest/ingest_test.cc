@@ -22,7 +22,7 @@
 #include "index/subtree_builder.h"
 #include "ingest/snapshot/snapshot_source.h"
 #include "storage/store_reader.h"
-#include "tools/store_verify.h"
+#include "index/store_verify.h"
 #include "tests/ingest/ingest_fixture.h"
 #include "tests/ingest/snapshot/gadget_test_file.h"
 #include "tests/ingest/store_check.h"

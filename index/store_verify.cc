@@ -1,5 +1,5 @@
 // octocosm verify: every checksum and structural invariant of a dataset store.
-#include "tools/store_verify.h"
+#include "index/store_verify.h"
 
 #include <algorithm>
 #include <bitset>

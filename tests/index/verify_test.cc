@@ -1,6 +1,6 @@
 // octocosm verify finds each kind of damage a test inflicts, and nothing in a
 // sound store.
-#include "tools/store_verify.h"
+#include "index/store_verify.h"
 
 #include <gtest/gtest.h>
 
