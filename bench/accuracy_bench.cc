@@ -53,7 +53,7 @@
 #include "base/error.h"
 #include "index/dataset.h"
 #include "ingest/ingest.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

@@ -45,7 +45,7 @@
 #include "base/error.h"
 #include "bench/las_export.h"
 #include "tools/cli_util.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 extern char** environ;
 

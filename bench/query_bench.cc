@@ -28,7 +28,7 @@
 #include "tools/cli_util.h"
 #include "ingest/ingest.h"
 #include "ingest/snapshot/snapshot_source.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

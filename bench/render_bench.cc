@@ -45,7 +45,7 @@
 #include "tools/image_io.h"
 #include "ingest/ingest.h"
 #include "tools/reference_render.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

@@ -31,7 +31,7 @@
 #include "tests/ingest/ingest_fixture.h"
 #include "tests/ingest/store_check.h"
 #include "ingest/ingest.h"
-#include "tools/synth/gadget_writer.h"
+#include "synth/gadget_writer.h"
 
 namespace octocosm {
 namespace {

@@ -19,7 +19,7 @@
 #include "tests/support/temp_dir.h"
 #include "tools/camera_flags.h"
 #include "tools/reference_render.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

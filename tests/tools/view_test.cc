@@ -33,7 +33,7 @@
 #include "tests/support/temp_dir.h"
 #include "tests/tools/virtual_display.h"
 #include "tools/image_io.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

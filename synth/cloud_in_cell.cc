@@ -1,4 +1,4 @@
-#include "tools/synth/cloud_in_cell.h"
+#include "synth/cloud_in_cell.h"
 
 #include <numbers>
 

@@ -20,11 +20,11 @@
 #include "index/particle_chunk.h"
 #include "base/error.h"
 #include "ingest/snapshot/snapshot_source.h"
-#include "tools/synth/cosmic_web.h"
-#include "tools/synth/nfw_profile.h"
-#include "tools/synth/scale_generator.h"
-#include "tools/synth/random.h"
-#include "tools/synth/scale_sampler.h"
+#include "synth/cosmic_web.h"
+#include "synth/nfw_profile.h"
+#include "synth/scale_generator.h"
+#include "synth/random.h"
+#include "synth/scale_sampler.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm::synth {

@@ -8,8 +8,8 @@
 #include <cstdint>
 #include <string>
 
-#include "tools/synth/gadget_writer.h"
-#include "tools/synth/particle_mesh.h"
+#include "synth/gadget_writer.h"
+#include "synth/particle_mesh.h"
 
 namespace octocosm::synth {
 

@@ -1,11 +1,11 @@
-#include "tools/synth/pm_simulation.h"
+#include "synth/pm_simulation.h"
 
 #include <cmath>
 #include <string>
 
 #include "base/error.h"
 #include "base/parallel_for.h"
-#include "tools/synth/zeldovich.h"
+#include "synth/zeldovich.h"
 
 namespace octocosm::synth {
 namespace {

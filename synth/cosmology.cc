@@ -1,4 +1,4 @@
-#include "tools/synth/cosmology.h"
+#include "synth/cosmology.h"
 
 #include <cmath>
 #include <string>

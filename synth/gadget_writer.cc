@@ -1,4 +1,4 @@
-#include "tools/synth/gadget_writer.h"
+#include "synth/gadget_writer.h"
 
 #include <fcntl.h>
 #include <unistd.h>

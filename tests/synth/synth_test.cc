@@ -18,12 +18,12 @@
 #include <vector>
 
 #include "base/error.h"
-#include "tools/synth/cosmology.h"
-#include "tools/synth/gadget_writer.h"
-#include "tools/synth/linear_power.h"
-#include "tools/synth/particle_mesh.h"
-#include "tools/synth/pm_simulation.h"
-#include "tools/synth/power_spectrum_estimator.h"
+#include "synth/cosmology.h"
+#include "synth/gadget_writer.h"
+#include "synth/linear_power.h"
+#include "synth/particle_mesh.h"
+#include "synth/pm_simulation.h"
+#include "synth/power_spectrum_estimator.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm::synth {

@@ -1,4 +1,4 @@
-#include "tools/synth/fourier_grid.h"
+#include "synth/fourier_grid.h"
 
 #include <fftw3.h>
 

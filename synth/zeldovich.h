@@ -18,7 +18,7 @@
 #include <cstdint>
 #include <span>
 
-#include "tools/synth/linear_power.h"
+#include "synth/linear_power.h"
 
 namespace octocosm::synth {
 

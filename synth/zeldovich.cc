@@ -1,12 +1,12 @@
-#include "tools/synth/zeldovich.h"
+#include "synth/zeldovich.h"
 
 #include <cmath>
 #include <numbers>
 
 #include "base/error.h"
-#include "tools/synth/fourier_grid.h"
+#include "synth/fourier_grid.h"
 #include "base/parallel_for.h"
-#include "tools/synth/random.h"
+#include "synth/random.h"
 
 namespace octocosm::synth {
 

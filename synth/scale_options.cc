@@ -1,4 +1,4 @@
-#include "tools/synth/scale_options.h"
+#include "synth/scale_options.h"
 
 #include <algorithm>
 #include <cmath>

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "tools/synth/scale_options.h"
+#include "synth/scale_options.h"
 
 namespace octocosm::synth {
 

@@ -1,11 +1,11 @@
-#include "tools/synth/power_spectrum_estimator.h"
+#include "synth/power_spectrum_estimator.h"
 
 #include <cmath>
 #include <numbers>
 
 #include "base/error.h"
-#include "tools/synth/cloud_in_cell.h"
-#include "tools/synth/fourier_grid.h"
+#include "synth/cloud_in_cell.h"
+#include "synth/fourier_grid.h"
 
 namespace octocosm::synth {
 

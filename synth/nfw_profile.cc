@@ -1,4 +1,4 @@
-#include "tools/synth/nfw_profile.h"
+#include "synth/nfw_profile.h"
 
 #include <algorithm>
 #include <cmath>

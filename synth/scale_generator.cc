@@ -1,4 +1,4 @@
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 #include <algorithm>
 #include <atomic>
@@ -11,10 +11,10 @@
 #include <thread>
 
 #include "base/error.h"
-#include "tools/synth/cosmic_web.h"
-#include "tools/synth/gadget_writer.h"
+#include "synth/cosmic_web.h"
+#include "synth/gadget_writer.h"
 #include "base/parallel_for.h"
-#include "tools/synth/scale_sampler.h"
+#include "synth/scale_sampler.h"
 
 namespace octocosm::synth {
 namespace {

@@ -1,9 +1,9 @@
-#include "tools/synth/pm_gravity.h"
+#include "synth/pm_gravity.h"
 
 #include <numbers>
 
 #include "base/error.h"
-#include "tools/synth/cloud_in_cell.h"
+#include "synth/cloud_in_cell.h"
 #include "base/parallel_for.h"
 
 namespace octocosm::synth {

@@ -1,4 +1,4 @@
-#include "tools/synth/particle_mesh.h"
+#include "synth/particle_mesh.h"
 
 #include <algorithm>
 #include <chrono>
@@ -7,7 +7,7 @@
 #include <filesystem>
 
 #include "base/error.h"
-#include "tools/synth/pm_simulation.h"
+#include "synth/pm_simulation.h"
 
 namespace octocosm::synth {
 namespace {

@@ -1,4 +1,4 @@
-#include "tools/synth/cosmic_web.h"
+#include "synth/cosmic_web.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <numeric>
 #include <utility>
 
-#include "tools/synth/random.h"
+#include "synth/random.h"
 
 namespace octocosm::synth {
 namespace {

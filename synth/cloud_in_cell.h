@@ -10,7 +10,7 @@
 #include <cstddef>
 #include <span>
 
-#include "tools/synth/fourier_grid.h"
+#include "synth/fourier_grid.h"
 
 namespace octocosm::synth {
 

@@ -26,7 +26,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tools/synth/cosmic_web.h"
+#include "synth/cosmic_web.h"
 
 namespace octocosm::synth {
 

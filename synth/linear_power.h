@@ -7,7 +7,7 @@
 // <delta(k) delta*(k')> = (2 pi)^3 delta_D(k - k') P(k).
 #pragma once
 
-#include "tools/synth/cosmology.h"
+#include "synth/cosmology.h"
 
 namespace octocosm::synth {
 

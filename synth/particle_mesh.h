@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "tools/synth/cosmology.h"
-#include "tools/synth/gadget_writer.h"
+#include "synth/cosmology.h"
+#include "synth/gadget_writer.h"
 
 namespace octocosm::synth {
 

@@ -18,9 +18,9 @@
 #include <span>
 #include <vector>
 
-#include "tools/synth/cosmology.h"
-#include "tools/synth/linear_power.h"
-#include "tools/synth/pm_gravity.h"
+#include "synth/cosmology.h"
+#include "synth/linear_power.h"
+#include "synth/pm_gravity.h"
 
 namespace octocosm::synth {
 

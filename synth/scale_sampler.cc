@@ -1,10 +1,10 @@
-#include "tools/synth/scale_sampler.h"
+#include "synth/scale_sampler.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "tools/synth/gadget_writer.h"
-#include "tools/synth/random.h"
+#include "synth/gadget_writer.h"
+#include "synth/random.h"
 
 namespace octocosm::synth {
 namespace {

@@ -1,4 +1,4 @@
-#include "tools/synth/linear_power.h"
+#include "synth/linear_power.h"
 
 #include <cmath>
 #include <numbers>

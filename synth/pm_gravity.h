@@ -21,7 +21,7 @@
 
 #include <span>
 
-#include "tools/synth/fourier_grid.h"
+#include "synth/fourier_grid.h"
 
 namespace octocosm::synth {
 

@@ -23,8 +23,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "tools/synth/nfw_profile.h"
-#include "tools/synth/scale_options.h"
+#include "synth/nfw_profile.h"
+#include "synth/scale_options.h"
 
 namespace octocosm::synth {
 
