@@ -2,7 +2,7 @@
 
 #include "accuracy/pcl_random_sample.h"
 #include "accuracy/voxel_census.h"
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm::accuracy {
 

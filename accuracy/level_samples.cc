@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <string>
 
+#include "base/error.h"
 #include "index/block_codec.h"
-#include "storage/error.h"
 
 namespace octocosm::accuracy {
 

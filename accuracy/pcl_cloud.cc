@@ -2,7 +2,7 @@
 
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm::accuracy {
 namespace {

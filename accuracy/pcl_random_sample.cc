@@ -6,7 +6,7 @@
 #include <string>
 
 #include "accuracy/pcl_cloud.h"
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm::accuracy {
 

@@ -6,8 +6,8 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "base/error.h"
 #include "index/block_codec.h"
-#include "storage/error.h"
 
 namespace octocosm::accuracy {
 namespace {

@@ -1,6 +1,6 @@
 #include "accuracy/snapshot_points.h"
 
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm::accuracy {
 

@@ -9,8 +9,8 @@
 #include <unordered_map>
 
 #include "accuracy/pcl_cloud.h"
+#include "base/error.h"
 #include "index/morton.h"
-#include "storage/error.h"
 
 namespace octocosm::accuracy {
 namespace {

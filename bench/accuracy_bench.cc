@@ -50,10 +50,10 @@
 #include "accuracy/pcl_octree_leaves.h"
 #include "accuracy/position_errors.h"
 #include "accuracy/snapshot_points.h"
+#include "base/error.h"
 #include "index/dataset.h"
-#include "storage/error.h"
-#include "tools/ingest/ingest.h"
-#include "tools/synth/scale_generator.h"
+#include "ingest/ingest.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

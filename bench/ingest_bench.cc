@@ -42,10 +42,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "bench/las_export.h"
-#include "storage/error.h"
 #include "tools/cli_util.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 extern char** environ;
 

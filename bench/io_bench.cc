@@ -24,8 +24,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "storage/block_cache.h"
-#include "storage/error.h"
 #include "storage/prefetcher.h"
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"

@@ -8,12 +8,12 @@
 #include <memory>
 #include <vector>
 
+#include "base/error.h"
 #include "index/particle_chunk.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 #include "storage/file.h"
-#include "tools/ingest/epoch_join.h"
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/epoch_join.h"
+#include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm {
 namespace {

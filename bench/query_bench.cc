@@ -21,14 +21,14 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "index/dataset.h"
 #include "index/query.h"
 #include "index/region.h"
-#include "storage/error.h"
 #include "tools/cli_util.h"
-#include "tools/ingest/ingest.h"
-#include "tools/snapshot/snapshot_source.h"
-#include "tools/synth/scale_generator.h"
+#include "ingest/ingest.h"
+#include "ingest/snapshot/snapshot_source.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

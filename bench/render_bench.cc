@@ -36,16 +36,16 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "index/node_hierarchy.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
-#include "storage/error.h"
 #include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/image_io.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 #include "tools/reference_render.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

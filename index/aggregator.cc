@@ -5,7 +5,7 @@
 #include <cmath>
 #include <queue>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

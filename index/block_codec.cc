@@ -15,11 +15,11 @@
 #include <emmintrin.h>
 #endif
 
+#include "base/error.h"
 #include "index/extended_sum.h"
 #include "index/nth_largest.h"
 #include "storage/checksum.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

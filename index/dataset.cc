@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

@@ -20,7 +20,7 @@
 namespace octocosm {
 
 // How an epoch links to the next, as ingest fitted it (docs/FORMAT.md 5.2,
-// `to_next`; tools/ingest/epoch_join.h, VelocityScaleFit). A renderer moves a
+// `to_next`; ingest/epoch_join.h, VelocityScaleFit). A renderer moves a
 // particle between epochs e and e + 1 along the cubic Hermite curve from p_e
 // to p_e+1 with tangents velocity_scale * v_e and velocity_scale * v_e+1.
 struct EpochLink {

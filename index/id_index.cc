@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cstring>
 
+#include "base/error.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

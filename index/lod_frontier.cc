@@ -5,7 +5,7 @@
 #include <queue>
 #include <utility>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

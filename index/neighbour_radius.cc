@@ -7,7 +7,7 @@
 
 #include <nanoflann.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

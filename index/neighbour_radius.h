@@ -7,7 +7,7 @@
 // NeighbourRadii answers that radius for query points against a fixed set of
 // points, with a k-d tree (nanoflann, Debian's libnanoflann-dev) in double
 // precision: exact, no approximation. It knows nothing of periodic boxes or of
-// points not in its set; tools/smoothing_pass.h loads the right neighbours
+// points not in its set; ingest/smoothing_pass.h loads the right neighbours
 // (halos across region borders, periodic images) and checks that a sphere lay
 // inside what was loaded.
 #pragma once

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

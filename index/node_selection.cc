@@ -7,7 +7,7 @@
 #include <numbers>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -14,7 +14,7 @@ namespace octocosm {
 // NodePoints carry alike and every stage treats alike (VectorColumns lists
 // them), in the order blocks store them. Each is empty or holds 3 * size()
 // values, x,y,z interleaved. The epoch links (all but velocity) come from
-// joining a series' epochs by particle ID (tools/ingest/epoch_join.h).
+// joining a series' epochs by particle ID (ingest/epoch_join.h).
 enum class VectorColumn : std::uint8_t {
   kVelocity,          // the particle's velocity, in input units
   kDisplacement,      // minimal-image offset to the same particle's position at the next epoch

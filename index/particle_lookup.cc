@@ -5,9 +5,9 @@
 #include <memory>
 #include <unordered_map>
 
+#include "base/error.h"
 #include "index/query.h"
 #include "index/region.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -1,6 +1,6 @@
 #include "index/query.h"
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

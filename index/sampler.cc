@@ -8,10 +8,10 @@
 #include <numeric>
 #include <string>
 
+#include "base/error.h"
+#include "base/hash.h"
 #include "index/extended_sum.h"
 #include "index/nth_largest.h"
-#include "storage/error.h"
-#include "storage/hash.h"
 
 namespace octocosm {
 namespace {

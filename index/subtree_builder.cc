@@ -13,7 +13,7 @@
 #include "index/cluster_shape.h"
 #include "index/block_codec.h"
 #include "index/radix_sort.h"
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

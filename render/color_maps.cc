@@ -8,7 +8,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

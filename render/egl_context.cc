@@ -8,8 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "render/gl_context.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -2,7 +2,7 @@
 
 #include <glad/gl.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

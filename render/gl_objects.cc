@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

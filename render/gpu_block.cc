@@ -6,8 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

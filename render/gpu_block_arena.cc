@@ -5,7 +5,7 @@
 #include <optional>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

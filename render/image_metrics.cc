@@ -3,7 +3,7 @@
 #include <cmath>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -10,8 +10,8 @@
 #include <mutex>
 #include <string>
 
+#include "base/error.h"
 #include "render/gl_context.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "base/error.h"
 #include "render/splat_kernel.h"
-#include "storage/error.h"
 
 namespace octocosm {
 

@@ -4,7 +4,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -3,8 +3,8 @@
 #include <chrono>
 #include <exception>
 
+#include "base/error.h"
 #include "index/particle_lookup.h"
-#include "storage/error.h"
 
 namespace octocosm {
 

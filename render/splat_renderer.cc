@@ -6,10 +6,10 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "render/color_maps.h"
 #include "render/render_shaders.h"
 #include "render/splat_kernel.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -4,7 +4,7 @@
 #include <sstream>
 #include <utility>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

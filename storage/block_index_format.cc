@@ -2,9 +2,9 @@
 
 #include <algorithm>
 
+#include "base/error.h"
 #include "storage/checksum.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 
+#include "base/error.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 
 namespace octocosm {
 

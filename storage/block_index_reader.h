@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/block_index_format.h"
-#include "storage/error.h"
 #include "storage/index_page_cache.h"
 
 namespace octocosm {

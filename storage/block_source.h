@@ -8,7 +8,7 @@
 #include <functional>
 #include <vector>
 
-#include "storage/hash.h"
+#include "base/hash.h"
 
 namespace octocosm {
 

@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <cstring>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -12,7 +12,7 @@
 #include <filesystem>
 #include <system_error>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -3,8 +3,8 @@
 #include <cinttypes>
 #include <cstdio>
 
+#include "base/error.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 #include "storage/page_file_format.h"
 
 namespace octocosm {

@@ -2,10 +2,10 @@
 
 #include <algorithm>
 
+#include "base/error.h"
 #include "storage/block_index_format.h"
 #include "storage/checksum.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 
 namespace octocosm {
 

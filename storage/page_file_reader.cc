@@ -2,8 +2,8 @@
 
 #include <array>
 
+#include "base/error.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 
 namespace octocosm {
 

@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "base/error.h"
 #include "storage/block_index_builder.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

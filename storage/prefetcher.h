@@ -45,9 +45,9 @@
 #include <unordered_set>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/block_cache.h"
 #include "storage/block_source.h"
-#include "storage/error.h"
 
 namespace octocosm {
 

@@ -1,8 +1,8 @@
 #include "storage/store_reader.h"
 
 
+#include "base/error.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 #include "storage/file.h"
 
 namespace octocosm {

@@ -10,7 +10,7 @@
 #include <cmath>
 #include <random>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "storage/file.h"
 
 namespace octocosm {

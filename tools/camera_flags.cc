@@ -6,7 +6,7 @@
 
 #include <CLI/CLI.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/cli_util.h"
 
 namespace octocosm {

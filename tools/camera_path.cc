@@ -7,7 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

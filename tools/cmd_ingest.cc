@@ -5,12 +5,12 @@
 
 #include <CLI/CLI.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
+#include "base/progress.h"
 #include "storage/page_file_format.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
-#include "tools/ingest/ingest.h"
-#include "tools/progress.h"
+#include "ingest/ingest.h"
 #include "tools/read_flags.h"
 
 namespace octocosm {

@@ -12,9 +12,9 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "index/particle_lookup.h"
 #include "index/query.h"
-#include "storage/error.h"
 #include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"

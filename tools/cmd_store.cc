@@ -1,17 +1,17 @@
 // octocosm info and octocosm verify: what a store holds, and whether it is whole
-// (the checks themselves are in tools/store_verify.h).
+// (the checks themselves are in index/store_verify.h).
 #include <cstdio>
 #include <map>
 #include <string>
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
+#include "base/progress.h"
 #include "index/dataset.h"
-#include "storage/error.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
-#include "tools/progress.h"
-#include "tools/store_verify.h"
+#include "index/store_verify.h"
 
 namespace octocosm {
 namespace {

@@ -8,11 +8,11 @@
 
 #include <CLI/CLI.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
+#include "synth/particle_mesh.h"
+#include "synth/scale_generator.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
-#include "tools/synth/particle_mesh.h"
-#include "tools/synth/scale_generator.h"
 
 namespace octocosm {
 

@@ -21,11 +21,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "render/render_view.h"
 #include "render/scene_renderer.h"
 #include "render/splat_renderer.h"
 #include "render/tone_map.h"
-#include "storage/error.h"
 #include "tools/camera_flags.h"
 #include "tools/camera_path.h"
 #include "tools/commands.h"

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tools/output_file.h"
 
 namespace octocosm {

@@ -8,10 +8,10 @@
 
 #include <CLI/CLI.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
+#include "base/huge_pages.h"
+#include "base/interrupt_cleanup.h"
 #include "tools/commands.h"
-#include "tools/huge_pages.h"
-#include "tools/interrupt_cleanup.h"
 
 namespace {
 

@@ -9,7 +9,7 @@
 #include <random>
 #include <system_error>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -2,7 +2,7 @@
 // picture) that appears whole or not at all: written under a temporary name
 // in the same directory and renamed over the final name by Commit(). The
 // temporary file is removed if Commit() is never reached (an error) and when
-// SIGINT, SIGTERM or SIGHUP ends the program (tools/interrupt_cleanup.h);
+// SIGINT, SIGTERM or SIGHUP ends the program (base/interrupt_cleanup.h);
 // an earlier file under the final name stays as it was until then.
 //
 // A path that exists and is not a regular file (a pipe, /dev/stdout, a
@@ -14,7 +14,7 @@
 #include <optional>
 #include <string>
 
-#include "tools/interrupt_cleanup.h"
+#include "base/interrupt_cleanup.h"
 
 namespace octocosm {
 

@@ -8,8 +8,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "base/error.h"
 #include "index/cluster_shape.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -7,7 +7,7 @@
 #include <cstddef>
 #include <string>
 
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/snapshot/snapshot_source.h"
 
 namespace CLI {
 class App;

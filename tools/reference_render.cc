@@ -4,10 +4,10 @@
 #include <memory>
 #include <vector>
 
+#include "base/error.h"
+#include "base/parallel_for.h"
 #include "index/cube.h"
 #include "render/reference_rasterizer.h"
-#include "storage/error.h"
-#include "tools/parallel_for.h"
 
 namespace octocosm {
 

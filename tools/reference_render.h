@@ -4,7 +4,7 @@
 // as the GPU: no sampling, no quantization, no float, and nothing from a
 // store.
 //
-// Smoothing lengths are the standard ones (tools/smoothing_pass.h): the
+// Smoothing lengths are the standard ones (ingest/smoothing_pass.h): the
 // snapshot's own where it has them (GADGET's HSML, HDF5 SmoothingLength of
 // SPH gas), else the radius holding each particle's k nearest neighbours
 // (k = 32 by default), across the faces of a periodic box. That pass reads
@@ -18,12 +18,12 @@
 #include <string>
 #include <vector>
 
+#include "ingest/smoothing_pass.h"
+#include "ingest/snapshot/snapshot_source.h"
 #include "render/image.h"
 #include "render/render_view.h"
 #include "render/selection_set.h"
 #include "render/tone_map.h"
-#include "tools/smoothing_pass.h"
-#include "tools/snapshot/snapshot_source.h"
 
 namespace octocosm {
 

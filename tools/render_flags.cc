@@ -4,8 +4,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "base/error.h"
 #include "index/particle_lookup.h"
-#include "storage/error.h"
 #include "tools/cli_util.h"
 #include "tools/cmd_query.h"
 

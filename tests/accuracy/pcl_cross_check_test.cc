@@ -17,7 +17,7 @@
 #include "accuracy/level_samples.h"
 #include "accuracy/pcl_octree_leaves.h"
 #include "accuracy/voxel_census.h"
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/accuracy/clustered_points.h"
 
 namespace octocosm::accuracy {

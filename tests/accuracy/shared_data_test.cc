@@ -14,8 +14,8 @@
 #include "accuracy/pcl_octree_leaves.h"
 #include "accuracy/snapshot_points.h"
 #include "index/dataset.h"
-#include "tests/tools/ingest_fixture.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
+#include "tests/ingest/ingest_fixture.h"
 
 namespace octocosm::accuracy {
 namespace {

@@ -24,14 +24,14 @@
 #include <vector>
 
 #include "accuracy/position_errors.h"
+#include "base/error.h"
 #include "index/block_codec.h"
 #include "index/dataset.h"
 #include "index/subtree_builder.h"
-#include "storage/error.h"
-#include "tests/tools/ingest_fixture.h"
-#include "tests/tools/store_check.h"
-#include "tools/ingest/ingest.h"
-#include "tools/synth/gadget_writer.h"
+#include "tests/ingest/ingest_fixture.h"
+#include "tests/ingest/store_check.h"
+#include "ingest/ingest.h"
+#include "synth/gadget_writer.h"
 
 namespace octocosm {
 namespace {

@@ -9,8 +9,8 @@
 #include <fstream>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm {

@@ -12,11 +12,11 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "index/block_codec.h"
 #include "index/cube.h"
 #include "index/morton.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 #include "tests/fuzz/fuzz_target.h"
 #include "tests/fuzz/store_fuzz_util.h"
 

@@ -1,4 +1,4 @@
-// Fuzz target: the CSV reader (tools/snapshot/csv_source.h), with the
+// Fuzz target: the CSV reader (ingest/snapshot/csv_source.h), with the
 // delimiter detected from the header row.
 #include <cstddef>
 #include <cstdint>

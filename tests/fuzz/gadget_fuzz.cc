@@ -1,4 +1,4 @@
-// Fuzz target: the GADGET binary reader (tools/snapshot/gadget_source.h),
+// Fuzz target: the GADGET binary reader (ingest/snapshot/gadget_source.h),
 // format 1 and 2 in either byte order, on one file.
 #include <array>
 #include <cstddef>
@@ -8,7 +8,7 @@
 
 #include "tests/fuzz/fuzz_target.h"
 #include "tests/fuzz/snapshot_fuzz.h"
-#include "tests/tools/gadget_test_file.h"
+#include "tests/ingest/snapshot/gadget_test_file.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   octocosm::ReadOptions options;

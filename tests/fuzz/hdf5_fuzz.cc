@@ -1,4 +1,4 @@
-// Fuzz target: the HDF5 snapshot reader (tools/snapshot/hdf5_source.h),
+// Fuzz target: the HDF5 snapshot reader (ingest/snapshot/hdf5_source.h),
 // GADGET-4 / AREPO and SWIFT layouts, on one file. libhdf5 parses the file's
 // structure (superblock, object headers, B-trees, heaps, filters); the
 // fuzzer reaches our checks of attributes, shapes and values through it.

@@ -1,4 +1,4 @@
-// Fuzz target: the raw binary reader (tools/snapshot/raw_source.h) and its
+// Fuzz target: the raw binary reader (ingest/snapshot/raw_source.h) and its
 // layout grammar (RawLayout::Parse). The input is the layout string, a
 // newline, and then the file's bytes, so that the fuzzer varies both.
 #include <algorithm>
@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/fuzz/fuzz_target.h"
 #include "tests/fuzz/snapshot_fuzz.h"
 

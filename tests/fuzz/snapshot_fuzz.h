@@ -5,10 +5,10 @@
 #include <cstdint>
 #include <string>
 
+#include "base/error.h"
 #include "index/particle_chunk.h"
-#include "storage/error.h"
 #include "tests/fuzz/fuzz_target.h"
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm::fuzz {
 

@@ -20,12 +20,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/error.h"
 #include "index/block_codec.h"
 #include "index/column_reader.h"
 #include "index/dataset.h"
 #include "index/morton.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 #include "storage/manifest.h"
 #include "storage/store_writer.h"
 #include "tests/fuzz/fuzz_target.h"

@@ -9,10 +9,10 @@
 
 #include <gtest/gtest.h>
 
+#include "base/error.h"
 #include "index/block_codec.h"
 #include "index/cluster_shape.h"
 #include "index/subtree_builder.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -15,9 +15,9 @@
 #include <limits>
 #include <random>
 
+#include "base/error.h"
 #include "index/extended_sum.h"
 #include "index/query.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -9,7 +9,7 @@
 #include <cmath>
 #include <random>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

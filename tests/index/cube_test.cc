@@ -8,7 +8,7 @@
 #include <limits>
 #include <random>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "index/dataset.h"
-#include "storage/error.h"
 #include "storage/store_writer.h"
 #include "tests/support/temp_dir.h"
 

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/coding.h"
-#include "storage/error.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm {

@@ -5,8 +5,8 @@
 #include <random>
 #include <set>
 
+#include "base/error.h"
 #include "index/lod_frontier.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

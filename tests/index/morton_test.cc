@@ -8,7 +8,7 @@
 #include <random>
 #include <set>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -17,14 +17,14 @@
 #include <unistd.h>
 #include <unordered_set>
 
+#include "base/error.h"
 #include "index/block_codec.h"
 #include "index/dataset.h"
 #include "index/frustum.h"
 #include "index/node_selection.h"
 #include "index/particle_lookup.h"
 #include "index/region.h"
-#include "storage/error.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 
 namespace octocosm {
 namespace {

@@ -11,7 +11,7 @@
 #include <numeric>
 #include <random>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

@@ -14,8 +14,8 @@
 #include <random>
 #include <set>
 
+#include "base/error.h"
 #include "index/block_codec.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

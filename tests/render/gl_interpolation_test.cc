@@ -8,9 +8,9 @@
 #include <random>
 #include <utility>
 
+#include "ingest/ingest.h"
 #include "render/offscreen_renderer.h"
 #include "tests/support/temp_dir.h"
-#include "tools/ingest/ingest.h"
 
 namespace octocosm {
 namespace {

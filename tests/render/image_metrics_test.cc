@@ -3,8 +3,8 @@
 
 #include <random>
 
+#include "base/error.h"
 #include "render/image_metrics.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

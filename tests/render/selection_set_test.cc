@@ -4,8 +4,8 @@
 #include <random>
 #include <unordered_set>
 
+#include "base/error.h"
 #include "render/selection_set.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

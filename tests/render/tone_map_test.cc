@@ -3,8 +3,8 @@
 
 #include <cmath>
 
+#include "base/error.h"
 #include "render/tone_map.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

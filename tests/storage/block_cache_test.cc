@@ -8,7 +8,7 @@
 #include <thread>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/storage/cache_test_source.h"
 
 namespace octocosm {

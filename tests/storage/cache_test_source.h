@@ -14,8 +14,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/block_source.h"
-#include "storage/error.h"
 
 namespace octocosm::cachetest {
 

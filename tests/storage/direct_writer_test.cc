@@ -16,7 +16,7 @@
 #include <thread>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "storage/page_file_reader.h"
 #include "storage/page_file_writer.h"
 #include "tests/storage/storage_test_util.h"

@@ -7,8 +7,8 @@
 #include <filesystem>
 #include <random>
 
+#include "base/error.h"
 #include "storage/block_cache.h"
-#include "storage/error.h"
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"
 

@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "base/error.h"
 #include "storage/block_source.h"
-#include "storage/error.h"
 
 namespace octocosm::storagetest {
 

@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "tests/support/temp_dir.h"
 #include "tools/camera_path.h"
 

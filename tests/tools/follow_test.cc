@@ -14,11 +14,11 @@
 #include <sstream>
 #include <unistd.h>
 
+#include "base/error.h"
 #include "index/particle_lookup.h"
-#include "storage/error.h"
-#include "tools/ingest/ingest.h"
+#include "ingest/ingest.h"
 #include "tools/query_output.h"
-#include "tools/snapshot/snapshot_source.h"
+#include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm {
 namespace {

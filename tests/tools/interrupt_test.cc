@@ -1,6 +1,6 @@
 // Interrupted and failed runs of the octocosm program leave nothing behind:
-// ingest stopped by a signal (tools/interrupt_cleanup.h), a rerun after
-// kill -9 (the locks of storage/store_writer.h and tools/temp_directory.h),
+// ingest stopped by a signal (base/interrupt_cleanup.h), a rerun after
+// kill -9 (the locks of storage/store_writer.h and base/temp_directory.h),
 // and output files that appear whole or not at all (tools/output_file.h).
 // The program runs as a child process (OCTOCOSM_BINARY), as a user runs it.
 #include <fcntl.h>
@@ -19,12 +19,12 @@
 #include <thread>
 #include <vector>
 
+#include "base/temp_directory.h"
 #include "index/dataset.h"
 #include "index/morton.h"
 #include "storage/store_writer.h"
 #include "tests/support/temp_dir.h"
 #include "tools/output_file.h"
-#include "tools/temp_directory.h"
 
 extern char** environ;
 

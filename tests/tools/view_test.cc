@@ -27,13 +27,13 @@
 #include <vector>
 
 #include "index/dataset.h"
+#include "ingest/ingest.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
 #include "tests/support/temp_dir.h"
 #include "tests/tools/virtual_display.h"
 #include "tools/image_io.h"
-#include "tools/ingest/ingest.h"
-#include "tools/synth/scale_generator.h"
+#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

@@ -8,8 +8,8 @@
 #include <random>
 #include <thread>
 
+#include "base/error.h"
 #include "render/render_view.h"
-#include "storage/error.h"
 #include "tools/viewer/playback.h"
 #include "tools/viewer/screen_region.h"
 #include "tools/viewer/screenshot_request.h"

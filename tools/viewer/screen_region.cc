@@ -3,7 +3,7 @@
 #include <array>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {

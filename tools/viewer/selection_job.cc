@@ -3,9 +3,9 @@
 #include <chrono>
 #include <exception>
 
+#include "base/error.h"
 #include "index/particle_lookup.h"
 #include "index/region.h"
-#include "storage/error.h"
 #include "tools/cmd_query.h"
 
 namespace octocosm {

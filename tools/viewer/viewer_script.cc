@@ -2,7 +2,7 @@
 
 #include <cstdio>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

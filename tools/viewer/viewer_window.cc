@@ -11,8 +11,8 @@
 #include <imgui_impl_glfw.h>
 #include <imgui_impl_opengl3.h>
 
+#include "base/error.h"
 #include "render/gl_context.h"
-#include "storage/error.h"
 
 namespace octocosm {
 namespace {

@@ -1,0 +1,50 @@
+// A snapshot with the particles outside a box left out: what ingest reads
+// under --clip-box, and under --drop-outliers where an epoch has outliers
+// (ingest/outliers.h). Everything after it (the smoothing pass, the
+// sort by ID, the bounds, the chunks) sees only the particles kept, so their
+// counts, masses and links agree with each other without knowing of it.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "ingest/outliers.h"
+#include "ingest/snapshot/snapshot_source.h"
+
+namespace octocosm {
+
+class ClippedSource : public ParticleSource {
+ public:
+  // Reads `inner` once to count what is kept, so that header() states the
+  // kept particles (counts per type, total), as the smoothing pass and the
+  // chunker expect; the header's `extra` gains an entry in "dropped" (the
+  // box, `reason`, the particles read and dropped). Throws Error::BadInput
+  // naming the file when the box keeps no particle.
+  ClippedSource(std::unique_ptr<ParticleSource> inner, const PositionBox& box, const std::string& reason);
+
+  const SnapshotHeader& header() const override { return header_; }
+  bool Next(ParticleChunk& chunk) override;
+  void Rewind() override { inner_->Rewind(); }
+  // No mappable segments: a mapping would hand out the particles left out.
+
+  std::uint64_t dropped() const { return dropped_; }
+  // The largest distance of a dropped particle outside the box (PositionBox::DistanceOutside).
+  double farthest_dropped() const { return farthest_dropped_; }
+  // The kept particles, surveyed while they were counted.
+  const PositionSurvey& survey() const { return survey_; }
+
+ private:
+  // The particles of `in` inside the box, every column, into `out`.
+  void Keep(const ParticleChunk& in, ParticleChunk& out);
+
+  std::unique_ptr<ParticleSource> inner_;
+  PositionBox box_;
+  SnapshotHeader header_;
+  ParticleChunk read_;  // the inner source's batch, reused
+  bool counting_ = true;  // the constructor's pass
+  std::uint64_t dropped_ = 0;
+  double farthest_dropped_ = 0;
+  PositionSurvey survey_;
+};
+
+}  // namespace octocosm

@@ -1,0 +1,901 @@
+#include "ingest/ingest.h"
+
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
+#include <filesystem>
+#include <functional>
+#include <future>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <unordered_set>
+
+#include <nlohmann/json.hpp>
+
+#include "base/error.h"
+#include "base/interrupt_cleanup.h"
+#include "base/progress.h"
+#include "base/temp_directory.h"
+#include "index/block_codec.h"
+#include "index/dataset_manifest.h"
+#include "index/id_index.h"
+#include "storage/store_writer.h"
+#include "ingest/chunk_gatherer.h"
+#include "ingest/chunk_queue.h"
+#include "ingest/chunker.h"
+#include "ingest/clipped_source.h"
+#include "ingest/dense_id_table.h"
+#include "ingest/epoch_join.h"
+#include "ingest/external_sorter.h"
+#include "ingest/outliers.h"
+#include "ingest/resident_epoch.h"
+#include "ingest/smoothing_pass.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Bytes of memory one particle costs while its chunk's subtree is built: the
+// chunk's columns (about 65 bytes), the octant partition, and the node copies
+// handed to the sink and the encoder. Measured peak RSS / chunk points is
+// about 120; this leaves room.
+constexpr std::uint64_t kBuildBytesPerPoint = 160;
+
+// The most memory chunk buffers take, whatever the budget.
+constexpr std::uint64_t kMaxChunkBufferBytes = std::uint64_t{256} << 20;
+
+// The most points a chunk is cut to hold, whatever the budget (unless the
+// node capacity asks for more). A chunk's buffers on its build thread (its
+// gathered columns and placement records, about 90 bytes a point) are fresh
+// memory, whose first touch is the costliest memory access on the virtual
+// machines this runs on; chunks this small keep them small and near the
+// caches. At 10^7 points the ingest took 1.23-1.45 s with them against
+// 1.51-1.57 s with chunks of 1.25 million points, and about 175 MiB less
+// peak RSS; at 10^8 the size matters little (docs/BENCHMARKS.md).
+constexpr std::uint64_t kMaxChunkPoints = std::uint64_t{1} << 18;
+// The build threads take chunks from a window of this many per thread
+// (ingest/chunk_queue.h), so the last ones built are among the last
+// that many; those are cut to at most an eighth of the largest chunk
+// (Chunker::SplitTail), a few milliseconds' work each.
+constexpr std::size_t kQueueWindowPerThread = 4;
+constexpr std::uint64_t kTailChunkFraction = 8;
+
+struct IdLeafRecord {
+  std::uint64_t key;  // particle ID
+  std::uint64_t leaf;
+};
+
+// Removes the output directory on failure, and when a signal ends the
+// program (base/interrupt_cleanup.h), but only if this run created it; in
+// a directory that was there before, only the unfinished store's files.
+class OutputGuard {
+ public:
+  explicit OutputGuard(const std::string& path) : path_(path), created_(!fs::exists(path)) {
+    if (!created_) return;  // see StoreLocked
+    remove_on_interrupt_.emplace([path] {
+      std::error_code ignored;
+      fs::remove_all(path, ignored);
+    });
+  }
+  // In a directory that was there before, the store files are this run's to
+  // remove only once its store writer holds the lock: until then they may
+  // be another's, which the writer refuses to touch.
+  void StoreLocked() {
+    if (created_) return;
+    remove_on_interrupt_.emplace([path = path_] { RemoveUnfinishedStore(path); });  // with the ID index's store in it
+  }
+  ~OutputGuard() {
+    if (!committed_ && created_) {
+      std::error_code ignored;
+      fs::remove_all(path_, ignored);
+    }
+  }
+  void Commit() {
+    committed_ = true;
+    remove_on_interrupt_.reset();
+  }
+
+ private:
+  std::string path_;
+  bool created_;
+  bool committed_ = false;
+  std::optional<RemoveOnInterrupt> remove_on_interrupt_;
+};
+
+nlohmann::json HeaderJson(const SnapshotHeader& h) {
+  return {{"format", h.format},
+          {"files", h.files},
+          {"time", h.time},
+          {"redshift", h.redshift},
+          {"box_size", h.box_size},
+          {"count_per_type", h.count_per_type},
+          {"total_count", h.total_count},
+          {"cosmological", h.cosmological},
+          {"omega0", h.omega0},
+          {"omega_lambda", h.omega_lambda},
+          {"hubble_param", h.hubble_param},
+          {"extra", h.extra}};
+}
+
+// Whether the inner nodes whose points are clusters carry the velocity
+// dispersion column: with velocities, when inner nodes are clusters at all
+// (a sample's points are particles, whose dispersion is 0).
+bool InnerNodesCarryVelocityDispersion(bool has_velocity, CoarsePoints coarse) {
+  return has_velocity && coarse == CoarsePoints::kClusters;
+}
+
+nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links, bool velocity_dispersion, bool shapes) {
+  nlohmann::json columns = nlohmann::json::array();
+  auto add = [&](ColumnId column, const char* encoding, const char* meaning) {
+    columns.push_back({{"id", static_cast<int>(column)}, {"name", ColumnName(column)}, {"encoding", encoding},
+                       {"meaning", meaning}});
+  };
+  add(ColumnId::kPosition, "u16x3 relative to the node cube", "position");
+  add(ColumnId::kWeight, "u32 units x f64 unit per block", "mass the point stands for");
+  add(ColumnId::kSmoothing, "u16 log2 code relative to the node size", "smoothing length");
+  add(ColumnId::kType, "u8", "particle type");
+  if (velocity) add(ColumnId::kVelocity, "u16x3 between per-block min and max", "velocity (input units)");
+  if (id) add(ColumnId::kId, "u32 offsets from a u64 base per block, or u64", "particle ID");
+  if (epoch_links) {
+    const char* ranged = "u16x3 between per-block min and max";
+    add(ColumnId::kDisplacement, ranged, "offset to the next epoch (minimal image); every epoch but the last");
+    if (velocity) add(ColumnId::kNextVelocity, ranged, "velocity at the next epoch; every epoch but the last");
+    add(ColumnId::kPrevDisplacement, ranged, "offset to the previous epoch (minimal image); every epoch but the first");
+    if (velocity) add(ColumnId::kPrevVelocity, ranged, "velocity at the previous epoch; every epoch but the first");
+  }
+  if (velocity_dispersion) {
+    add(ColumnId::kVelocityDispersion, "u16 between per-block min and max",
+        "1-D rms velocity dispersion of the particles a cluster stands for; inner nodes of clusters only");
+  }
+  if (shapes) {
+    add(ColumnId::kShape, "u8x6 covariance over trace / 3 (index/cluster_shape.h)",
+        "shape of the blob of the particles a cluster stands for; inner nodes of clusters only");
+  }
+  return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
+}
+
+// The link file that the join of epoch e - 1 writes for epoch e (ingest/epoch_join.h).
+std::string LinkFilePath(const std::string& temp_dir, std::size_t epoch) {
+  return temp_dir + "/links-" + std::to_string(epoch);
+}
+
+// Particle IDs must be unique: the ID index and the links between epochs find
+// a particle by its ID. `repeats` is how many repeat, 0 when not known.
+[[noreturn]] void RefuseDuplicateIds(const SnapshotHeader& header, std::uint64_t id, std::uint64_t repeats) {
+  const std::size_t files = header.files.size();
+  const std::string where = files > 1 ? " (in the snapshot's " + std::to_string(files) + " files)" : "";
+  const std::string count = repeats > 0 ? " (" + std::to_string(repeats) + " repeats in all)" : "";
+  throw Error::BadInput(header.files.front(),
+                        "ID " + std::to_string(id) + " is given to more than one particle" + where + count +
+                            "; particle IDs must be unique, since the ID index and the links between epochs find a "
+                            "particle by its ID: ingest with --no-ids to leave the IDs out");
+}
+
+bool InsideBox(const ParticleChunk& chunk, const Cube& cube) {
+  for (std::size_t i = 0; i < chunk.position.size(); ++i) {
+    const double t = chunk.position[i] - cube.origin[i % 3];
+    if (!(t >= 0 && t < cube.size)) return false;
+  }
+  return true;
+}
+
+void WrapIntoBox(ParticleChunk& chunk, const Cube& cube) {
+  for (std::size_t i = 0; i + 3 <= chunk.position.size(); i += 3) cube.Wrap(&chunk.position[i]);
+}
+
+// Holds the epoch of `source` in `resident` mapped from its files
+// (ResidentEpoch::Map) when the source's format allows and every value is
+// as reading through the source would give it, its IDs counted into
+// `census` (fresh) meanwhile. Returns false, nothing held and nothing
+// counted, otherwise: the caller then reads through the source, which
+// reports or wraps what stopped the mapping.
+bool MapResident(const ParticleSource& source, const Cube& cube, const ParticleColumns& columns, unsigned threads,
+                 ResidentEpoch& resident, IdCensus& census, Progress& progress) {
+  const std::vector<MappableSegment> segments = source.MappableSegments();
+  if (segments.empty() || !resident.Map(segments, source.header().files, columns)) return false;
+  IdCensus counted = census;
+  bool usable = false;
+  {
+    // The IDs are counted on a thread of their own while all threads check the values.
+    std::jthread count_ids;
+    if (columns.id) {
+      count_ids = std::jthread([&] { resident.VisitIds([&counted](std::span<const std::uint64_t> ids) { counted.Add(ids); }); });
+    }
+    usable = resident.ValuesAsRead(cube, static_cast<int>(threads), [&progress](std::size_t n) { progress.Add(n); });
+  }
+  if (!usable) {
+    resident = ResidentEpoch();
+    progress.Restart();
+    return false;
+  }
+  census = std::move(counted);
+  return true;
+}
+
+// An epoch's source as ingest reads it, and what screening it found.
+struct ScreenedEpoch {
+  std::unique_ptr<ParticleSource> source;
+  // The bounds of the particles `source` hands out, where the cube is their
+  // bounding cube (the survey's pass found them).
+  std::optional<Bounds> bounds;
+  std::uint64_t read = 0;
+  std::uint64_t dropped = 0;
+  bool passes = false;  // whether screening read the snapshot
+};
+
+// Leaves out what --clip-box leaves out; then, where the cube is the
+// particles' bounding cube, looks for outliers (ingest/outliers.h) and
+// refuses the epoch for them, or drops them with --drop-outliers. A given
+// cube or a periodic box needs no look: particles outside a periodic box are
+// the reader's error, and a given cube is the user's choice of resolution.
+ScreenedEpoch Screen(std::unique_ptr<ParticleSource> raw, const IngestOptions& options, const std::string& label) {
+  ScreenedEpoch out;
+  const SnapshotHeader header = raw->header();
+  out.read = header.total_count;
+  std::optional<PositionSurvey> survey;
+  if (options.clip_box) {
+    auto clipped = std::make_unique<ClippedSource>(std::move(raw), *options.clip_box, "--clip-box");
+    out.dropped += clipped->dropped();
+    out.passes = true;
+    survey = clipped->survey();
+    raw = std::move(clipped);
+  }
+  if (options.cube || header.box_size > 0) {
+    out.source = std::move(raw);
+    return out;
+  }
+  if (!survey) survey = SurveyPositions(*raw, label + ": bounds");
+  out.passes = true;
+  const OutlierVerdict verdict = JudgeOutliers(*survey);
+  if (!verdict.outliers) {
+    out.bounds = survey->bounds();
+    out.source = std::move(raw);
+    return out;
+  }
+  auto kept = std::make_unique<ClippedSource>(std::move(raw), verdict.bulk, "--drop-outliers");
+  if (!options.drop_outliers) RefuseOutliers(header, verdict, kept->dropped(), kept->farthest_dropped());
+  out.dropped += kept->dropped();
+  out.bounds = kept->survey().bounds();
+  out.source = std::move(kept);
+  return out;
+}
+
+// Wall time of consecutive phases.
+class PhaseClock {
+ public:
+  explicit PhaseClock(EpochReport& report) : report_(report) {}
+  void Lap(const char* phase) {
+    const auto now = std::chrono::steady_clock::now();
+    const double cpu = ProcessCpuSeconds();
+    report_.phases.push_back({phase, std::chrono::duration<double>(now - last_).count(), cpu - last_cpu_});
+    last_ = now;
+    last_cpu_ = cpu;
+  }
+
+ private:
+  static double ProcessCpuSeconds() {
+    timespec t{};
+    ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_nsec) * 1e-9;
+  }
+
+  EpochReport& report_;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+  double last_cpu_ = ProcessCpuSeconds();
+};
+
+// Everything one epoch's build shares between the worker threads.
+struct EpochBuild {
+  const Cube* cube = nullptr;
+  const SubtreeOptions* tree = nullptr;
+  StoreWriter* store = nullptr;
+  // Where the leaves' (ID, leaf) pairs go: the table when the epoch's IDs are
+  // unique and compact, else the sorter; both null without IDs.
+  DenseIdTable* id_table = nullptr;
+  ExternalSorter<IdLeafRecord>* id_pairs = nullptr;
+  std::mutex mutex;  // guards report (the store, the table and the sorter take blocks and pairs from several threads)
+  EpochReport* report = nullptr;
+  Progress* progress = nullptr;
+
+  // Encodes a finished node into `block` (the caller's buffer, reused from
+  // node to node) and adds it to the store. `is_leaf` decides whether its
+  // IDs go to the ID index.
+  void Emit(NodeKey key, const NodePoints& points, bool is_leaf, Bytes& block) {
+    EncodeBlock(points, key, *cube, block);
+    if (is_leaf && id_table != nullptr) id_table->Add(points.id, key);
+    std::vector<IdLeafRecord> pairs;
+    if (is_leaf && id_pairs != nullptr) {
+      pairs.reserve(points.id.size());
+      for (std::uint64_t id : points.id) pairs.push_back({id, key.value()});
+    }
+    // Neither call holds the other workers up for long: a block's copy into
+    // the file and the sorting and writing of a full run of pairs (seconds
+    // at 10^8 points) happen outside their locks.
+    store->AddBlock(key.value(), block, points.size());
+    if (!pairs.empty()) id_pairs->Add(pairs);
+    std::lock_guard lock(mutex);
+    ++report->nodes;
+    report->depth = std::max(report->depth, key.level());
+    if (is_leaf) ++report->leaves;
+  }
+};
+
+// A sink that tells leaves from inner nodes: nodes arrive children first, so
+// a node none of whose children has arrived is a leaf.
+NodeSink LeafAwareSink(EpochBuild& build, std::unordered_set<std::uint64_t>& has_children, Bytes& block) {
+  return [&build, &has_children, &block](NodeKey key, const NodePoints& points) {
+    const bool is_leaf = has_children.erase(key.value()) == 0;
+    if (key.level() > 0) has_children.insert(key.Parent().value());
+    build.Emit(key, points, is_leaf, block);
+  };
+}
+
+// Builds the chunks' subtrees on `threads` threads and merges the levels
+// above them as they complete. Chunks are taken nearly in depth-first order
+// (ChunkQueue) and their roots handed to the merger in that order (a root
+// that completes early waits for its predecessors), so memory holds a few
+// chunk roots plus the merger's open ancestors, never every chunk's sample.
+// Returns the root.
+// Resident chunks (Chunker::SplitResident) are copied out of `resident` one
+// at a time by each worker's gatherer. `chunks_built` is called once every
+// chunk is built, before the merger closes the nodes still open above the
+// last one: every leaf has been emitted by then.
+NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident, EpochBuild& build, unsigned threads,
+                       const std::function<void()>& chunks_built) {
+  Bytes merger_block;  // the merger runs under merge_mutex: one buffer serves it
+  TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
+    build.Emit(key, points, /*is_leaf=*/false, merger_block);
+  });
+  std::mutex merge_mutex;  // guards merger, ready, next_to_merge
+  std::map<std::size_t, NodePoints> ready;
+  std::size_t next_to_merge = 0;
+  std::vector<std::uint64_t> point_counts;
+  for (const Chunk& chunk : chunks) point_counts.push_back(chunk.point_count);
+  ChunkQueue queue(std::move(point_counts), kQueueWindowPerThread * std::size_t{threads});
+  std::atomic<bool> failed{false};
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  std::size_t largest_resident = 0;
+  for (const Chunk& chunk : chunks) largest_resident = std::max(largest_resident, chunk.resident.size());
+  auto work = [&] {
+    try {
+      Bytes block;  // this worker's encoding buffer
+      SubtreeWorkspace workspace;
+      ChunkGatherer gatherer(*build.cube, build.tree->max_level);
+      gatherer.Reserve(resident, largest_resident);
+      for (std::size_t c = queue.Take(); c < chunks.size() && !failed; c = queue.Take()) {
+        const std::uint64_t count = chunks[c].point_count;
+        std::unordered_set<std::uint64_t> has_children;
+        const NodeSink sink = LeafAwareSink(build, has_children, block);
+        NodePoints root;
+        if (!chunks[c].resident.empty()) {
+          root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink,
+                              &workspace);
+          chunks[c].resident = {};
+          chunks[c].resident_lists.reset();  // the last chunk built frees the split's list
+        } else {
+          root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink, &workspace);
+        }
+        {
+          std::lock_guard lock(merge_mutex);
+          ready.emplace(c, std::move(root));
+          for (auto it = ready.begin(); it != ready.end() && it->first == next_to_merge; it = ready.erase(it)) {
+            merger.Add(chunks[next_to_merge].key, std::move(it->second));
+            ++next_to_merge;
+          }
+        }
+        build.progress->Add(count);
+      }
+    } catch (...) {
+      std::lock_guard lock(error_mutex);
+      if (!error) error = std::current_exception();
+      failed = true;
+    }
+  };
+  std::vector<std::thread> workers;
+  for (unsigned t = 1; t < threads; ++t) workers.emplace_back(work);
+  work();
+  for (auto& worker : workers) worker.join();
+  if (error) std::rethrow_exception(error);
+  chunks_built();
+  return merger.Finish();
+}
+
+// The memory budget's shares (docs/INGEST.md): the sorted current and next
+// epochs 15 % each, the (ID, leaf) pairs 10 %, chunk buffers 30 %, chunk
+// builds 30 %. Phases overlap only partly, so the sum is a bound, not a
+// forecast.
+struct MemoryShares {
+  MemoryShares(std::uint64_t total, unsigned threads, const IngestOptions& options)
+      : budget(total),
+        build_points(std::max<std::uint64_t>(total * 3 / 10 / (threads * kBuildBytesPerPoint), 4 * options.tree.capacity)),
+        sort_run_records(static_cast<std::size_t>(
+            options.sort_run_points ? options.sort_run_points
+                                    : std::max<std::uint64_t>(total * 15 / 100 / sizeof(ParticleRecord), 1024))),
+        id_run_records(static_cast<std::size_t>(std::max<std::uint64_t>(total / 30 / sizeof(IdLeafRecord), 1024))),
+        id_table_slots(total / 10 / sizeof(std::uint32_t)),
+        chunk_buffer_bytes(static_cast<std::size_t>(std::min<std::uint64_t>(total * 3 / 10, kMaxChunkBufferBytes))) {}
+
+  std::uint64_t budget;
+  std::uint64_t build_points;    // the builds' 30 %, a thread's share in points
+  std::size_t sort_run_records;  // a sorted epoch's 15 %
+  // A third of the pairs' 10 %: while one run is sorted (with a scratch as
+  // large) the workers fill the next (ingest/external_sorter.h).
+  std::size_t id_run_records;
+  // Or, for unique IDs in a compact range, the pairs' whole share as one table.
+  std::uint64_t id_table_slots;
+  // The chunk buffers' 30 %, capped: measured on this project's machines,
+  // buffering gigabytes of points costs more in first-touch page faults
+  // than spilling them to temporary files that stay in the OS page cache
+  // (docs/BENCHMARKS.md).
+  std::size_t chunk_buffer_bytes;
+  // A point set that fits whole in the chunk buffers' share (and the sorted
+  // epochs' too when there are none) is held in memory and chunked in place
+  // (Chunker::SplitResident); the split's own memory must fit the builds'
+  // and the ID pairs' shares (40 %): its cells go before the builds start,
+  // its index lists as their chunks are built.
+  std::uint64_t ResidentBytes(bool sorted_epochs) const { return budget * (sorted_epochs ? 3 : 6) / 10; }
+  std::uint64_t ResidentScratchBytes() const { return budget * 4 / 10; }
+};
+
+// One epoch's particles as the steps after the first see them: a pass that
+// can be repeated, wrapped into a periodic box, joined to the next epoch in
+// a series with IDs.
+struct EpochPoints {
+  ParticleSource* source = nullptr;
+  const SortedEpoch* current = nullptr;  // a series with IDs: this epoch and the next, sorted
+  const SortedEpoch* next = nullptr;
+  Cube cube;
+  std::string links_from_previous, links_to_next;  // the join's files (ingest/epoch_join.h)
+  std::size_t chunk_particles = 0;
+  JoinStats join_stats;  // of the latest joined pass
+
+  void Pass(const std::function<void(const ParticleChunk&)>& consume) {
+    auto forward = [&](const ParticleChunk& chunk) {
+      if (!cube.periodic || InsideBox(chunk, cube)) return consume(chunk);
+      ParticleChunk wrapped = chunk;
+      WrapIntoBox(wrapped, cube);
+      consume(wrapped);
+    };
+    if (current != nullptr) {
+      join_stats = JoinedPass(*current, next, links_from_previous, links_to_next, cube.periodic ? cube.size : 0.0,
+                              chunk_particles, forward);
+    } else {
+      source->Rewind();
+      ParticleChunk chunk;
+      while (source->Next(chunk)) forward(chunk);
+    }
+  }
+};
+
+// An epoch cut into chunks, with what the cutting counted.
+struct ChunkedEpoch {
+  std::vector<Chunk> chunks;
+  ResidentEpoch resident;  // the points, when held in memory whole
+  IdCensus ids;
+};
+
+// A whole ingest: the store being written and what carries from one epoch
+// to the next. Ingest() below reads as its steps.
+class IngestRun {
+ public:
+  explicit IngestRun(const IngestOptions& options);
+  void IngestEpoch(std::size_t e);
+  IngestReport Finish();
+
+ private:
+  std::unique_ptr<ParticleSource> Smooth(std::unique_ptr<ParticleSource> raw);
+  std::unique_ptr<ParticleSource> Prepare(std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock);
+  std::unique_ptr<SortedEpoch> SortEpoch(ParticleSource& source, std::size_t e);
+  Bounds SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report);
+  Cube ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const;
+  ChunkedEpoch ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
+                          EpochPoints& points, EpochReport& epoch_report);
+  void RecordLinks(const EpochPoints& points, EpochReport& epoch_report);
+  void BuildAndWrite(std::size_t e, const SnapshotHeader& header, const Cube& cube, ChunkedEpoch& chunked,
+                     EpochReport& epoch_report, PhaseClock& clock);
+  void WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_table, ExternalSorter<IdLeafRecord>* id_pairs);
+
+  const IngestOptions& options_;
+  const std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  IngestReport report_;
+  unsigned threads_;
+  MemoryShares shares_;
+  std::unique_ptr<ParticleSource> source_;  // the epoch to ingest next, when opened ahead
+  bool has_id_, has_velocity_, join_epochs_;
+  DatasetManifest manifest_;
+  // Declared in the order they must be made; destroyed the other way round.
+  OutputGuard output_guard_;
+  StoreWriter store_;
+  std::unique_ptr<StoreWriter> id_store_;
+  std::uint32_t id_index_page_size_;
+  std::optional<TempDirectory> temp_;
+  std::vector<ScreenedEpoch> screened_;
+  bool source_smoothed_ = false;
+  std::unique_ptr<SortedEpoch> sorted_current_, sorted_next_;
+  std::unique_ptr<ParticleSource> next_source_;
+  std::uint64_t missing_in_prev_ = 0;  // of the epoch to come, counted by the join before it
+};
+
+IngestReport StartReport(const IngestOptions& options) {
+  if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
+  if (options.output.empty()) throw Error::InvalidArgument("ingest: no output store given (-o)");
+  if (options.cube) options.cube->Validate();
+  if (options.clip_box) options.clip_box->Validate("--clip-box");
+  Progress::SetQuiet(options.quiet);
+  IngestReport report;
+  report.memory_budget = options.memory_budget ? options.memory_budget : DefaultMemoryBudget();
+  if (report.memory_budget < (std::uint64_t{32} << 20)) {
+    throw Error::InvalidArgument("ingest: a memory budget below 32 MiB is too small to work in");
+  }
+  return report;
+}
+
+DatasetManifest ManifestFor(const IngestOptions& options, bool has_id, bool has_velocity, bool join_epochs) {
+  DatasetManifest m;
+  m.capacity = options.tree.capacity;
+  m.max_level = options.tree.max_level;
+  m.coarse = options.tree.coarse == CoarsePoints::kClusters ? "clusters" : "sample";
+  m.smoothing_rule = options.neighbours > 0 ? "neighbours" : "density grid";
+  m.neighbours = std::max(options.neighbours, 0);
+  m.sampler = options.tree.sampler;
+  m.has_velocity = has_velocity;
+  m.has_id = has_id;
+  m.has_displacement = join_epochs;
+  m.has_next_velocity = join_epochs && has_velocity;
+  m.has_prev_displacement = join_epochs;
+  m.has_prev_velocity = join_epochs && has_velocity;
+  m.has_velocity_dispersion = InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse);
+  m.has_shape = options.tree.coarse == CoarsePoints::kClusters;
+  m.id_index = has_id ? "ids" : "";
+  return m;
+}
+
+StoreWriterOptions StoreOptions(const IngestOptions& options) {
+  StoreWriterOptions store_options;
+  store_options.page_size = options.page_size;
+  return store_options;
+}
+
+IngestRun::IngestRun(const IngestOptions& options)
+    : options_(options),
+      report_(StartReport(options)),
+      threads_(options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency())),
+      shares_(report_.memory_budget, threads_, options),
+      // The first epoch, opened to learn what the series carries.
+      source_(OpenSnapshot(options.inputs[0], options.read)),
+      has_id_(source_->header().has_id),
+      has_velocity_(source_->header().has_velocity),
+      join_epochs_(has_id_ && options.inputs.size() > 1),
+      manifest_(ManifestFor(options, has_id_, has_velocity_, join_epochs_)),
+      output_guard_(options.output),
+      store_(options.output, manifest_.ToJson(),
+             AttributeSchema(has_velocity_, has_id_, join_epochs_, manifest_.has_velocity_dispersion, manifest_.has_shape),
+             StoreOptions(options)),
+      id_index_page_size_(std::max(options.page_size, kIdIndexMinPageSize)),
+      screened_(options.inputs.size()) {
+  if (has_id_) {
+    StoreWriterOptions id_store_options = StoreOptions(options);
+    id_store_options.page_size = id_index_page_size_;
+    id_store_ = std::make_unique<StoreWriter>((fs::path(options.output) / "ids").string(),
+                                              nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
+                                              nlohmann::json::object(), id_store_options);
+  }
+  output_guard_.StoreLocked();
+  // Inside the output by default: where this run may surely write, and where
+  // a rerun finds it if a kill leaves it behind (TempDirectory). Made after
+  // the store writers, which clear away an abandoned store first.
+  temp_.emplace(options.temp_dir.empty() ? options.output : options.temp_dir, "octocosm-ingest");
+}
+
+// The leaves' smoothing lengths from neighbours (or the snapshot's own),
+// computed before anything else reads the epoch, in the whole budget (the
+// pass is done with its memory before the epoch's build takes it, but for
+// the lengths themselves: 4 bytes a particle, or a mapped file).
+std::unique_ptr<ParticleSource> IngestRun::Smooth(std::unique_ptr<ParticleSource> raw) {
+  if (options_.neighbours <= 0) return raw;
+  SmoothingPassOptions pass;
+  pass.neighbours = options_.neighbours;
+  // Neighbours across the faces where ingest wraps into a periodic box.
+  pass.box_size = options_.cube ? 0.0 : raw->header().box_size;
+  pass.memory_budget = shares_.budget;
+  pass.temp_dir = temp_->path();
+  pass.threads = threads_;
+  pass.quiet = options_.quiet;
+  std::shared_ptr<const SmoothingLengthTable> table = ComputeSmoothingLengths(*raw, pass);
+  return WithSmoothingLengths(std::move(raw), std::move(table));
+}
+
+// Each epoch screened (Screen) before anything else reads it; the smoothing
+// pass then sees only the particles kept.
+std::unique_ptr<ParticleSource> IngestRun::Prepare(std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock) {
+  ScreenedEpoch s = Screen(std::move(raw), options_, "epoch " + std::to_string(e));
+  if (clock != nullptr && s.passes) clock->Lap("bounds");
+  std::unique_ptr<ParticleSource> prepared = Smooth(std::move(s.source));
+  screened_[e] = std::move(s);
+  return prepared;
+}
+
+std::unique_ptr<SortedEpoch> IngestRun::SortEpoch(ParticleSource& source, std::size_t e) {
+  Progress progress("epoch " + std::to_string(e) + ": sort by ID", source.header().total_count, "points");
+  auto sorted = std::make_unique<SortedEpoch>(source, temp_->path() + "/sorted-" + std::to_string(e),
+                                              shares_.sort_run_records, [&](std::uint64_t n) { progress.Add(n); });
+  if (sorted->duplicate_ids() > 0) RefuseDuplicateIds(source.header(), sorted->first_duplicate_id(), sorted->duplicate_ids());
+  progress.Finish();
+  return sorted;
+}
+
+// Step 1: a series with IDs is sorted by ID, this epoch and the next (read
+// ahead, and kept for the next epoch); otherwise the bounds come from the
+// screening's survey.
+Bounds IngestRun::SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report) {
+  Bounds bounds;
+  if (join_epochs_) {
+    if (!sorted_current_) sorted_current_ = SortEpoch(*source_, e);
+    if (e + 1 < options_.inputs.size()) {
+      if (options_.neighbours > 0) clock.Lap("sort");
+      next_source_ = Prepare(OpenSnapshot(options_.inputs[e + 1], options_.read), e + 1, nullptr);
+      if (options_.neighbours > 0) clock.Lap("next smoothing");
+      sorted_next_ = SortEpoch(*next_source_, e + 1);
+    }
+    bounds = sorted_current_->bounds();
+    epoch_report.duplicate_ids = sorted_current_->duplicate_ids();
+    clock.Lap(next_source_ && options_.neighbours > 0 ? "next sort" : "sort");
+  } else if (screened_[e].bounds) {
+    bounds = *screened_[e].bounds;  // the survey's, before the smoothing pass
+  }
+  return bounds;
+}
+
+Cube IngestRun::ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const {
+  if (options_.cube) return *options_.cube;
+  if (header.box_size > 0) return {{0, 0, 0}, header.box_size, true};
+  if (!bounds.empty()) return Cube::FromBounds(bounds.lo, bounds.hi);
+  return {};
+}
+
+// Step 2: chunks small enough for memory and the caches, and numerous
+// enough (four per thread) that every core has work until the end.
+ChunkedEpoch IngestRun::ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
+                                   EpochPoints& points, EpochReport& epoch_report) {
+  const std::uint64_t max_chunk =
+      options_.max_chunk_points
+          ? options_.max_chunk_points
+          : std::min(shares_.build_points, std::max<std::uint64_t>(std::min(expected / (4 * threads_), kMaxChunkPoints),
+                                                                   4 * options_.tree.capacity));
+  report_.max_chunk_points = std::max(report_.max_chunk_points, max_chunk);
+  ChunkerOptions chunker_options;
+  chunker_options.max_chunk_points = max_chunk;
+  chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
+  chunker_options.max_level = options_.tree.max_level;
+  chunker_options.leaf_capacity = options_.tree.capacity;
+  chunker_options.memory_bytes = shares_.chunk_buffer_bytes;
+  chunker_options.temp_dir = temp_->path();
+  chunker_options.threads = static_cast<int>(threads_);
+  chunker_options.columns.id = has_id_;
+  // Epoch by epoch: a series may give smoothing lengths in some snapshots only.
+  chunker_options.columns.smoothing = header.has_smoothing;
+  chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity_;
+  chunker_options.columns.vector(VectorColumn::kDisplacement) = points.next != nullptr;
+  chunker_options.columns.vector(VectorColumn::kNextVelocity) = points.next != nullptr && has_velocity_;
+  chunker_options.columns.vector(VectorColumn::kPrevDisplacement) = !points.links_from_previous.empty();
+  chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !points.links_from_previous.empty() && has_velocity_;
+  const bool resident = !options_.stream_chunks && expected < UINT32_MAX &&
+                        expected * chunker_options.columns.BytesPerPoint() <= shares_.ResidentBytes(join_epochs_) &&
+                        expected * Chunker::kResidentScratchBytesPerPoint <= shares_.ResidentScratchBytes();
+  ChunkedEpoch chunked{{}, ResidentEpoch(), IdCensus(shares_.id_table_slots)};
+  Progress progress(label + ": read + chunk", expected, "points");
+  PointPass counted = [&](const std::function<void(const ParticleChunk&)>& consume) {
+    points.Pass([&](const ParticleChunk& chunk) {
+      consume(chunk);
+      chunked.ids.Add(chunk.id);
+      progress.Add(chunk.size());
+    });
+  };
+  Chunker chunker(points.cube, chunker_options);
+  if (resident) {
+    const bool mapped = !join_epochs_ && MapResident(*points.source, points.cube, chunker_options.columns, threads_,
+                                                     chunked.resident, chunked.ids, progress);
+    if (!mapped) chunked.resident.Read(counted, expected, chunker_options.columns);
+    chunked.chunks = chunker.SplitTail(chunker.SplitResident(NodeKey::Root(), chunked.resident), chunked.resident,
+                                       kQueueWindowPerThread * threads_, max_chunk / kTailChunkFraction);
+  } else {
+    chunked.chunks = chunker.Split(NodeKey::Root(), counted);
+  }
+  epoch_report.spilled_points = chunker.spilled_points();
+  epoch_report.resident = resident;
+  epoch_report.mapped = chunked.resident.mapped();
+  return chunked;
+}
+
+// What the join to the next epoch found: missing particles and the fit of
+// the curves between the two.
+void IngestRun::RecordLinks(const EpochPoints& points, EpochReport& epoch_report) {
+  const JoinStats& join = points.join_stats;
+  epoch_report.missing_in_next = join.missing_in_next;
+  epoch_report.missing_in_prev = missing_in_prev_;
+  missing_in_prev_ = join.new_in_next;
+  if (points.next == nullptr) return;
+  const VelocityScaleFit& fit = join.fit;
+  // A Hermite curve strays from its chord by at most 4/27 of each tangent
+  // (the peak of the basis functions h10 and h11).
+  const double excursion = join.max_displacement + 4.0 / 27.0 * std::fabs(fit.velocity_scale()) * join.max_speed_sum;
+  epoch_report.to_next = EpochLink{fit.velocity_scale(), fit.fit_residual(), fit.least_squares_scale(),
+                                   fit.inlier_fraction(), join.matched, excursion};
+}
+
+// Step 5, the ID index. It needs only the leaves, so it is written on a
+// thread of its own from when the last chunk is built, while the merger
+// closes the nodes above it, and while the epoch's page file is finished
+// (mostly waiting for fsync). The store and the ID store share no state.
+void IngestRun::WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_table,
+                             ExternalSorter<IdLeafRecord>* id_pairs) {
+  if (id_pairs != nullptr) id_pairs->Finish();
+  id_store_->BeginEpoch(header.time, header.redshift);
+  IdIndexEpochWriter ids(*id_store_, id_index_page_size_);
+  if (id_table != nullptr) {
+    if (id_table->narrow()) {
+      ids.AddTable(id_table->first(), id_table->narrow_slots(), id_table->leaves());
+    } else {
+      ids.AddTable(id_table->first(), id_table->wide_slots(), id_table->leaves());
+    }
+  } else {
+    auto reader = id_pairs->Open();
+    IdLeafRecord r{};
+    for (std::uint64_t n = 0, previous = 0; reader.Next(r); ++n, previous = r.key) {
+      // What the census could not see: a repeat among IDs too far apart for its table.
+      if (n > 0 && r.key == previous) RefuseDuplicateIds(header, r.key, 0);
+      ids.Add(r.key, NodeKey::FromValue(r.leaf));
+    }
+  }
+  ids.Finish();
+  id_store_->EndEpoch();
+}
+
+// Steps 3 and 4: the chunks' subtrees and the levels above them into the
+// store; step 5 beside them.
+void IngestRun::BuildAndWrite(std::size_t e, const SnapshotHeader& header, const Cube& cube, ChunkedEpoch& chunked,
+                              EpochReport& epoch_report, PhaseClock& clock) {
+  store_.BeginEpoch(header.time, header.redshift);
+  std::unique_ptr<DenseIdTable> id_table;
+  std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
+  if (has_id_ && chunked.ids.dense() && chunked.ids.count() == epoch_report.points) {
+    id_table = std::make_unique<DenseIdTable>(chunked.ids.first(), chunked.ids.span());
+  } else if (has_id_) {
+    epoch_report.ids_sorted = true;
+    id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp_->path() + "/ids-" + std::to_string(e),
+                                                             shares_.id_run_records);
+    id_pairs->Reserve(static_cast<std::size_t>(epoch_report.points));
+  }
+  EpochBuild build;
+  build.cube = &cube;
+  build.tree = &options_.tree;
+  build.store = &store_;
+  build.id_table = id_table.get();
+  build.id_pairs = id_pairs.get();
+  build.report = &epoch_report;
+  std::future<void> id_index_written;
+  {
+    Progress progress("epoch " + std::to_string(e) + ": build", epoch_report.points, "points");
+    build.progress = &progress;
+    const NodePoints root = BuildChunks(std::move(chunked.chunks), chunked.resident, build, threads_, [&] {
+      if (has_id_) {
+        id_index_written = std::async(std::launch::async, [&] { WriteIdIndex(header, id_table.get(), id_pairs.get()); });
+      }
+    });
+    chunked.resident = ResidentEpoch();
+    for (double w : root.weight) epoch_report.mass += w;
+    progress.Finish();
+  }
+  clock.Lap("build");
+  std::future<void> epoch_written = std::async(std::launch::async, [this] { store_.EndEpoch(); });
+  if (has_id_) {
+    id_index_written.get();
+    clock.Lap("ids");
+  }
+  epoch_written.get();
+  clock.Lap("write");
+}
+
+EpochRecord RecordOf(const SnapshotHeader& header, const Cube& cube, const EpochReport& r) {
+  EpochRecord record;
+  record.input = HeaderJson(header);
+  record.cube = cube;
+  record.summary.points = r.points;
+  record.summary.mass = r.mass;
+  record.summary.nodes = r.nodes;
+  record.summary.leaves = r.leaves;
+  record.summary.depth = r.depth;
+  record.missing_in_next = r.missing_in_next;
+  record.missing_in_prev = r.missing_in_prev;
+  record.duplicate_ids = r.duplicate_ids;
+  record.to_next = r.to_next;
+  return record;
+}
+
+void IngestRun::IngestEpoch(std::size_t e) {
+  if (!source_) source_ = OpenSnapshot(options_.inputs[e], options_.read);
+  EpochReport epoch_report;
+  PhaseClock clock(epoch_report);
+  if (!source_smoothed_) {
+    source_ = Prepare(std::move(source_), e, &clock);
+    if (options_.neighbours > 0) clock.Lap("smoothing");
+  }
+  const SnapshotHeader header = source_->header();
+  if (header.has_id != has_id_ || header.has_velocity != has_velocity_) {
+    throw Error::BadInput(header.files.front(), "this epoch " + std::string(header.has_id ? "has" : "lacks") +
+                                                    " IDs / velocities unlike epoch 0; all epochs of a series must carry the same columns");
+  }
+  const Bounds bounds = SortOrBound(e, clock, epoch_report);
+  EpochPoints points;
+  points.source = source_.get();
+  points.current = join_epochs_ ? sorted_current_.get() : nullptr;
+  points.next = sorted_next_.get();
+  points.cube = ChooseCube(header, bounds);
+  points.links_from_previous = join_epochs_ && e > 0 ? LinkFilePath(temp_->path(), e) : "";
+  points.links_to_next = points.next != nullptr ? LinkFilePath(temp_->path(), e + 1) : "";
+  points.chunk_particles = options_.read.chunk_particles;
+
+  const std::uint64_t expected = join_epochs_ ? bounds.count : header.total_count;
+  ChunkedEpoch chunked = ChunkEpoch("epoch " + std::to_string(e), header, expected, points, epoch_report);
+  clock.Lap("read+chunk");
+  if (has_id_ && chunked.ids.repeated_id()) RefuseDuplicateIds(header, *chunked.ids.repeated_id(), 0);
+  for (const Chunk& c : chunked.chunks) epoch_report.points += c.point_count;
+  epoch_report.read_points = screened_[e].read;
+  epoch_report.dropped_points = screened_[e].dropped;
+  epoch_report.chunks = chunked.chunks.size();
+  if (!points.links_from_previous.empty()) std::remove(points.links_from_previous.c_str());
+  RecordLinks(points, epoch_report);
+
+  BuildAndWrite(e, header, points.cube, chunked, epoch_report, clock);
+  manifest_.epochs.push_back(RecordOf(header, points.cube, epoch_report));
+  report_.input_points += epoch_report.points;
+  report_.read_points += epoch_report.read_points;
+  report_.dropped_points += epoch_report.dropped_points;
+  report_.epochs.push_back(epoch_report);
+
+  // The next epoch reuses what this one read ahead.
+  sorted_current_ = std::move(sorted_next_);
+  source_ = std::move(next_source_);
+  source_smoothed_ = source_ != nullptr;
+}
+
+IngestReport IngestRun::Finish() {
+  if (id_store_) id_store_->Finish();
+  store_.SetDataset(manifest_.ToJson());
+  store_.Finish();
+  output_guard_.Commit();
+  report_.store_bytes = store_.bytes_written() + (id_store_ ? id_store_->bytes_written() : 0);
+  report_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return report_;
+}
+
+}  // namespace
+
+std::uint64_t DefaultMemoryBudget() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES);
+  const long page_size = ::sysconf(_SC_PAGE_SIZE);
+  const std::uint64_t physical = pages > 0 && page_size > 0 ? static_cast<std::uint64_t>(pages) * static_cast<std::uint64_t>(page_size) : 0;
+  return std::max<std::uint64_t>(physical / 2, std::uint64_t{256} << 20);
+}
+
+// The pipeline: for each epoch, screen and smooth, sort or bound, chunk,
+// build, write (IngestRun::IngestEpoch); then the manifest.
+IngestReport Ingest(const IngestOptions& options) {
+  IngestRun run(options);
+  for (std::size_t e = 0; e < options.inputs.size(); ++e) run.IngestEpoch(e);
+  return run.Finish();
+}
+
+}  // namespace octocosm

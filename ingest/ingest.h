@@ -1,0 +1,120 @@
+// `octocosm ingest`: snapshots in, a level-of-detail store out, in bounded
+// memory. The pipeline, per epoch (PotreeConverter 2's count / chunk / index
+// / merge, plus the epoch join):
+//
+//   1. sort    (series with IDs) read the snapshot once, sorted by ID into
+//              temporary runs; the merge join with the next epoch's runs gives
+//              each particle its links to the neighbouring epochs
+//              (displacements and velocities, ingest/epoch_join.h)
+//      bounds  (otherwise) one pass for the bounding box, unless the box is
+//              periodic or the cube is given
+//   Before either, where the cube is the bounding cube, the positions are
+//   surveyed for outliers that would cost the bulk its precision
+//   (ingest/outliers.h; in the bounds pass without a sort), and
+//   particles outside --clip-box are left out (ingest/clipped_source.h).
+//   2. chunk   count on a coarse grid, merge cells into chunks that fit in
+//              memory, distribute the points into chunk files (ingest/chunker.h);
+//              an epoch that fits in its share of the budget whole is read into
+//              memory once instead and chunked in place
+//   3. build   each chunk's subtree in memory (index/subtree_builder.h), chunks
+//              in parallel; blocks are encoded (index/block_codec.h) and added
+//              to the store as they complete
+//   4. top     the levels above the chunks, from the chunks' root samples
+//   5. ids     the (ID, leaf) pairs, sorted, into the ID index (index/id_index.h)
+//
+// Nothing half-written survives a failure: the store writers remove their
+// files, the temporary directory is removed, and an output directory that this
+// run created is removed again.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <utility>
+#include <string>
+#include <vector>
+
+#include "index/cube.h"
+#include "index/dataset.h"
+#include "index/neighbour_radius.h"
+#include "index/subtree_builder.h"
+#include "ingest/outliers.h"
+#include "ingest/snapshot/snapshot_source.h"
+#include "storage/page_file_format.h"
+
+namespace octocosm {
+
+struct IngestOptions {
+  std::vector<std::string> inputs;  // one snapshot per epoch, in time order (each may be multi-file)
+  std::string output;               // the store directory to create
+  ReadOptions read;
+  SubtreeOptions tree;
+  // The leaves' smoothing lengths, where the snapshot has none of its own:
+  // > 0, the radius holding this many nearest neighbours, as the reference
+  // renderer draws them (ingest/smoothing_pass.h; a pass over the snapshot
+  // before the rest); 0, the leaf's density grid (index/sampler.h step 5):
+  // no pass, faster, but not the standard.
+  int neighbours = kDefaultNeighbours;
+  std::uint64_t memory_budget = 0;  // bytes; 0 = DefaultMemoryBudget()
+  std::string temp_dir;             // parent of the temporary directory; "" = inside the output
+  std::optional<Cube> cube;         // overrides the periodic box / bounding cube
+  // Keep only the particles inside this box, in every epoch (--clip-box).
+  std::optional<PositionBox> clip_box;
+  // Where an epoch's cube is its bounding cube and outliers would cost the
+  // bulk its precision (ingest/outliers.h): drop the particles outside
+  // the bulk instead of refusing the epoch (--drop-outliers).
+  bool drop_outliers = false;
+  unsigned threads = 0;             // 0 = all cores
+  std::uint32_t page_size = kDefaultPageSize;
+  std::uint64_t max_chunk_points = 0;  // 0 = derived from the memory budget; tests set it to force chunking
+  std::uint64_t sort_run_points = 0;   // 0 = derived from the memory budget; tests set it to force merge sorts
+  bool stream_chunks = false;          // chunk through buffers and files even when the epoch fits in memory whole (tests)
+  bool quiet = false;               // no progress output
+};
+
+struct EpochReport {
+  std::uint64_t points = 0;          // stored: read_points - dropped_points
+  std::uint64_t read_points = 0;     // in the snapshot (of the types read)
+  std::uint64_t dropped_points = 0;  // left out by clip_box or drop_outliers
+  std::uint64_t nodes = 0;
+  std::uint64_t leaves = 0;
+  std::uint64_t chunks = 0;
+  std::uint64_t spilled_points = 0;  // points that went through temporary chunk files
+  bool resident = false;             // held in memory whole and chunked in place (Chunker::SplitResident)
+  bool mapped = false;               // resident, mapped from the input files (ResidentEpoch::Map)
+  struct Phase {
+    std::string name;
+    double seconds = 0;      // wall time
+    double cpu_seconds = 0;  // CPU time of the whole process (all threads, user and system)
+  };
+  std::vector<Phase> phases;  // in order
+  int depth = 0;
+  double mass = 0;
+  std::uint64_t missing_in_next = 0;  // particles whose ID the next epoch lacks
+  std::uint64_t missing_in_prev = 0;  // particles whose ID the previous epoch lacks
+  std::uint64_t duplicate_ids = 0;
+  // The (ID, leaf) pairs went through the external sorter: some ID came
+  // twice, or the IDs' range needs more than the pairs' share of the budget
+  // at 4 bytes a value (ingest/dense_id_table.h).
+  bool ids_sorted = false;
+  std::optional<EpochLink> to_next;   // every epoch but the last of a series with IDs
+};
+
+struct IngestReport {
+  std::vector<EpochReport> epochs;
+  std::uint64_t input_points = 0;    // stored, over all epochs
+  std::uint64_t read_points = 0;     // read, over all epochs
+  std::uint64_t dropped_points = 0;  // read but left out (clip_box, drop_outliers)
+  std::uint64_t store_bytes = 0;
+  std::uint64_t max_chunk_points = 0;
+  std::uint64_t memory_budget = 0;
+  double seconds = 0;
+};
+
+// Half of the physical memory, at least 256 MiB: "a safe fraction of RAM".
+std::uint64_t DefaultMemoryBudget();
+
+// Runs the whole pipeline. Throws Error (kBadInput for malformed snapshots,
+// kInvalidArgument for bad options, kIo for the disk) after cleaning up.
+IngestReport Ingest(const IngestOptions& options);
+
+}  // namespace octocosm

@@ -1,0 +1,217 @@
+#include "ingest/smoothing_pass.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "base/error.h"
+#include "tests/support/temp_dir.h"
+
+namespace octocosm {
+namespace {
+
+// A snapshot in memory, handed out in chunks of `chunk` particles.
+class VectorSource : public ParticleSource {
+ public:
+  VectorSource(std::vector<double> positions, std::vector<float> given, double box, std::size_t chunk = 777)
+      : positions_(std::move(positions)), given_(std::move(given)), chunk_(chunk) {
+    header_.format = "test";
+    header_.files = {"memory"};
+    header_.box_size = box;
+    header_.total_count = positions_.size() / 3;
+    header_.count_per_type = {header_.total_count};
+  }
+  const SnapshotHeader& header() const override { return header_; }
+  bool Next(ParticleChunk& chunk) override {
+    chunk.clear();
+    const std::size_t total = positions_.size() / 3;
+    if (next_ >= total) return false;
+    const std::size_t end = std::min(total, next_ + chunk_);
+    chunk.position.assign(positions_.begin() + 3 * next_, positions_.begin() + 3 * end);
+    chunk.mass.assign(end - next_, 1.0);
+    chunk.type.assign(end - next_, 0);
+    if (!given_.empty()) chunk.smoothing.assign(given_.begin() + next_, given_.begin() + end);
+    next_ = end;
+    return true;
+  }
+  void Rewind() override { next_ = 0; }
+
+ private:
+  std::vector<double> positions_;
+  std::vector<float> given_;
+  std::size_t chunk_;
+  std::size_t next_ = 0;
+  SnapshotHeader header_;
+};
+
+// Clumps, a filament and a sparse background in [0, box)^3, with clumps
+// straddling the periodic faces.
+std::vector<double> ClusteredPoints(std::size_t n, double box, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const double centres[3][3] = {{0.02, 0.5, 0.5}, {0.6, 0.97, 0.99}, {0.4, 0.4, 0.3}};
+  std::vector<double> points;
+  for (std::size_t i = 0; i < n; ++i) {
+    double p[3];
+    const std::size_t kind = i % 10;
+    if (kind < 6) {
+      const double* c = centres[kind % 3];
+      for (int a = 0; a < 3; ++a) p[a] = c[a] + 0.03 * normal(rng);
+    } else if (kind < 8) {
+      const double t = uniform(rng);
+      p[0] = t;
+      p[1] = 0.2 + 0.01 * normal(rng);
+      p[2] = 0.7 + 0.01 * normal(rng);
+    } else {
+      for (double& c : p) c = uniform(rng);
+    }
+    for (double& c : p) {
+      c = box * (c - std::floor(c));
+      if (c >= box) c = 0;
+      points.push_back(c);
+    }
+  }
+  return points;
+}
+
+// The k-th smallest distance from particle i to all particles (itself
+// included), minimal image in a periodic box.
+double BruteForce(const std::vector<double>& points, std::size_t i, int k, double box) {
+  std::vector<double> d;
+  for (std::size_t j = 0; j < points.size() / 3; ++j) {
+    double s = 0;
+    for (int a = 0; a < 3; ++a) {
+      double delta = std::abs(points[3 * j + a] - points[3 * i + a]);
+      if (box > 0) delta = std::min(delta, box - delta);
+      s += delta * delta;
+    }
+    d.push_back(std::sqrt(s));
+  }
+  const std::size_t kth = std::min<std::size_t>(static_cast<std::size_t>(k), d.size()) - 1;
+  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(kth), d.end());
+  return d[kth];
+}
+
+struct Case {
+  const char* name;
+  double box;
+  std::uint64_t budget;  // 0 = the default (everything in memory)
+};
+
+void ExpectExact(const Case& c, std::size_t n, int k) {
+  const std::vector<double> points = ClusteredPoints(n, c.box > 0 ? c.box : 100.0, 11);
+  VectorSource source(points, {}, c.box);
+  testing_support::TempDir temp("smoothing-pass");
+  SmoothingPassOptions options;
+  options.neighbours = k;
+  options.box_size = c.box;
+  options.memory_budget = c.budget;
+  options.temp_dir = temp.path().string();
+  options.quiet = true;
+  SmoothingPassReport report;
+  const auto table = ComputeSmoothingLengths(source, options, &report);
+  ASSERT_EQ(table->size(), n);
+  EXPECT_EQ(report.searched, n) << c.name;
+  double worst = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double truth = BruteForce(points, i, k, c.box);
+    const double got = (*table)[i];
+    worst = std::max(worst, std::abs(got - truth) / truth);
+    ASSERT_NEAR(got, truth, 1e-6 * truth) << c.name << " particle " << i << " at " << points[3 * i] << ","
+                                         << points[3 * i + 1] << "," << points[3 * i + 2];
+  }
+  ::testing::Test::RecordProperty(std::string(c.name) + "_worst_relative_error", std::to_string(worst));
+  if (c.budget != 0) {
+    EXPECT_GT(report.regions, 1u) << c.name;
+  }
+  // Regions go through files; their halos leave some sparse particles to
+  // the second search.
+  EXPECT_EQ(report.spilled, c.budget != 0) << c.name;
+  if (c.budget != 0) {
+    EXPECT_GT(report.searched_again, 0u) << c.name;
+  }
+  // Nothing is left in the temporary directory.
+  EXPECT_TRUE(std::filesystem::is_empty(temp.path())) << c.name;
+}
+
+TEST(SmoothingPass, InMemoryEqualsBruteForceWithoutABox) { ExpectExact({"open", 0, 0}, 4000, 32); }
+
+TEST(SmoothingPass, InMemoryEqualsBruteForceAcrossPeriodicFaces) { ExpectExact({"periodic", 100, 0}, 4000, 32); }
+
+TEST(SmoothingPass, RegionsThroughFilesEqualBruteForce) {
+  // 4000 particles at 48 bytes need 192 kB: a budget of 100 kB cuts a few
+  // regions, one of 20 kB (about 400 particles) many.
+  ExpectExact({"regions-open", 0, 100000}, 4000, 32);
+  ExpectExact({"regions-periodic", 100, 100000}, 4000, 32);
+  ExpectExact({"small-regions-open", 0, 20000}, 4000, 16);
+  ExpectExact({"small-regions-periodic", 100, 20000}, 4000, 16);
+}
+
+TEST(SmoothingPass, FewerParticlesThanNeighboursTakeThemAll) { ExpectExact({"few", 0, 0}, 10, 32); }
+
+TEST(SmoothingPass, KeepsTheSnapshotsOwnSmoothingLengths) {
+  const std::size_t n = 2000;
+  const std::vector<double> points = ClusteredPoints(n, 50, 3);
+  std::vector<float> given(n, 0.0f);
+  for (std::size_t i = 0; i < n; i += 3) given[i] = 0.5f + static_cast<float>(i) * 1e-3f;
+  SmoothingPassOptions options;
+  options.box_size = 50;
+  options.quiet = true;
+  {
+    VectorSource source(points, given, 50);
+    SmoothingPassReport report;
+    const auto table = ComputeSmoothingLengths(source, options, &report);
+    EXPECT_EQ(report.given, (n + 2) / 3);
+    EXPECT_EQ(report.searched, n - report.given);
+    for (std::size_t i = 0; i < n; ++i) {
+      if (given[i] > 0) {
+        EXPECT_EQ((*table)[i], given[i]);
+      } else {
+        // The particles with given lengths still count as neighbours.
+        EXPECT_NEAR((*table)[i], BruteForce(points, i, 32, 50), 1e-6 * (*table)[i]);
+      }
+    }
+  }
+}
+
+TEST(SmoothingPass, TheWrappedSourceCarriesTheTable) {
+  const std::vector<double> points = ClusteredPoints(1500, 10, 5);
+  SmoothingPassOptions options;
+  options.quiet = true;
+  auto inner = std::make_unique<VectorSource>(points, std::vector<float>{}, 0.0, 100);
+  std::shared_ptr<const SmoothingLengthTable> table = ComputeSmoothingLengths(*inner, options);
+  auto source = WithSmoothingLengths(std::move(inner), table);
+  for (int round = 0; round < 2; ++round) {
+    ParticleChunk chunk;
+    std::size_t next = 0;
+    while (source->Next(chunk)) {
+      ASSERT_EQ(chunk.smoothing.size(), chunk.size());
+      for (std::size_t i = 0; i < chunk.size(); ++i) ASSERT_EQ(chunk.smoothing[i], (*table)[next + i]);
+      next += chunk.size();
+    }
+    EXPECT_EQ(next, 1500u);
+    EXPECT_TRUE(source->MappableSegments().empty());
+    source->Rewind();
+  }
+}
+
+TEST(SmoothingPass, RefusesBadOptionsAndEmptySnapshots) {
+  VectorSource empty({}, {}, 0);
+  SmoothingPassOptions options;
+  options.quiet = true;
+  EXPECT_THROW(ComputeSmoothingLengths(empty, options), Error);
+  VectorSource one({1, 2, 3}, {}, 0);
+  options.neighbours = 0;
+  EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
+  options.neighbours = 32;
+  options.box_size = std::nan("");
+  EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
+}
+
+}  // namespace
+}  // namespace octocosm

@@ -1,0 +1,88 @@
+// Helpers shared by the snapshot reader tests: draining a source into one
+// big batch, expecting a clean BadInput error, and a scratch directory that cleans up after itself.
+#pragma once
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "base/error.h"
+#include "index/particle_chunk.h"
+#include "ingest/snapshot/snapshot_source.h"
+
+namespace octocosm {
+
+// Concatenates every chunk of `source` (from where it stands to the end),
+// checking the per-chunk invariants on the way.
+inline ParticleChunk ReadAll(ParticleSource& source, std::size_t* chunks = nullptr) {
+  ParticleChunk all, chunk;
+  std::size_t count = 0;
+  while (source.Next(chunk)) {
+    ++count;
+    EXPECT_GT(chunk.size(), 0u);
+    EXPECT_EQ(chunk.position.size(), 3 * chunk.size());
+    EXPECT_EQ(chunk.type.size(), chunk.size());
+    EXPECT_EQ(chunk.has_velocity(), source.header().has_velocity);
+    EXPECT_EQ(chunk.has_id(), source.header().has_id);
+    EXPECT_EQ(chunk.has_smoothing(), source.header().has_smoothing);
+    if (chunk.has_smoothing()) {
+      EXPECT_EQ(chunk.smoothing.size(), chunk.size());
+    }
+    if (chunk.has_velocity()) {
+      EXPECT_EQ(chunk.velocity.size(), 3 * chunk.size());
+    }
+    if (chunk.has_id()) {
+      EXPECT_EQ(chunk.id.size(), chunk.size());
+    }
+    all.position.insert(all.position.end(), chunk.position.begin(), chunk.position.end());
+    all.velocity.insert(all.velocity.end(), chunk.velocity.begin(), chunk.velocity.end());
+    all.mass.insert(all.mass.end(), chunk.mass.begin(), chunk.mass.end());
+    all.id.insert(all.id.end(), chunk.id.begin(), chunk.id.end());
+    all.type.insert(all.type.end(), chunk.type.begin(), chunk.type.end());
+    all.smoothing.insert(all.smoothing.end(), chunk.smoothing.begin(), chunk.smoothing.end());
+  }
+  EXPECT_EQ(chunk.size(), 0u) << "Next() returning false must leave the chunk empty";
+  if (chunks != nullptr) *chunks = count;
+  return all;
+}
+
+// Expects OpenSnapshot + reading everything to fail with BadInput whose
+// message names `path` and contains `problem`.
+inline void ExpectBadInput(const std::string& path, const std::string& problem, const ReadOptions& options = {}) {
+  try {
+    auto source = OpenSnapshot(path, options);
+    ReadAll(*source);
+    ADD_FAILURE() << "no error for " << path << " (expected \"" << problem << "\")";
+  } catch (const Error& error) {
+    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
+    EXPECT_NE(std::string(error.what()).find(path), std::string::npos) << error.what();
+    EXPECT_NE(std::string(error.what()).find(problem), std::string::npos) << error.what();
+  }
+}
+
+inline bool SameParticles(const ParticleChunk& a, const ParticleChunk& b) {
+  return a.position == b.position && a.velocity == b.velocity && a.mass == b.mass && a.id == b.id &&
+         a.type == b.type && a.smoothing == b.smoothing;
+}
+
+class ScratchDir {
+ public:
+  ScratchDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path_ = std::filesystem::temp_directory_path() /
+            ("octocosm_snapshot_" + std::string(info->test_suite_name()) + "_" + info->name() + "_" +
+             std::to_string(::getpid()));
+    std::filesystem::remove_all(path_);
+    std::filesystem::create_directories(path_);
+  }
+  ~ScratchDir() { std::filesystem::remove_all(path_); }
+  std::string File(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+}  // namespace octocosm
