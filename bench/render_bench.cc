@@ -65,6 +65,7 @@ struct Flags {
   std::string splat = "auto";  // splat paths to time (render/compute_splatter.h), the first also cold
   double compute_radius = 4;   // the compute path's largest blob, pixels
   bool full = true, selection = false, prepare_only = false;
+  bool reference = true;  // false: times only (no reference rendering, no PSNR or SSIM)
   unsigned threads = 0;
   std::string playback;  // a multi-epoch store: measure playback instead
   double playback_threshold = 1;
@@ -186,9 +187,11 @@ std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const Ren
       row.gpu_tone_map_ms = warm.gpu_times->tone_map_ms;
     }
     row.readback_ms = warm.readback_ms;
-    const DisplayImage picture = ToneMap(*warm.hdr, tone);
-    row.psnr = Psnr(picture, reference);
-    row.ssim = Ssim(picture, reference);
+    if (!reference.rgb.empty()) {
+      const DisplayImage picture = ToneMap(*warm.hdr, tone);
+      row.psnr = Psnr(picture, reference);
+      row.ssim = Ssim(picture, reference);
+    }
     rows.push_back(row);
   }
   return rows;
@@ -290,6 +293,7 @@ void Playback(const Flags& f, SplatPath path) {
   std::printf("playback: %s, %u epochs, %dx%d, threshold %g px, %d frames per epoch, %s, splat path %s\n",
               f.playback.c_str(), dataset.epoch_count(), f.width, f.height, f.playback_threshold, f.frames_per_epoch,
               renderer.description().c_str(), SplatPathName(path));
+  std::fflush(stdout);
   const int frames = static_cast<int>(dataset.epoch_count() - 1) * f.frames_per_epoch + 1;
   ExposureSmoother smoother;
   double total = 0, worst = 0;
@@ -366,6 +370,7 @@ std::vector<HdrImage> PrepareReferences(const Flags& f, const std::string& snaps
                                         const std::vector<RenderView>& render_views, double& seconds) {
   const fs::path dir = f.dir;
   std::vector<HdrImage> references(views.size());
+  if (!f.reference) return references;
   bool missing = false;
   for (std::size_t v = 0; v < views.size(); ++v) missing |= !fs::exists(dir / ("reference-" + views[v].name + ".pfm"));
   if (missing) {
@@ -397,9 +402,17 @@ std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, con
   std::vector<Row> rows;
   const std::vector<std::string> thresholds = Split(f.thresholds), budgets = Split(f.budgets);
   for (std::size_t v = 0; v < views.size(); ++v) {
-    const ToneMapParameters tone = ResolveToneMap({}, MeasureImage(references[v], ColorMode::kDensity));
-    const DisplayImage reference = ToneMap(references[v], tone);
-    WritePng((fs::path(f.dir) / ("reference-" + views[v].name + ".png")).string(), ToBytes(reference));
+    // Without a reference (--no-reference) the tone map is fixed by an
+    // exposure of 1 and the error columns stay 0.
+    ToneMapParameters tone;
+    tone.exposure = 1;
+    tone.floor = 1e-4;
+    DisplayImage reference;
+    if (f.reference) {
+      tone = ResolveToneMap({}, MeasureImage(references[v], ColorMode::kDensity));
+      reference = ToneMap(references[v], tone);
+      WritePng((fs::path(f.dir) / ("reference-" + views[v].name + ".png")).string(), ToBytes(reference));
+    }
     if (f.full) {
       SceneOptions options;
       options.lod.pixel_threshold = 1e-9;
@@ -506,13 +519,17 @@ void Run(const Flags& f) {
   for (const NamedView& v : views) render_views.emplace_back(v.camera, f.width, f.height);
   double reference_seconds = 0;
   const std::vector<HdrImage> references = PrepareReferences(f, snapshot, views, render_views, reference_seconds);
-  std::printf("reference: %llu points, %.1f s a view on the CPU\n",
-              static_cast<unsigned long long>(datasets.front().points(0)), reference_seconds);
+  if (f.reference) {
+    std::printf("reference: %llu points, %.1f s a view on the CPU\n",
+                static_cast<unsigned long long>(datasets.front().points(0)), reference_seconds);
+  }
   if (f.prepare_only) return;
 
   const std::vector<Row> rows = Sweep(f, datasets, representations, views, render_views, references, backend);
-  PrintTargets(rows, views, representations, reference_seconds);
-  Plot(fs::path(f.dir), rows, views);
+  if (f.reference) {
+    PrintTargets(rows, views, representations, reference_seconds);
+    Plot(fs::path(f.dir), rows, views);
+  }
   if (f.selection) MeasureSelection(datasets.front(), views[0], render_views[0], backend);
 }
 
@@ -542,8 +559,10 @@ int main(int argc, char** argv) {
                  "splat paths to time, comma-separated: raster, compute, auto (the first cold and warm, the others warm "
                  "on the same blocks; --playback plays through each)")
       ->default_val("auto");
-  app.add_option("--compute-radius", f.compute_radius, "compute path: blobs up to this radius (pixels) by the compute shader")
+  app.add_option("--compute-radius", f.compute_radius, "compute path: blobs up to this radius (pixels) are added by one thread, larger ones by a workgroup")
       ->default_val(4);
+  app.add_flag("!--no-reference", f.reference,
+               "time only: no reference rendering (minutes on the CPU at 10^8 points), no PSNR or SSIM columns (0)");
   app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");
   app.add_flag("--selection", f.selection, "also time a frame with 10^6 selected IDs");
   app.add_option("--playback", f.playback, "measure playback through the epochs of this store instead (frames per second)");

@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "render/render_shaders.h"
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 namespace {
@@ -52,6 +52,8 @@ constexpr std::size_t kLargeBlobBytes = 48;  // LargeBlob in shaders/splat_comp.
 constexpr std::size_t kLargeHeaderBytes = 16;
 constexpr std::uint32_t kDefaultLargeCapacity = 1u << 20;
 constexpr GLuint kMaxGroups = 65535;
+constexpr GLuint kLargeBlobGroups = 2048;  // workgroups taking the large blobs in turn
+constexpr const char* kAtomicFloat = "#extension GL_NV_shader_atomic_float : require\n";
 
 GLint Location(const GlProgram& program, const char* name) { return glGetUniformLocation(program.get(), name); }
 
@@ -64,13 +66,11 @@ bool ComputeSplatter::Supported() {
 }
 
 ComputeSplatter::ComputeSplatter() {
-  blob_program_ = BuildGlProgram(
-      "large blobs", {{GL_VERTEX_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatBlobVert}},
-                      {GL_FRAGMENT_SHADER, {shaders::kShaderSplatCommon, shaders::kShaderSplatFrag}}});
+  large_program_ = BuildGlProgram(
+      "compute splat, large blobs",
+      {{GL_COMPUTE_SHADER,
+        {kAtomicFloat, shaders::kShaderSplatCommon, shaders::kShaderSplatAccumulate, shaders::kShaderSplatLargeComp}}});
   resolve_ = BuildGlProgram("accumulation resolve", {{GL_COMPUTE_SHADER, {shaders::kShaderAccumulationResolveComp}}});
-  GLuint vao = 0;
-  glCreateVertexArrays(1, &vao);
-  empty_vao_ = GlVertexArray(vao);
   absent_column_ = MakeGlBuffer(16, nullptr, 0);
   GLint64 max_block = 0;
   glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &max_block);
@@ -95,7 +95,7 @@ void ComputeSplatter::set_large_blob_capacity(std::uint32_t blobs) {
   large_capacity_ = std::max<std::uint32_t>(blobs, 1);
   const std::size_t bytes = kLargeHeaderBytes + std::size_t{large_capacity_} * kLargeBlobBytes;
   large_blobs_ = MakeGlBuffer(bytes, nullptr, GL_DYNAMIC_STORAGE_BIT);
-  const std::uint32_t header[4] = {0, 1, 0, 0};  // count, instances, first, base instance
+  const std::uint32_t header[4] = {0, 0, 0, 0};  // count, padding
   glNamedBufferSubData(large_blobs_.get(), 0, sizeof header, header);
   CheckGlError("allocating the large blobs' list");
 }
@@ -120,7 +120,7 @@ const GlProgram& ComputeSplatter::ProgramFor(const ComputeColumns& columns) {
   const unsigned key = KeyOf(columns);
   auto it = programs_.find(key);
   if (it != programs_.end()) return it->second;
-  std::string defines = "#extension GL_NV_shader_atomic_float : require\n";
+  std::string defines = kAtomicFloat;
   if (columns.velocity) defines += "#define HAS_VELOCITY 1\n";
   if (columns.dispersion) defines += "#define HAS_DISPERSION 1\n";
   if (columns.type) defines += "#define HAS_TYPE 1\n";
@@ -129,7 +129,8 @@ const GlProgram& ComputeSplatter::ProgramFor(const ComputeColumns& columns) {
   if (columns.hermite) defines += "#define HAS_HERMITE 1\n";
   GlProgram program = BuildGlProgram(
       "compute splat", {{GL_COMPUTE_SHADER,
-                         {defines.c_str(), shaders::kShaderSplatCommon, shaders::kShaderSplatPoint, shaders::kShaderSplatComp}}});
+                         {defines.c_str(), shaders::kShaderSplatCommon, shaders::kShaderSplatPoint, shaders::kShaderSplatAccumulate,
+                          shaders::kShaderSplatComp}}});
   return programs_.emplace(key, std::move(program)).first->second;
 }
 
@@ -166,22 +167,19 @@ void ComputeSplatter::Splat(const GpuBlockArena& arena, std::uint32_t pool, std:
   const GLuint groups = std::min<GLuint>(kMaxGroups, (points + 255) / 256);
   glDispatchCompute(groups, 1, 1);
   pending_ = true;
-  DrawLargeBlobs();
+  SplatLargeBlobs();
   CheckGlError("splatting blocks by compute");
 }
 
-void ComputeSplatter::DrawLargeBlobs() {
-  glMemoryBarrier(GL_COMMAND_BARRIER_BIT | GL_SHADER_STORAGE_BARRIER_BIT);
-  glUseProgram(blob_program_.get());
-  glProgramUniform2f(blob_program_.get(), Location(blob_program_, "u_framebuffer"), static_cast<float>(width_),
-                     static_cast<float>(height_));
-  glBindVertexArray(empty_vao_.get());
-  glBindBuffer(GL_DRAW_INDIRECT_BUFFER, large_blobs_.get());
-  glDrawArraysIndirect(GL_POINTS, nullptr);
-  // The count back to 0 for the next dispatch (after the draw has read it).
+void ComputeSplatter::SplatLargeBlobs() {
+  glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT);
+  glUseProgram(large_program_.get());
+  glProgramUniform2i(large_program_.get(), Location(large_program_, "u_target_size"), width_, height_);
+  glDispatchCompute(kLargeBlobGroups, 1, 1);
+  // The count back to 0 for the next dispatch, once this one has read it.
+  glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
   const std::uint32_t zero = 0;
   glClearNamedBufferSubData(large_blobs_.get(), GL_R32UI, 0, 4, GL_RED_INTEGER, GL_UNSIGNED_INT, &zero);
-  glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT);
 }
 
 void ComputeSplatter::Resolve(GLuint texture) {

@@ -5,10 +5,12 @@
 // part of its multiprocessors only (data-centre GPUs on few of them) and
 // spends a sprite's setup on blobs of one or two pixels; a compute dispatch
 // reaches every multiprocessor. Blobs larger than the compute radius are
-// listed and drawn by the raster path after the dispatch, where blending
-// beats one thread's loop over many pixels. The image is the raster path's
-// to float rounding: the same blobs (shaders/splat_point.glsl), the same
-// pixels, the same weights, added in another order.
+// listed and added after the dispatch by a workgroup each
+// (shaders/splat_large_comp.glsl), its threads sharing the blob's pixels, so
+// no blob is one thread's long loop and none passes through the graphics
+// units. The image is the raster path's to float rounding: the same blobs
+// (shaders/splat_point.glsl), the same pixels, the same weights, added in
+// another order (and so not bit for bit the same from one run to the next).
 //
 // Needs GL_NV_shader_atomic_float (float atomic adds; NVIDIA's drivers and
 // Mesa's llvmpipe have it) and 16 storage buffers in a compute shader
@@ -48,7 +50,7 @@ class ComputeSplatter {
   // margin included). False when one storage buffer cannot hold it: the
   // frame is then drawn by the raster path.
   bool Prepare(int width, int height);
-  // Blobs above this radius (pixels) are drawn by the raster path.
+  // Blobs above this radius (pixels) are added by a workgroup each.
   void set_compute_radius(double pixels) { compute_radius_ = static_cast<float>(pixels); }
   double compute_radius() const { return compute_radius_; }
   // Room for so many large blobs a dispatch (those past it are added by the
@@ -67,9 +69,7 @@ class ComputeSplatter {
   // dispatch (`points` in all). The columns are bound from pool point `base`
   // (a multiple of base_alignment()) on. The caller has bound the frame's
   // uniforms (0), the selection (1), the blocks' parameters (3) and the
-  // Draws (4), and the accumulation framebuffer with the splat pass's
-  // additive blending, into which the large blobs are drawn after the
-  // dispatch. Leaves other programs bound than it found.
+  // Draws (4). Leaves another program bound than it found.
   void Splat(const GpuBlockArena& arena, std::uint32_t pool, std::uint32_t first_draw, std::uint32_t draw_count,
              std::uint32_t points, std::uint32_t base, const ComputeColumns& columns);
   // Adds what the dispatches since the last Resolve accumulated into
@@ -80,12 +80,11 @@ class ComputeSplatter {
 
  private:
   const GlProgram& ProgramFor(const ComputeColumns& columns);
-  void DrawLargeBlobs();
+  void SplatLargeBlobs();
 
   std::map<unsigned, GlProgram> programs_;  // by the columns read
-  GlProgram blob_program_;
+  GlProgram large_program_;
   GlProgram resolve_;
-  GlVertexArray empty_vao_;
   GlBuffer accumulation_;
   std::size_t accumulation_bytes_ = 0;
   GlBuffer large_blobs_;

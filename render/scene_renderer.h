@@ -63,9 +63,9 @@ struct SceneOptions {
   // Clusters drawn with their shapes (index/cluster_shape.h), where the store
   // has them; false: as round blobs of the same size.
   bool cluster_shapes = true;
-  // Point sprites, or small blobs by a compute shader (render/compute_splatter.h).
+  // Point sprites, or blobs added by compute shaders (render/compute_splatter.h).
   SplatPath splat_path = SplatPath::kAuto;
-  double compute_radius = 4;  // pixels: larger blobs are drawn as sprites on the compute path
+  double compute_radius = 4;  // pixels: the compute path adds larger blobs by a workgroup each
   std::size_t cpu_cache_bytes = std::size_t{1} << 30;     // blocks read from disk, in memory
   std::size_t gpu_cache_bytes = std::size_t{2} << 30;     // blocks on the GPU
   std::size_t io_threads = 2;

@@ -62,6 +62,12 @@ SplatRenderer::SplatRenderer() {
   // A sprite of side SpriteSize(R) must fit the largest point size.
   max_blob_radius_ = std::max(kMinBlobRadius, std::floor((double{range[1]} - kSpriteGuard) / 2));
   compute_supported_ = ComputeSplatter::Supported();
+  const auto* renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+  const std::string renderer_name = renderer != nullptr ? renderer : "";
+  const bool software = renderer_name.find("llvmpipe") != std::string::npos ||
+                        renderer_name.find("softpipe") != std::string::npos ||
+                        renderer_name.find("SWR") != std::string::npos;
+  compute_preferred_ = compute_supported_ && !software;
   CheckGlError("setting up the splat renderer");
 }
 
@@ -142,7 +148,8 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   commands_used_ = 0;
   Allocate(accumulation_, GL_RGBA32F, tw, th, "the accumulation buffer");
   compute_frame_ = false;
-  if (compute_supported_ && settings.path != SplatPath::kRaster) {
+  if (settings.path == SplatPath::kCompute ? compute_supported_
+                                           : settings.path == SplatPath::kAuto && compute_preferred_) {
     if (!compute_) compute_ = std::make_unique<ComputeSplatter>();
     compute_->set_compute_radius(settings.compute_radius);
     compute_frame_ = compute_->Prepare(tw, th);

@@ -42,8 +42,8 @@ enum class Interpolation {
 // How blobs reach the accumulation buffer (render/compute_splatter.h).
 enum class SplatPath {
   kRaster,   // every point a point sprite, blended
-  kCompute,  // small blobs added by a compute shader, large ones drawn as sprites
-  kAuto,     // compute where the GPU can (SplatRenderer::compute_supported), else raster
+  kCompute,  // blobs added by compute shaders: a thread a small blob, a workgroup a large one
+  kAuto,     // compute on a hardware GPU that can (SplatRenderer::compute_preferred), else raster
 };
 
 // "raster", "compute", "auto"; and back (throws Error::InvalidArgument).
@@ -53,7 +53,7 @@ SplatPath ParseSplatPath(const std::string& name);
 struct FrameSettings {
   ColorMode color = ColorMode::kDensity;
   SplatPath path = SplatPath::kAuto;
-  double compute_radius = 4;  // pixels: the compute path's largest blob (larger ones are drawn as sprites)
+  double compute_radius = 4;  // pixels: the compute path adds larger blobs by a workgroup each
   double mass_unit = 1;  // > 0: the GPU accumulates mass / mass_unit
   Interpolation interpolation = Interpolation::kNone;
   double t = 0;              // in [0, 1]
@@ -76,6 +76,11 @@ class SplatRenderer {
   double max_blob_radius() const { return max_blob_radius_; }
   // Whether this GL can take the compute path (render/compute_splatter.h).
   bool compute_supported() const { return compute_supported_; }
+  // Whether SplatPath::kAuto takes the compute path: where it is supported
+  // and the GL is not a software rasterizer (llvmpipe blends sprites 1.5-3x
+  // faster than it runs the compute path's atomics; a GPU, whose graphics
+  // units are few, the other way round).
+  bool compute_preferred() const { return compute_preferred_; }
   // The path the current (or last) frame takes: kRaster or kCompute. A frame
   // asking for kCompute takes the raster path where the compute path cannot
   // hold its image (one storage buffer's size) or the GL lacks it.
@@ -224,6 +229,7 @@ class SplatRenderer {
   std::size_t commands_used_ = 0;  // this frame
 
   bool compute_supported_ = false;
+  bool compute_preferred_ = false;
   std::unique_ptr<ComputeSplatter> compute_;  // made on the first frame that takes the compute path
   bool compute_frame_ = false;                // this frame takes it
 };

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace octocosm {
 

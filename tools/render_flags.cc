@@ -39,10 +39,11 @@ void AddSceneFlags(CLI::App& cmd, SceneFlags& f) {
   cmd.add_option("--softening", f.softening, "asinh curve: linear below exposure * softening")->default_val(1e-3);
   cmd.add_option("--max-radius", f.max_radius, "largest blob radius, pixels")->default_val(kDefaultMaxBlobRadius);
   cmd.add_option("--splat", f.splat,
-                 "how blobs are drawn: raster (point sprites), compute (small blobs by a compute shader, large ones as "
-                 "sprites) or auto (compute where the GPU has float atomics)")
+                 "how blobs are drawn: raster (point sprites, blended) or compute (added by compute shaders with float "
+                 "atomics: a thread a small blob, a workgroup a large one); auto: compute on a GPU that has float atomics, "
+                 "raster on software OpenGL (llvmpipe)")
       ->default_val("auto");
-  cmd.add_option("--compute-radius", f.compute_radius, "compute path: blobs up to this radius (pixels) by the compute shader")
+  cmd.add_option("--compute-radius", f.compute_radius, "compute path: blobs up to this radius (pixels) are added by one thread, larger ones by a workgroup")
       ->default_val(4);
   cmd.add_option("--select", f.select, "highlight the particle IDs listed in this file (one per line)");
   cmd.add_option("--select-box", f.select_box, "highlight the particles in the box x0,y0,z0,x1,y1,z1 (in the epoch nearest the time shown)");

@@ -13,3 +13,8 @@ float CubicKernel(float q) {
   float r = 1.0 - q;
   return 2.0 * r * r * r;
 }
+
+// q for a pixel offset d from a blob's centre.
+float FootprintDistance(vec3 conic, vec2 d) {
+  return sqrt(conic.x * d.x * d.x + 2.0 * conic.y * d.x * d.y + conic.z * d.y * d.y);
+}

@@ -1,10 +1,10 @@
 // The compute path (render/compute_splatter.h): one invocation per point,
 // read from its block's columns as storage buffers, turned into its blob by
 // splat_point.glsl, and added pixel by pixel into a float buffer with atomic
-// adds (GL_NV_shader_atomic_float) where the blob is small. A blob larger
-// than u_compute_radius goes to a list that the raster path draws after the
-// dispatch (splat_blob_vert.glsl), where a GPU's blending beats a thread's
-// loop; if the list is full the thread adds it itself, so no blob is lost.
+// adds (GL_NV_shader_atomic_float, splat_accumulate.glsl) where the blob is
+// small. A blob larger than u_compute_radius goes to a list that a workgroup
+// a blob adds after this dispatch (splat_large_comp.glsl); if the list is
+// full the thread adds it itself, so no blob is lost.
 //
 // Before this file the program defines which columns it reads (the frame's
 // colour mode, interpolation and selection decide): HAS_VELOCITY,
@@ -23,7 +23,6 @@ uniform uint u_points;
 uniform uint u_base;
 uniform uint u_id_words;
 uniform float u_compute_radius;  // pixels: larger blobs go to the list
-uniform ivec2 u_target_size;     // the accumulation buffer, guard margin included
 
 // Columns as words; element i of a column of s-byte elements starts at byte s i.
 layout(std430, binding = 5) readonly buffer PositionColumn { uint position_words[]; };
@@ -50,25 +49,6 @@ layout(std430, binding = 14) readonly buffer PrevDisplacementColumn { uint prev_
 layout(std430, binding = 15) readonly buffer NextVelocityColumn { uint next_velocity_words[]; };
 layout(std430, binding = 16) readonly buffer PrevVelocityColumn { uint prev_velocity_words[]; };
 #endif
-
-// The accumulation: four floats per pixel, rows from the bottom, as the
-// accumulation texture (render/splat_renderer.h).
-layout(std430, binding = 17) buffer Accumulation { float accumulation[]; };
-
-struct LargeBlob {
-  vec4 center_major;  // centre (x, y), larger radius, unused
-  vec4 conic;         // xyz
-  vec4 value;
-};
-// A DrawArraysIndirectCommand (its count the blobs listed, possibly more
-// than fit: those past the capacity were added here), then the blobs.
-layout(std430, binding = 18) buffer LargeBlobs {
-  uint large_count;
-  uint large_instances;
-  uint large_first;
-  uint large_base_instance;
-  LargeBlob large_blobs[];
-};
 
 #define U16(words, index) ((words[(index) >> 1u] >> (((index) & 1u) << 4u)) & 0xFFFFu)
 #define U8(words, index) ((words[(index) >> 2u] >> (((index) & 3u) << 3u)) & 0xFFu)
@@ -131,26 +111,13 @@ Point Load(uint draw, uint i) {
   return pt;
 }
 
-void Add(uint at, float value) {
-  if (value != 0.0) atomicAdd(accumulation[at], value);
-}
-
 // Adds the blob to every pixel whose centre its footprint covers: the pixels
 // splat_frag.glsl would shade, with the same weights.
 void AddPixels(Blob blob) {
-  ivec2 low = max(ivec2(ceil(blob.center - blob.major - 0.5)), ivec2(0));
-  ivec2 high = min(ivec2(floor(blob.center + blob.major - 0.5)), u_target_size - 1);
+  ivec2 low, high;
+  PixelBox(blob.center, blob.major, low, high);
   for (int j = low.y; j <= high.y; ++j) {
-    for (int i = low.x; i <= high.x; ++i) {
-      float w = CubicKernel(FootprintDistance(blob.conic, vec2(float(i) + 0.5, float(j) + 0.5) - blob.center));
-      if (w <= 0.0) continue;
-      uint at = 4u * (uint(j) * uint(u_target_size.x) + uint(i));
-      vec4 v = blob.value * w;
-      Add(at, v.x);
-      Add(at + 1u, v.y);
-      Add(at + 2u, v.z);
-      Add(at + 3u, v.w);
-    }
+    for (int i = low.x; i <= high.x; ++i) AddPixel(ivec2(i, j), blob.center, blob.conic, blob.value);
   }
 }
 

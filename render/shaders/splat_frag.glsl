@@ -8,8 +8,7 @@ flat in vec4 v_value;
 layout(location = 0) out vec4 out_value;
 
 void main() {
-  vec2 d = gl_FragCoord.xy - v_center;
-  float q = sqrt(v_conic.x * d.x * d.x + 2.0 * v_conic.y * d.x * d.y + v_conic.z * d.y * d.y);
+  float q = FootprintDistance(v_conic, gl_FragCoord.xy - v_center);
   if (q >= 1.0) discard;
   out_value = v_value * CubicKernel(q);
 }

@@ -146,11 +146,6 @@ bool IsSelected(uvec2 id) {
   return false;
 }
 
-// q for a pixel offset d from a blob's centre.
-float FootprintDistance(vec3 conic, vec2 d) {
-  return sqrt(conic.x * d.x * d.x + 2.0 * conic.y * d.x * d.y + conic.z * d.y * d.y);
-}
-
 // The kernel summed over the pixel centres of the footprint, which lies
 // within `extent` pixels of c.
 float PixelSum(vec2 c, vec3 conic, float extent) {

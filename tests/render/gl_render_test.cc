@@ -530,11 +530,11 @@ TEST_F(GlRenderTest, ComputePathMatchesTheRasterPath) {
   }
 }
 
-// Blobs above the compute radius are listed and drawn as sprites after the
-// dispatch; when the list is full the compute shader adds them itself. Inside
+// Blobs above the compute radius are listed and added after the dispatch by a
+// workgroup each; when the list is full the thread adds its blob itself. Inside
 // the box, with radii of 1 to tens of pixels: the same image whatever the
-// radius (0: every blob a sprite; 1000: none) and with a list of 16 blobs.
-TEST_F(GlRenderTest, ComputePathDrawsLargeBlobsAsSpritesAndNeverLosesOne) {
+// radius (0: every blob by a workgroup; 1000: none) and with a list of 16 blobs.
+TEST_F(GlRenderTest, ComputePathAddsLargeBlobsByWorkgroupAndNeverLosesOne) {
   const Dataset d = Dataset::Open(scene->store);
   SceneOptions options = Full();
   options.splat_path = SplatPath::kRaster;
