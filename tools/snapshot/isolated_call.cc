@@ -97,7 +97,8 @@ IsolatedResult ReadChild(pid_t child, int pipe_read, std::chrono::milliseconds t
   std::string stream;
   bool timed_out = false;
   for (;;) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0) {
       timed_out = true;
       break;
@@ -143,7 +144,8 @@ IsolatedResult ReadChild(pid_t child, int pipe_read, std::chrono::milliseconds t
   } else if (WIFSIGNALED(status)) {
     const int signal_number = WTERMSIG(status);
     const char* name = strsignal(signal_number);
-    result.failure = "was killed by signal " + std::to_string(signal_number) + (name ? " (" + std::string(name) + ")" : "");
+    result.failure =
+        "was killed by signal " + std::to_string(signal_number) + (name ? " (" + std::string(name) + ")" : "");
   } else if (WIFEXITED(status) && WEXITSTATUS(status) != 0) {
     result.failure = "exited with status " + std::to_string(WEXITSTATUS(status));
   } else if (final_tag == kException) {
