@@ -58,7 +58,7 @@ TEST(IsolatedCall, AnAbortIsReported) {
   EXPECT_NE(result.failure.find("signal " + std::to_string(SIGABRT)), std::string::npos) << result.failure;
 }
 
-TEST(IsolatedCall, AChildPastItsTimeLimitIsKilled) {
+TEST(IsolatedCall, AChildSilentPastItsTimeLimitIsKilled) {
   const auto start = std::chrono::steady_clock::now();
   IsolationLimits limits;
   limits.time_limit = std::chrono::milliseconds(300);
@@ -68,8 +68,26 @@ TEST(IsolatedCall, AChildPastItsTimeLimitIsKilled) {
       },
       limits);
   EXPECT_FALSE(result.returned);
-  EXPECT_EQ(result.failure, "ran past its time limit of 300 ms and was killed");
+  EXPECT_EQ(result.failure, "went 300 ms without progress and was killed");
   EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
+}
+
+TEST(IsolatedCall, NotesStartTheTimeLimitAfresh) {
+  IsolationLimits limits;
+  limits.time_limit = std::chrono::milliseconds(500);
+  // 1.2 s in all, never 500 ms without a note.
+  const IsolatedResult result = CallIsolated(
+      [] {
+        for (int step = 0; step < 12; ++step) {
+          NoteIsolatedProgress("step " + std::to_string(step));
+          std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
+        return std::string("done");
+      },
+      limits);
+  ASSERT_TRUE(result.returned) << result.failure;
+  EXPECT_EQ(result.bytes, "done");
+  EXPECT_EQ(result.last_note, "step 11");
 }
 
 TEST(IsolatedCall, AnExitWithoutResultIsReported) {

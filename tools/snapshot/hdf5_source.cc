@@ -875,8 +875,9 @@ bool IsHdf5Signature(const std::uint8_t bytes[8]) {
 // hands back what it found (State, as CBOR) or the Error it threw, and the
 // parent builds its source from that without parsing the headers again; it
 // then opens and reads only the datasets the child read. A child that dies,
-// runs past kChildTimeLimit or fails to allocate within its cap becomes an
-// Error naming the file it was reading.
+// fails to allocate within its cap, or goes kChildTimeLimit without opening
+// another file (a structure that loops) becomes an Error naming the file it
+// was reading.
 //
 // The child is a fork() of this process running only this thread; libhdf5
 // is not used by another thread meanwhile (ParticleSource: HDF5 sources are

@@ -90,10 +90,11 @@ std::uint64_t AddressSpaceBytes() {
   _exit(WriteRecord(pipe_write, tag, bytes) ? 0 : 126);
 }
 
-// Reads the child's records, ends the child when the time limit passes and
-// reaps it. Returns the result with `failure` set unless the child returned.
+// Reads the child's records, ends the child when it sends nothing for
+// `time_limit` and reaps it. Returns the result with `failure` set unless the
+// child returned.
 IsolatedResult ReadChild(pid_t child, int pipe_read, std::chrono::milliseconds time_limit) {
-  const auto deadline = std::chrono::steady_clock::now() + time_limit;
+  auto deadline = std::chrono::steady_clock::now() + time_limit;
   std::string stream;
   bool timed_out = false;
   for (;;) {
@@ -112,6 +113,7 @@ IsolatedResult ReadChild(pid_t child, int pipe_read, std::chrono::milliseconds t
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) break;  // end of file: the child has exited or closed the pipe
     stream.append(buffer, static_cast<std::size_t>(n));
+    deadline = std::chrono::steady_clock::now() + time_limit;  // it is making progress
   }
   if (timed_out) kill(child, SIGKILL);
   int status = 0;
@@ -138,9 +140,9 @@ IsolatedResult ReadChild(pid_t child, int pipe_read, std::chrono::milliseconds t
 
   if (timed_out) {
     const auto ms = time_limit.count();
-    result.failure = "ran past its time limit of " +
+    result.failure = "went " +
                      (ms % 1000 == 0 ? std::to_string(ms / 1000) + " s" : std::to_string(ms) + " ms") +
-                     " and was killed";
+                     " without progress and was killed";
   } else if (WIFSIGNALED(status)) {
     const int signal_number = WTERMSIG(status);
     const char* name = strsignal(signal_number);

@@ -20,7 +20,9 @@
 namespace octocosm {
 
 struct IsolationLimits {
-  // The child is killed (SIGKILL) when it runs longer.
+  // The child is killed (SIGKILL) when it sends nothing, neither a note
+  // (NoteIsolatedProgress) nor its result, for this long: a limit on each
+  // step of a long call that notes its steps, on the whole call otherwise.
   std::chrono::milliseconds time_limit{30'000};
   // Address space the child may map beyond what it inherits (RLIMIT_AS,
   // counted from the parent's size at the fork); 0 = no cap. An allocation
@@ -33,7 +35,7 @@ struct IsolatedResult {
   std::string bytes;
   // When it did not: what became of the child, as a phrase that follows
   // "the child process", e.g. "was killed by signal 11 (Segmentation fault)",
-  // "ran past its time limit of 30 s and was killed", "threw std::bad_alloc".
+  // "went 30 s without progress and was killed", "threw std::bad_alloc".
   std::string failure;
   // The last note the child made (NoteIsolatedProgress) before it ended;
   // empty when none.
@@ -47,8 +49,8 @@ struct IsolatedResult {
 IsolatedResult CallIsolated(const std::function<std::string()>& function, const IsolationLimits& limits = {});
 
 // Inside a function run by CallIsolated: records `note` (e.g. the file it is
-// about to read), so that if the child dies the parent learns how far it got.
-// Anywhere else it does nothing.
+// about to read), so that if the child dies the parent learns how far it got,
+// and starts its time limit afresh. Anywhere else it does nothing.
 void NoteIsolatedProgress(std::string_view note);
 
 }  // namespace octocosm
