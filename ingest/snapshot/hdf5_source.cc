@@ -3,6 +3,7 @@
 #include <hdf5.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <numbers>
@@ -14,6 +15,7 @@
 #include "base/error.h"
 #include "ingest/snapshot/binary_file.h"
 #include "ingest/snapshot/file_set.h"
+#include "ingest/snapshot/isolated_call.h"
 #include "ingest/snapshot/segmented_source.h"
 
 namespace octocosm {
@@ -74,6 +76,9 @@ void SilenceHdf5ErrorPrinting() {
 }
 
 Handle OpenFile(const std::string& path) {
+  // In the child of OpenHdf5Snapshot: names the file that libhdf5 reads from
+  // here on, should it crash.
+  NoteIsolatedProgress(path);
   hid_t id = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
   if (id < 0) ThrowHdf5(path, "cannot open as HDF5 (truncated or damaged file?)");
   return Handle(id, H5Fclose);
@@ -272,6 +277,24 @@ void CheckDatasetStorage(const Handle& dataset, const std::string& name, const s
       throw Error::BadInput(path, where + " is stored in chunks of " + std::to_string(chunk_bytes) +
                                       " bytes; at most " + std::to_string(kMaxChunkBytes) + " are read");
     }
+    // Counting the chunks walks the whole chunk index (its B-tree), which
+    // reads of the data would otherwise first walk part by part: in the
+    // child of OpenHdf5Snapshot, a damaged index fails here.
+    hsize_t chunks = 0;
+    Handle space(H5Dget_space(dataset.get()), H5Sclose);
+    if (H5Dget_num_chunks(dataset.get(), space.get(), &chunks) < 0) {
+      ThrowHdf5(path, "cannot walk the chunk index of " + where);
+    }
+    double grid = 1;
+    const hsize_t extent[2] = {shape.rows, shape.columns};
+    for (int a = 0; a < rank && a < 2; ++a) {
+      grid *= chunk[a] == 0 ? 0 : std::ceil(static_cast<double>(extent[a]) / static_cast<double>(chunk[a]));
+    }
+    if (static_cast<double>(chunks) > grid) {
+      throw Error::BadInput(path, where + "'s chunk index lists " + std::to_string(chunks) +
+                                      " chunks; its shape has room for " +
+                                      std::to_string(static_cast<std::uint64_t>(grid)));
+    }
   }
   if (values_bytes == 0) return;
   const double stored = static_cast<double>(H5Dget_storage_size(dataset.get()));
@@ -347,6 +370,9 @@ std::string GroupName(int type) { return "PartType" + std::to_string(type); }
 
 class Hdf5Source final : public SegmentedSource {
  public:
+  // Walks the snapshot's structure with libhdf5: every file's header and
+  // datasets (DescribeFile), the first file's header numbers (FillHeader)
+  // and smoothing lengths (FindSmoothing).
   Hdf5Source(const std::string& any_file, const ReadOptions& options) : SegmentedSource(options.chunk_particles) {
     SilenceHdf5ErrorPrinting();
     long long declared = 1;
@@ -374,6 +400,96 @@ class Hdf5Source final : public SegmentedSource {
     header_.has_id = options.read_id && all_id;
     FillHeader(options);
     FindSmoothing(options);
+  }
+
+  // A source from what the walk above found (State()), without asking
+  // libhdf5 again: the parent side of OpenHdf5Snapshot.
+  Hdf5Source(const nlohmann::json& state, const ReadOptions& options) : SegmentedSource(options.chunk_particles) {
+    SilenceHdf5ErrorPrinting();
+    read_velocity_ = options.read_velocity;
+    read_id_ = options.read_id;
+    read_smoothing_ = options.read_smoothing;
+    for (const nlohmann::json& f : state.at("files")) {
+      Hdf5File file;
+      file.path = f.at("path").get<std::string>();
+      file.this_file = f.at("this_file").get<std::vector<std::uint64_t>>();
+      file.mass_table = f.at("mass_table").get<std::vector<double>>();
+      file.has_masses = f.at("has_masses").get<std::vector<bool>>();
+      file.signed_ids = f.at("signed_ids").get<std::vector<bool>>();
+      file.smoothing_dataset = f.at("smoothing_dataset").get<std::string>();
+      files_.push_back(std::move(file));
+    }
+    for (const nlohmann::json& s : state.at("segments")) {
+      segments_.push_back(Segment{s.at(0).get<std::size_t>(), s.at(1).get<int>(), s.at(2).get<std::uint64_t>()});
+    }
+    const nlohmann::json& h = state.at("header");
+    header_.format = h.at("format").get<std::string>();
+    header_.files = h.at("files").get<std::vector<std::string>>();
+    header_.time = h.at("time").get<double>();
+    header_.redshift = h.at("redshift").get<double>();
+    header_.count_per_type = h.at("count_per_type").get<std::vector<std::uint64_t>>();
+    header_.total_count = h.at("total_count").get<std::uint64_t>();
+    header_.has_velocity = h.at("has_velocity").get<bool>();
+    header_.has_id = h.at("has_id").get<bool>();
+    header_.has_smoothing = h.at("has_smoothing").get<bool>();
+    header_.cosmological = h.at("cosmological").get<bool>();
+    header_.omega0 = h.at("omega0").get<double>();
+    header_.omega_lambda = h.at("omega_lambda").get<double>();
+    header_.hubble_param = h.at("hubble_param").get<double>();
+    header_.extra = h.at("extra");
+    smoothing_scale_ = state.at("smoothing_scale").get<double>();
+    declared_box_ = state.at("declared_box").get<double>();
+    // As FillHeader did in the walk, which it passed: sets the box and where it came from.
+    SetBoxSize(files_.front().path, "BoxSize", declared_box_, options);
+  }
+
+  // Everything the walk found, for the constructor above.
+  nlohmann::json State() const {
+    nlohmann::json files = nlohmann::json::array();
+    for (const Hdf5File& f : files_) {
+      files.push_back({{"path", f.path},
+                       {"this_file", f.this_file},
+                       {"mass_table", f.mass_table},
+                       {"has_masses", f.has_masses},
+                       {"signed_ids", f.signed_ids},
+                       {"smoothing_dataset", f.smoothing_dataset}});
+    }
+    nlohmann::json segments = nlohmann::json::array();
+    for (const Segment& s : segments_) segments.push_back({s.file, s.type, s.count});
+    const nlohmann::json header = {{"format", header_.format},
+                                   {"files", header_.files},
+                                   {"time", header_.time},
+                                   {"redshift", header_.redshift},
+                                   {"count_per_type", header_.count_per_type},
+                                   {"total_count", header_.total_count},
+                                   {"has_velocity", header_.has_velocity},
+                                   {"has_id", header_.has_id},
+                                   {"has_smoothing", header_.has_smoothing},
+                                   {"cosmological", header_.cosmological},
+                                   {"omega0", header_.omega0},
+                                   {"omega_lambda", header_.omega_lambda},
+                                   {"hubble_param", header_.hubble_param},
+                                   {"extra", header_.extra}};
+    return {{"files", files},
+            {"segments", segments},
+            {"header", header},
+            {"smoothing_scale", smoothing_scale_},
+            {"declared_box", declared_box_}};
+  }
+
+  // Reads the first and the last particle of every segment as Next() would:
+  // each dataset read is opened, its hyperslab selected, and its first and
+  // last chunk (when chunked) read through the filters. In the child of
+  // OpenHdf5Snapshot, so that a dataset whose storage crashes libhdf5 fails
+  // there; the chunks between stay trusted (docs/INPUT_FORMATS.md).
+  void Probe() {
+    ParticleChunk chunk;
+    for (const Segment& segment : segments_) {
+      AppendRange(segment, 0, 1, chunk);
+      if (segment.count > 1) AppendRange(segment, segment.count - 1, 1, chunk);
+      chunk.clear();
+    }
+    CloseSegment();
   }
 
  protected:
@@ -598,6 +714,7 @@ class Hdf5Source final : public SegmentedSource {
       }
       if (box->size() > 1 && std::isfinite(declared_box)) header_.extra["box_size_vector"] = *box;
     }
+    declared_box_ = declared_box;
     SetBoxSize(path, "BoxSize", declared_box, options);
 
     header_.extra["mass_table"] = files_.front().mass_table;
@@ -737,6 +854,7 @@ class Hdf5Source final : public SegmentedSource {
   std::vector<Hdf5File> files_;
   bool read_velocity_ = true, read_id_ = true, read_smoothing_ = true;
   double smoothing_scale_ = 1;  // what the file's smoothing lengths are multiplied by (SwiftKernelGamma)
+  double declared_box_ = 0;     // the header's BoxSize (its largest side), before the options' say
   Handle file_, coordinates_, velocities_, ids_, masses_, smoothing_;
   std::size_t open_file_index_ = 0;
   int open_type_ = -1;
@@ -749,8 +867,53 @@ bool IsHdf5Signature(const std::uint8_t bytes[8]) {
   return std::memcmp(bytes, kSignature, 8) == 0;
 }
 
+// libhdf5 parses a file's structure without guarding against damage: on a
+// crafted or damaged file it can crash, read past its buffers, loop or ask
+// for gigabytes (docs/TESTING.md). So the walk of the structure, which
+// decides everything the reader trusts, runs in a child process, together
+// with a read of the first and last value of each dataset (Probe). The child
+// hands back what it found (State, as CBOR) or the Error it threw, and the
+// parent builds its source from that without parsing the headers again; it
+// then opens and reads only the datasets the child read. A child that dies,
+// fails to allocate within its cap, or goes kChildTimeLimit without opening
+// another file (a structure that loops) becomes an Error naming the file it
+// was reading.
+//
+// The child is a fork() of this process running only this thread; libhdf5
+// is not used by another thread meanwhile (ParticleSource: HDF5 sources are
+// not read concurrently), and glibc's malloc survives fork(), so the child
+// finds libhdf5 and the heap in a consistent state.
+constexpr std::chrono::seconds kChildTimeLimit{30};
+// The child's allocations beyond the parent's: the walk needs little, and a
+// probe read at most a chunk (kMaxChunkBytes) and its compressed bytes.
+constexpr std::uint64_t kChildAddressSpace = std::uint64_t{1} << 30;
+
 std::unique_ptr<ParticleSource> OpenHdf5Snapshot(const std::string& file, const ReadOptions& options) {
-  return std::make_unique<Hdf5Source>(file, options);
+  if (!options.isolate_hdf5) return std::make_unique<Hdf5Source>(file, options);
+  // The child's answer: 'S' and the state as CBOR, or 'E', the error kind and its message.
+  const IsolatedResult result = CallIsolated(
+      [&]() -> std::string {
+        try {
+          Hdf5Source source(file, options);
+          source.Probe();
+          const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(source.State());
+          return 'S' + std::string(cbor.begin(), cbor.end());
+        } catch (const Error& e) {
+          return 'E' + std::string(1, static_cast<char>(e.kind())) + e.what();
+        }
+      },
+      IsolationLimits{kChildTimeLimit, kChildAddressSpace});
+  if (!result.returned) {
+    throw Error::BadInput(result.last_note.empty() ? file : result.last_note,
+                          "libhdf5 failed reading this file's metadata: the child process reading it " +
+                              result.failure + "; the file is damaged, or not an HDF5 snapshot this reader understands");
+  }
+  const std::string& answer = result.bytes;
+  if (answer.size() >= 2 && answer[0] == 'E') {
+    throw Error(static_cast<ErrorKind>(answer[1]), answer.substr(2));
+  }
+  if (answer.empty() || answer[0] != 'S') throw Error::BadInput(file, "the HDF5 reader's child process gave no answer");
+  return std::make_unique<Hdf5Source>(nlohmann::json::from_cbor(answer.begin() + 1, answer.end()), options);
 }
 
 }  // namespace octocosm

@@ -110,6 +110,12 @@ struct ReadOptions {
   // Treat the particles as not periodic whatever the header says (box_size
   // 0): ingest then indexes their bounding cube. Not with box_size_override.
   bool ignore_box = false;
+  // HDF5: read each snapshot's structure (and a first and last value of each
+  // dataset) in a child process first, so that libhdf5 crashing, looping or
+  // allocating without end on a damaged file ends the child with an error
+  // naming the file, not this process (docs/INPUT_FORMATS.md). Off only to
+  // fuzz libhdf5 itself in this process, where coverage is measured.
+  bool isolate_hdf5 = true;
 };
 
 // How far a particle may lie outside a periodic box [0, box_size)^3, as a

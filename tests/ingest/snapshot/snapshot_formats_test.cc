@@ -369,6 +369,117 @@ TEST(Hdf5Reader, CorruptFileIsBadInputNotACrash) {
   }
 }
 
+std::string ReadFileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+// Points the root group's symbol table at the undefined address (all bits
+// set) as its local heap, in a file with a version 0 superblock (libhdf5's
+// default). libhdf5 1.10.8 then crashes on the first lookup of a name:
+// SIGSEGV in H5F__accum_read, from H5Lexists through H5G__stab_lookup and
+// H5HL_protect. The superblock's root entry caches the symbol table's B-tree
+// and heap addresses (bytes 80 to 95); the same 16 bytes in the root object
+// header are its symbol table message, whose heap address is overwritten.
+void BreakRootLocalHeap(const std::string& path) {
+  std::string bytes = ReadFileBytes(path);
+  ASSERT_GT(bytes.size(), 96u);
+  ASSERT_EQ(bytes[8], 0) << "expected a version 0 superblock";
+  const std::size_t message = bytes.find(bytes.substr(80, 16), 96);
+  ASSERT_NE(message, std::string::npos) << "no symbol table message in the root object header";
+  std::memset(&bytes[message + 8], 0xff, 8);
+  WriteFile(path, bytes);
+}
+
+// OpenSnapshot reads an HDF5 file's structure in a child process
+// (ReadOptions::isolate_hdf5): libhdf5 crashing there is an error naming the
+// file, here the one file of a multi-file snapshot that is damaged.
+TEST(Hdf5Reader, LibHdf5CrashingOnADamagedFileIsAnErrorNamingTheFile) {
+  ScratchDir dir;
+  Hdf5Spec spec;
+  spec.num_files = 2;
+  spec.total = {6, 10};
+  WriteHdf5(dir.File("snap.0.hdf5"), spec);
+  spec.first_id = 9;
+  WriteHdf5(dir.File("snap.1.hdf5"), spec);
+  BreakRootLocalHeap(dir.File("snap.1.hdf5"));
+  // The damage is one that crashes libhdf5, not one it reports: read in this
+  // process, the file kills it.
+  ReadOptions in_process;
+  in_process.isolate_hdf5 = false;
+  EXPECT_DEATH(OpenSnapshot(dir.File("snap.1.hdf5"), in_process), "");
+  // "was killed by signal 11 (Segmentation fault)"; under AddressSanitizer,
+  // whose handler reports the fault and exits, "exited with status 1".
+  ExpectBadInput(dir.File("snap.1.hdf5"), "libhdf5 failed reading this file's metadata: the child process reading it ");
+  for (const char* name : {"snap", "snap.0.hdf5"}) {
+    try {
+      OpenSnapshot(dir.File(name), {});
+      ADD_FAILURE() << "no error for " << name;
+    } catch (const Error& error) {
+      EXPECT_EQ(error.kind(), ErrorKind::kBadInput);
+      EXPECT_EQ(std::string(error.what()).rfind(dir.File("snap.1.hdf5") + ": libhdf5 failed", 0), 0u) << error.what();
+    }
+  }
+}
+
+// The source built from what the child found reads as one that walked the
+// files itself, and a child's Error comes back as it was thrown.
+TEST(Hdf5Reader, IsolatedAndInProcessReadsAgree) {
+  ScratchDir dir;
+  Hdf5Spec spec;
+  spec.num_files = 2;
+  spec.total = {6, 10};
+  spec.swift = true;
+  spec.smoothing = {0.5, 1.0, 1.5};
+  spec.smoothing_name = "SmoothingLengths";
+  WriteHdf5(dir.File("snap.0.hdf5"), spec);
+  spec.first_id = 9;
+  WriteHdf5(dir.File("snap.1.hdf5"), spec);
+  ReadOptions in_process;
+  in_process.isolate_hdf5 = false;
+  in_process.chunk_particles = 5;
+  ReadOptions isolated = in_process;
+  isolated.isolate_hdf5 = true;
+  auto a = OpenSnapshot(dir.File("snap"), in_process);
+  auto b = OpenSnapshot(dir.File("snap"), isolated);
+  const SnapshotHeader& ha = a->header();
+  const SnapshotHeader& hb = b->header();
+  EXPECT_EQ(ha.format, hb.format);
+  EXPECT_EQ(ha.files, hb.files);
+  EXPECT_EQ(ha.time, hb.time);
+  EXPECT_EQ(ha.redshift, hb.redshift);
+  EXPECT_EQ(ha.box_size, hb.box_size);
+  EXPECT_EQ(ha.count_per_type, hb.count_per_type);
+  EXPECT_EQ(ha.total_count, hb.total_count);
+  EXPECT_EQ(ha.has_velocity, hb.has_velocity);
+  EXPECT_EQ(ha.has_id, hb.has_id);
+  EXPECT_EQ(ha.has_smoothing, hb.has_smoothing);
+  EXPECT_EQ(ha.cosmological, hb.cosmological);
+  EXPECT_EQ(ha.omega0, hb.omega0);
+  EXPECT_EQ(ha.extra, hb.extra);
+  EXPECT_TRUE(ha.has_smoothing);
+  const ParticleChunk pa = ReadAll(*a);
+  const ParticleChunk pb = ReadAll(*b);
+  EXPECT_EQ(pa.size(), 16u);
+  EXPECT_TRUE(SameParticles(pa, pb));
+  EXPECT_EQ(pa.smoothing, pb.smoothing);
+
+  Hdf5Spec short_coordinates;
+  short_coordinates.coordinate_rows_delta = 1;
+  WriteHdf5(dir.File("bad.hdf5"), short_coordinates);
+  std::string messages[2];
+  for (int i = 0; i < 2; ++i) {
+    try {
+      OpenSnapshot(dir.File("bad.hdf5"), i == 0 ? in_process : isolated);
+    } catch (const Error& error) {
+      EXPECT_EQ(error.kind(), ErrorKind::kBadInput);
+      messages[i] = error.what();
+    }
+  }
+  EXPECT_FALSE(messages[0].empty());
+  EXPECT_EQ(messages[0], messages[1]);
+}
+
 // ---- Numbers from an untrusted header, and datasets bounded before they are read ----
 
 // A file of `n` type-1 particles: header attributes as given, then the
