@@ -1,6 +1,6 @@
 #include "render/draw_plan.h"
 
-#include <unordered_map>
+#include <vector>
 
 namespace octocosm {
 namespace {
@@ -11,9 +11,13 @@ class Planner {
  public:
   Planner(const NodeHierarchy& hierarchy, const std::function<bool(std::int32_t)>& loaded,
           const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets)
-      : hierarchy_(hierarchy), loaded_(loaded), octant_offsets_(octant_offsets) {}
+      : hierarchy_(hierarchy),
+        loaded_(loaded),
+        octant_offsets_(octant_offsets),
+        roles_(hierarchy.nodes().size(), Role::kNone),
+        covered_(hierarchy.nodes().size(), kUnknown) {}
 
-  void SetRole(std::int32_t node, Role role) { roles_[node] = role; }
+  void SetRole(std::int32_t node, Role role) { roles_[static_cast<std::size_t>(node)] = role; }
 
   void Draw(std::int32_t node, DrawPlan& plan) {
     const Role role = RoleOf(node);
@@ -38,14 +42,11 @@ class Planner {
   }
 
  private:
-  Role RoleOf(std::int32_t node) const {
-    const auto it = roles_.find(node);
-    return it == roles_.end() ? Role::kNone : it->second;
-  }
+  Role RoleOf(std::int32_t node) const { return roles_[static_cast<std::size_t>(node)]; }
 
   bool Covered(std::int32_t node) {
-    const auto memo = covered_.find(node);
-    if (memo != covered_.end()) return memo->second;
+    std::uint8_t& memo = covered_[static_cast<std::size_t>(node)];
+    if (memo != kUnknown) return memo != 0;
     bool covered = loaded_(node);
     if (!covered && RoleOf(node) == Role::kRefined) {
       covered = true;
@@ -56,7 +57,7 @@ class Planner {
         }
       }
     }
-    covered_[node] = covered;
+    memo = covered ? 1 : 0;
     return covered;
   }
 
@@ -74,8 +75,11 @@ class Planner {
   const NodeHierarchy& hierarchy_;
   const std::function<bool(std::int32_t)>& loaded_;
   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets_;
-  std::unordered_map<std::int32_t, Role> roles_;
-  std::unordered_map<std::int32_t, bool> covered_;
+  // By node index: compact arrays, not maps (a frame's frontier may hold
+  // tens of thousands of nodes).
+  static constexpr std::uint8_t kUnknown = 2;
+  std::vector<Role> roles_;
+  std::vector<std::uint8_t> covered_;
 };
 
 }  // namespace

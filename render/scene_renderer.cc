@@ -240,7 +240,12 @@ std::vector<BlockId> SceneRenderer::RequestBlocks(const ScreenErrorView& error_v
       if (i < order.size()) needed.push_back(IdOf(c, order[i]));
     }
   }
-  std::vector<BlockId> wanted = needed;
+  // What is on the GPU already needs no reading (a warm frame submits nothing).
+  std::vector<BlockId> wanted;
+  wanted.reserve(needed.size());
+  for (const BlockId& id : needed) {
+    if (!gpu_.contains(Key(id))) wanted.push_back(id);
+  }
   std::vector<std::uint32_t> overlay_epochs;
   for (const Copy& c : copies) overlay_epochs.push_back(c.epoch);
   if (look_ahead && !complete) {
@@ -248,7 +253,10 @@ std::vector<BlockId> SceneRenderer::RequestBlocks(const ScreenErrorView& error_v
     if (ahead < dataset_.epoch_count()) {
       overlay_epochs.push_back(ahead);
       const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, options_.lod);
-      for (std::int32_t node : next.load_order) wanted.push_back({ahead, hierarchy(ahead).node(node).key.value()});
+      for (std::int32_t node : next.load_order) {
+        const BlockId id{ahead, hierarchy(ahead).node(node).key.value()};
+        if (!gpu_.contains(Key(id))) wanted.push_back(id);
+      }
     }
   }
   prefetcher_->Submit(wanted);
@@ -330,10 +338,15 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
   splat_.SetSelection(probe_ids ? selection_.get() : nullptr);
   for (std::size_t copy = 0; copy < copies.size(); ++copy) {
     const Copy& c = copies[copy];
-    const auto resident = [&](std::int32_t node) -> const Resident* {
-      const auto it = gpu_.find(Key(IdOf(c, node)));
-      return it == gpu_.end() ? nullptr : &it->second;
-    };
+    // Each frontier node's block on the GPU, or null: looked up once.
+    std::vector<const Resident*> resident_of(hierarchy(c.epoch).nodes().size(), nullptr);
+    for (const std::vector<std::int32_t>* nodes : {&c.frontier.selected, &c.frontier.refined}) {
+      for (std::int32_t node : *nodes) {
+        const auto it = gpu_.find(Key(IdOf(c, node)));
+        if (it != gpu_.end()) resident_of[static_cast<std::size_t>(node)] = &it->second;
+      }
+    }
+    const auto resident = [&](std::int32_t node) { return resident_of[static_cast<std::size_t>(node)]; };
     for (std::int32_t node : c.frontier.selected) stats.blocks_missing += resident(node) == nullptr;
     const DrawPlan plan = PlanDraws(
         hierarchy(c.epoch), c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
