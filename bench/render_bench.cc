@@ -206,7 +206,9 @@ void PrintRow(const Row& r) {
   std::fflush(stdout);
 }
 
-void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<NamedView>& views) {
+// Writes the rows as CSV and, with `errors` (a reference was rendered), the
+// plot of error against points drawn and time.
+void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<NamedView>& views, bool errors) {
   const fs::path data = dir / "render_bench.csv", script = dir / "render_bench.gp", png = dir / "render_bench.png";
   {
     std::ofstream csv(data);
@@ -218,6 +220,10 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
           << r.upload_ms << ',' << r.submit_ms << ',' << r.gpu_draw_ms << ',' << r.gpu_measure_ms << ','
           << r.gpu_tone_map_ms << ',' << r.readback_ms << ',' << r.path << '\n';
     }
+  }
+  if (!errors) {
+    std::printf("data: %s\n", data.c_str());
+    return;
   }
   // Per view a colour, per representation a point shape; the x axis of the
   // left panels is points drawn as a share of the view's full-detail frame.
@@ -526,10 +532,8 @@ void Run(const Flags& f) {
   if (f.prepare_only) return;
 
   const std::vector<Row> rows = Sweep(f, datasets, representations, views, render_views, references, backend);
-  if (f.reference) {
-    PrintTargets(rows, views, representations, reference_seconds);
-    Plot(fs::path(f.dir), rows, views);
-  }
+  if (f.reference) PrintTargets(rows, views, representations, reference_seconds);
+  Plot(fs::path(f.dir), rows, views, f.reference);
   if (f.selection) MeasureSelection(datasets.front(), views[0], render_views[0], backend);
 }
 

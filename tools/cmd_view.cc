@@ -219,6 +219,7 @@ OverlayReport MakeOverlayReport(const ViewerWindow& window, const FrameStats& st
   report.frame_ms = report.fps > 0 ? 1000 / report.fps : 0;
   report.frame = stats;
   report.gpu_times = splat.LatestGpuTimes(false);
+  report.splat_path = SplatPathName(splat.frame_path());
   report.cache = scene.cache_stats();
   report.disk = scene.disk_reads();
   report.exposure = exposure;

@@ -38,8 +38,8 @@ void Statistics(const OverlayReport& r) {
   ImGui::Text("%.1f fps, %.1f ms a frame; CPU: select %.1f, upload %.1f, draw calls %.1f", r.fps, r.frame_ms,
               f.select_ms, f.upload_ms, f.draw_ms);
   if (r.gpu_times) {
-    ImGui::Text("GPU: draw %.1f, measure %.1f, tone map %.1f ms", r.gpu_times->draw_ms, r.gpu_times->measure_ms,
-                r.gpu_times->tone_map_ms);
+    ImGui::Text("GPU (%s path): draw %.1f, measure %.1f, tone map %.1f ms", r.splat_path, r.gpu_times->draw_ms,
+                r.gpu_times->measure_ms, r.gpu_times->tone_map_ms);
   }
   ImGui::Text("points drawn %llu of %llu selected%s", U(f.points_drawn), U(f.points_selected),
               f.budget_reached ? " (budget reached)" : "");

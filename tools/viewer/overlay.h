@@ -34,6 +34,7 @@ struct OverlayReport {
   double fps = 0, frame_ms = 0;
   FrameStats frame;
   std::optional<GpuStageTimes> gpu_times;  // of a recent frame the GPU has finished
+  const char* splat_path = "raster";       // how the frame's blobs were drawn (render/compute_splatter.h)
   CacheStats cache;
   ReadCounters disk;
   double exposure = 0;  // as tone mapped
