@@ -182,10 +182,10 @@ class BlockCache {
   // Guards the lists, the table, the flights and the entries and flights
   // they hold.
   mutable Mutex mutex_;
-  EntryList lru_ GUARDED_BY(mutex_);              // unpinned, least recent first
+  EntryList lru_ GUARDED_BY(mutex_);                     // unpinned, least recent first
   std::vector<Bytes> spare_buffers_ GUARDED_BY(mutex_);  // evicted buffers for reuse
-  EntryList in_use_ GUARDED_BY(mutex_);           // pinned
-  EntryList detached_ GUARDED_BY(mutex_);         // pinned but erased
+  EntryList in_use_ GUARDED_BY(mutex_);                  // pinned
+  EntryList detached_ GUARDED_BY(mutex_);                // pinned but erased
   using Table = std::unordered_map<BlockId, Entry*, BlockIdHash>;
   Table table_ GUARDED_BY(mutex_);
   std::unordered_map<BlockId, std::shared_ptr<Flight>, BlockIdHash> flights_ GUARDED_BY(mutex_);
