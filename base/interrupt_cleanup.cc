@@ -7,19 +7,20 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
-#include <mutex>
 #include <system_error>
 #include <thread>
 #include <utility>
 #include <vector>
 
+#include "base/mutex.h"
+
 namespace octocosm {
 namespace {
 
 struct Registry {
-  std::mutex mutex;
-  unsigned long long next_id = 0;
-  std::vector<std::pair<unsigned long long, std::function<void()>>> removals;  // oldest first
+  Mutex mutex;
+  unsigned long long next_id GUARDED_BY(mutex) = 0;
+  std::vector<std::pair<unsigned long long, std::function<void()>>> removals GUARDED_BY(mutex);  // oldest first
 };
 
 Registry& TheRegistry() {
@@ -44,7 +45,7 @@ sigset_t CleanupSignals() {
   Registry& registry = TheRegistry();
   // Held until the end: an owner that finishes meanwhile waits in its
   // destructor instead of going on with what is being removed.
-  registry.mutex.lock();
+  registry.mutex.Lock();
   const bool removing = !registry.removals.empty();
   if (removing) {
     const char* name = sigabbrev_np(signal_number);
@@ -84,14 +85,14 @@ void InstallInterruptCleanup() {
 
 RemoveOnInterrupt::RemoveOnInterrupt(std::function<void()> remove) {
   Registry& registry = TheRegistry();
-  std::lock_guard<std::mutex> lock(registry.mutex);
+  MutexLock lock(registry.mutex);
   id_ = registry.next_id++;
   registry.removals.emplace_back(id_, std::move(remove));
 }
 
 RemoveOnInterrupt::~RemoveOnInterrupt() {
   Registry& registry = TheRegistry();
-  std::lock_guard<std::mutex> lock(registry.mutex);
+  MutexLock lock(registry.mutex);
   for (auto it = registry.removals.begin(); it != registry.removals.end(); ++it) {
     if (it->first == id_) {
       registry.removals.erase(it);

@@ -53,7 +53,7 @@ Progress::Progress(std::string phase, std::uint64_t total, std::string unit, std
 Progress::~Progress() { Finish(); }
 
 void Progress::Add(std::uint64_t done) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   done_ += done;
   const auto now = Clock::now();
   const auto interval = is_terminal_ ? std::chrono::milliseconds(100) : std::chrono::milliseconds(5000);
@@ -64,13 +64,13 @@ void Progress::Add(std::uint64_t done) {
 }
 
 void Progress::Restart() {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   done_ = 0;
   start_ = Clock::now();
 }
 
 void Progress::Finish() {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   if (finished_) return;
   finished_ = true;
   Draw(true);

@@ -6,8 +6,9 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
-#include <mutex>
 #include <string>
+
+#include "base/mutex.h"
 
 namespace octocosm {
 
@@ -22,28 +23,28 @@ class Progress {
   Progress& operator=(const Progress&) = delete;
 
   // Thread-safe; cheap when called often (redraws at most ~10 times a second).
-  void Add(std::uint64_t done);
-  void Finish();
+  void Add(std::uint64_t done) EXCLUDES(mutex_);
+  void Finish() EXCLUDES(mutex_);
   // Counts from zero again, for a phase that starts over another way.
-  void Restart();
+  void Restart() EXCLUDES(mutex_);
 
   // Disables all output (tests, --quiet).
   static void SetQuiet(bool quiet);
 
  private:
-  void Draw(bool final_line);
+  void Draw(bool final_line) REQUIRES(mutex_);
 
   using Clock = std::chrono::steady_clock;
-  std::mutex mutex_;
+  Mutex mutex_;
   std::string phase_;
   std::string unit_;
   std::uint64_t total_;
-  std::uint64_t done_ = 0;
+  std::uint64_t done_ GUARDED_BY(mutex_) = 0;
   std::FILE* out_;
   bool is_terminal_;
-  bool finished_ = false;
-  Clock::time_point start_;
-  Clock::time_point last_draw_;
+  bool finished_ GUARDED_BY(mutex_) = false;
+  Clock::time_point start_ GUARDED_BY(mutex_);
+  Clock::time_point last_draw_ GUARDED_BY(mutex_);
 };
 
 // "12.3 M", "456 k": compact counts for progress lines and reports.

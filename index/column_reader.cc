@@ -124,7 +124,7 @@ Bytes ColumnSubsetSource::ReadBlock(const BlockId& id) const {
   }
   ReadCounters counters;
   Bytes block = ReadBlockSubset(dataset_, id.epoch, *entry, wanted_, counters);
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   counters_.blocks += counters.blocks;
   counters_.reads += counters.reads;
   counters_.bytes += counters.bytes;
@@ -132,7 +132,7 @@ Bytes ColumnSubsetSource::ReadBlock(const BlockId& id) const {
 }
 
 ReadCounters ColumnSubsetSource::counters() const {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   return counters_;
 }
 

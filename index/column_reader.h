@@ -6,8 +6,8 @@
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 
+#include "base/mutex.h"
 #include "index/block_codec.h"
 #include "index/dataset.h"
 #include "storage/block_source.h"
@@ -38,15 +38,15 @@ Bytes ReadBlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEn
 class ColumnSubsetSource : public BlockSource {
  public:
   ColumnSubsetSource(const Dataset& dataset, ColumnSet wanted) : dataset_(dataset), wanted_(wanted) {}
-  Bytes ReadBlock(const BlockId& id) const override;
+  Bytes ReadBlock(const BlockId& id) const override EXCLUDES(mutex_);
   ColumnSet wanted() const { return wanted_; }
-  ReadCounters counters() const;
+  ReadCounters counters() const EXCLUDES(mutex_);
 
  private:
   const Dataset& dataset_;
   ColumnSet wanted_;
-  mutable std::mutex mutex_;
-  mutable ReadCounters counters_;  // guarded by mutex_
+  mutable Mutex mutex_;
+  mutable ReadCounters counters_ GUARDED_BY(mutex_);
 };
 
 }  // namespace octocosm

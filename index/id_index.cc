@@ -151,7 +151,7 @@ void IdIndexEpochWriter::Finish() {
 IdIndexReader::IdIndexReader(const std::string& directory) : store_(StoreReader::Open(directory)) {}
 
 IdIndexReader::Directory& IdIndexReader::DirectoryOf(std::uint32_t epoch) const {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   auto& slot = directories_[epoch];
   if (slot) return *slot;
   const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID directory";
@@ -261,7 +261,7 @@ std::optional<NodeKey> IdIndexReader::FindInTable(std::uint32_t epoch, const Byt
 
 const std::vector<std::uint64_t>& IdIndexReader::LeafTableOf(std::uint32_t epoch) const {
   Directory& directory = DirectoryOf(epoch);
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   std::optional<std::vector<std::uint64_t>>& leaves = directory.leaves;
   if (leaves) return *leaves;
   const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID leaf table";

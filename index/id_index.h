@@ -33,13 +33,13 @@
 #include <algorithm>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
+#include "base/mutex.h"
 #include "index/morton.h"
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"
@@ -115,16 +115,16 @@ class IdIndexReader {
     std::uint64_t total = 0;
     std::optional<std::vector<std::uint64_t>> leaves;  // the leaf table, once a table bucket needed it
   };
-  Directory& DirectoryOf(std::uint32_t epoch) const;  // loaded once, then kept
-  const std::vector<std::uint64_t>& LeafTableOf(std::uint32_t epoch) const;
+  Directory& DirectoryOf(std::uint32_t epoch) const EXCLUDES(mutex_);  // loaded once, then kept
+  const std::vector<std::uint64_t>& LeafTableOf(std::uint32_t epoch) const EXCLUDES(mutex_);
   std::optional<NodeKey> FindInPairs(const Bytes& block, std::uint64_t id, const std::string& where) const;
   // `slot_bytes`: 4 for a version-2 table bucket, 2 for version 3.
   std::optional<NodeKey> FindInTable(std::uint32_t epoch, const Bytes& block, std::uint64_t id, std::size_t slot_bytes,
                                      const std::string& where) const;
 
   StoreReader store_;
-  mutable std::mutex mutex_;
-  mutable std::unordered_map<std::uint32_t, std::unique_ptr<Directory>> directories_;
+  mutable Mutex mutex_;
+  mutable std::unordered_map<std::uint32_t, std::unique_ptr<Directory>> directories_ GUARDED_BY(mutex_);
 };
 
 }  // namespace octocosm

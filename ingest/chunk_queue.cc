@@ -10,7 +10,7 @@ ChunkQueue::ChunkQueue(std::vector<std::uint64_t> point_counts, std::size_t wind
 
 std::size_t ChunkQueue::Take() {
   const std::size_t none = point_counts_.size();
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   while (first_open_ < none && taken_[first_open_]) ++first_open_;
   const std::size_t end = std::min(none, first_open_ + window_);
   std::size_t best = none;

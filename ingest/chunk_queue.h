@@ -20,8 +20,9 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <mutex>
 #include <vector>
+
+#include "base/mutex.h"
 
 namespace octocosm {
 
@@ -32,14 +33,14 @@ class ChunkQueue {
 
   // The chunk to build next, or point_counts.size() once all are taken.
   // Thread-safe.
-  std::size_t Take();
+  std::size_t Take() EXCLUDES(mutex_);
 
  private:
   const std::vector<std::uint64_t> point_counts_;
   const std::size_t window_;
-  std::mutex mutex_;
-  std::vector<bool> taken_;
-  std::size_t first_open_ = 0;
+  Mutex mutex_;
+  std::vector<bool> taken_ GUARDED_BY(mutex_);
+  std::size_t first_open_ GUARDED_BY(mutex_) = 0;
 };
 
 }  // namespace octocosm

@@ -134,7 +134,7 @@ void RecordLeaf(Slot* slots, std::uint64_t first, std::uint64_t span, std::span<
 void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
   std::uint32_t slot_value = 0;
   {
-    std::unique_lock lock(mutex_);
+    WriterLock lock(mutex_);
     if (leaves_.size() >= UINT32_MAX - 1) {
       throw Error::InvalidArgument("DenseIdTable: more than " + std::to_string(UINT32_MAX - 1) + " leaves");
     }
@@ -142,7 +142,7 @@ void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
     slot_value = static_cast<std::uint32_t>(leaves_.size());
     if (narrow_ && slot_value > kMostNarrowLeaves) Widen();
   }
-  std::shared_lock lock(mutex_);
+  ReaderLock lock(mutex_);
   if (narrow_) {
     RecordLeaf(static_cast<std::uint16_t*>(slots_.get()), first_, span_, ids, static_cast<std::uint16_t>(slot_value));
   } else {

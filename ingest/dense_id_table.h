@@ -14,12 +14,11 @@
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
-#include <mutex>
 #include <optional>
-#include <shared_mutex>
 #include <span>
 #include <vector>
 
+#include "base/mutex.h"
 #include "index/morton.h"
 
 namespace octocosm {
@@ -78,16 +77,17 @@ class DenseIdTable {
   // it at once, as long as no ID comes twice (which IdCensus checked); an ID
   // outside the range or already recorded throws InvalidArgument, and so do
   // more than 2^32 - 2 leaves.
-  void Add(std::span<const std::uint64_t> ids, NodeKey leaf);
+  void Add(std::span<const std::uint64_t> ids, NodeKey leaf) EXCLUDES(mutex_);
 
   // What IdIndexEpochWriter::AddTable writes, once no Add runs: slot i is 0
   // where no leaf recorded ID first() + i, else 1 + the leaf's index in
   // leaves() (the order in which leaves were added). The slots are
   // narrow_slots() while narrow(), else wide_slots(); the other is empty.
-  bool narrow() const { return narrow_; }
-  std::span<const std::uint16_t> narrow_slots() const;
-  std::span<const std::uint32_t> wide_slots() const;
-  std::span<const std::uint64_t> leaves() const { return leaves_; }
+  // Unlocked: no thread adds any more.
+  bool narrow() const NO_THREAD_SAFETY_ANALYSIS { return narrow_; }
+  std::span<const std::uint16_t> narrow_slots() const NO_THREAD_SAFETY_ANALYSIS;
+  std::span<const std::uint32_t> wide_slots() const NO_THREAD_SAFETY_ANALYSIS;
+  std::span<const std::uint64_t> leaves() const NO_THREAD_SAFETY_ANALYSIS { return leaves_; }
 
   std::uint64_t first() const { return first_; }
   std::uint64_t span() const { return span_; }
@@ -97,17 +97,17 @@ class DenseIdTable {
     void operator()(void* p) const { std::free(p); }
   };
   // Rewrites the 16-bit slots as 32-bit ones, last first (each wide slot
-  // covers narrow ones at or after its own index). Under the exclusive lock.
-  void Widen();
+  // covers narrow ones at or after its own index).
+  void Widen() REQUIRES(mutex_);
 
   std::uint64_t first_;
   std::uint64_t span_;
   std::unique_ptr<void, Free> slots_;  // room for span 32-bit slots; the first half holds 16-bit ones while narrow_
-  bool narrow_ = true;
+  bool narrow_ GUARDED_BY(mutex_) = true;
   // Exclusive: adding a leaf, widening. Shared: writing a leaf's slots, which
   // for distinct IDs touch distinct slots.
-  std::shared_mutex mutex_;
-  std::vector<std::uint64_t> leaves_;  // leaf keys by ordinal
+  SharedMutex mutex_;
+  std::vector<std::uint64_t> leaves_ GUARDED_BY(mutex_);  // leaf keys by ordinal
 };
 
 }  // namespace octocosm

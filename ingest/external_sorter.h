@@ -18,7 +18,6 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
-#include <mutex>
 #include <queue>
 #include <span>
 #include <string>
@@ -26,6 +25,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "index/radix_sort.h"
 #include "ingest/record_file.h"
 
@@ -47,19 +47,19 @@ class ExternalSorter {
 
   // Makes room for `records` (at most one run) at once, instead of growing
   // the run buffer step by step, copying it and touching new memory each time.
-  void Reserve(std::size_t records) {
-    std::lock_guard lock(mutex_);
+  void Reserve(std::size_t records) EXCLUDES(mutex_) {
+    MutexLock lock(mutex_);
     reserve_ = std::min(records, run_records_);
     buffer_.reserve(reserve_);
   }
-  void Add(const Record& record) { Add(std::span<const Record>(&record, 1)); }
+  void Add(const Record& record) EXCLUDES(mutex_) { Add(std::span<const Record>(&record, 1)); }
   // May be called from several threads at once (see the top of the file).
-  void Add(std::span<const Record> records) {
+  void Add(std::span<const Record> records) EXCLUDES(mutex_) {
     while (!records.empty()) {
       std::vector<Record> full;
       std::string path;
       {
-        std::lock_guard lock(mutex_);
+        MutexLock lock(mutex_);
         if (finished_) throw Error::InvalidArgument("ExternalSorter: Add after Finish");
         const std::size_t take = std::min(records.size(), run_records_ - buffer_.size());
         buffer_.insert(buffer_.end(), records.begin(), records.begin() + static_cast<std::ptrdiff_t>(take));
@@ -77,8 +77,8 @@ class ExternalSorter {
 
   // Sorts the last run; afterwards only reading is allowed. Every Add must
   // have returned.
-  void Finish() {
-    std::lock_guard lock(mutex_);
+  void Finish() EXCLUDES(mutex_) {
+    MutexLock lock(mutex_);
     if (finished_) return;
     finished_ = true;
     if (run_paths_.empty()) {
@@ -90,8 +90,9 @@ class ExternalSorter {
     buffer_.shrink_to_fit();
   }
 
-  std::uint64_t size() const { return size_; }
-  std::size_t run_count() const { return run_paths_.empty() ? (size_ > 0 ? 1 : 0) : run_paths_.size(); }
+  // These and Open read unlocked: after Finish no thread adds any more.
+  std::uint64_t size() const NO_THREAD_SAFETY_ANALYSIS { return size_; }
+  std::size_t run_count() const NO_THREAD_SAFETY_ANALYSIS { return run_paths_.empty() ? (size_ > 0 ? 1 : 0) : run_paths_.size(); }
 
   // Reads the records in key order. Several readers may be open at once.
   class Reader {
@@ -137,7 +138,7 @@ class ExternalSorter {
     std::priority_queue<HeapItem, std::vector<HeapItem>, std::greater<>> heap_;
   };
 
-  Reader Open() const {
+  Reader Open() const NO_THREAD_SAFETY_ANALYSIS {
     if (!finished_) throw Error::InvalidArgument("ExternalSorter: Open before Finish");
     Reader reader;
     if (run_paths_.empty()) {
@@ -164,10 +165,10 @@ class ExternalSorter {
     if (sorted.data() != records.data()) records.swap(scratch);
   }
 
-  // The next run's file name, listed at once (under mutex_) so that the
+  // The next run's file name, listed at once so that the
   // destructor removes the file even if writing it fails, and so that runs
   // are merged in the order they were filled.
-  std::string NextRunPath() {
+  std::string NextRunPath() REQUIRES(mutex_) {
     run_paths_.push_back(prefix_ + "-run-" + std::to_string(run_paths_.size()));
     return run_paths_.back();
   }
@@ -182,12 +183,12 @@ class ExternalSorter {
 
   std::string prefix_;
   std::size_t run_records_;
-  std::mutex mutex_;  // guards everything below during Add
-  std::size_t reserve_ = 0;  // what the next run buffer reserves at once (Reserve)
-  std::vector<Record> buffer_;
-  std::vector<std::string> run_paths_;
-  std::uint64_t size_ = 0;
-  bool finished_ = false;
+  Mutex mutex_;
+  std::size_t reserve_ GUARDED_BY(mutex_) = 0;  // what the next run buffer reserves at once (Reserve)
+  std::vector<Record> buffer_ GUARDED_BY(mutex_);
+  std::vector<std::string> run_paths_ GUARDED_BY(mutex_);
+  std::uint64_t size_ GUARDED_BY(mutex_) = 0;
+  bool finished_ GUARDED_BY(mutex_) = false;
 };
 
 }  // namespace octocosm

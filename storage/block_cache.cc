@@ -164,7 +164,7 @@ void BlockCache::EvictLocked() {
 }
 
 void BlockCache::Unpin(Entry* entry) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   assert(entry->pins > 0);
   if (--entry->pins > 0) return;
   switch (entry->where) {
@@ -188,7 +188,7 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
   std::shared_ptr<Flight> flight;
   Bytes buffer;  // a recycled one when there is one
   {
-    std::unique_lock lock(mutex_);
+    MutexLock lock(mutex_);
     if (Entry* entry = FindLocked(id)) {
       ++stats_.hits;
       return PinLocked(entry);
@@ -199,7 +199,7 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
       // read it twice. The reader pins the new entry once for every waiter.
       std::shared_ptr<Flight> joined = running->second;
       ++joined->waiters;
-      joined->done_cv.wait(lock, [&] { return joined->done; });
+      while (!joined->done) joined->done_cv.Wait(mutex_);
       if (joined->error) throw ThreadOwnCopy(*joined->error);
       if (joined->other_error) std::rethrow_exception(joined->other_error);
       return PinnedBlock(this, joined->entry);
@@ -230,7 +230,7 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
     thrown = std::current_exception();
   }
 
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   flights_.erase(id);
   --stats_.reads_in_flight;
   flight->done = true;
@@ -241,7 +241,7 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
     } else {
       flight->other_error = thrown;
     }
-    flight->done_cv.notify_all();
+    flight->done_cv.SignalAll();
     std::rethrow_exception(thrown);
   }
   stats_.bytes_read += bytes->size();
@@ -250,15 +250,15 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
     flight->entry = InsertPinnedLocked(id, std::move(bytes), pins);
   } catch (...) {
     flight->other_error = std::current_exception();
-    flight->done_cv.notify_all();
+    flight->done_cv.SignalAll();
     throw;
   }
-  flight->done_cv.notify_all();
+  flight->done_cv.SignalAll();
   return PinnedBlock(this, flight->entry);
 }
 
 PinnedBlock BlockCache::TryGet(const BlockId& id) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   Entry* entry = FindLocked(id);
   if (entry == nullptr) {
     ++stats_.misses;
@@ -269,7 +269,7 @@ PinnedBlock BlockCache::TryGet(const BlockId& id) {
 }
 
 bool BlockCache::Touch(const BlockId& id) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   Entry* entry = FindLocked(id);
   if (entry == nullptr) return false;
   if (entry->where == Where::kLru) lru_.splice(lru_.end(), lru_, entry->self);
@@ -277,18 +277,18 @@ bool BlockCache::Touch(const BlockId& id) {
 }
 
 bool BlockCache::Contains(const BlockId& id) const {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   return table_.contains(id);
 }
 
 PinnedBlock BlockCache::Insert(const BlockId& id, Bytes bytes) {
   auto shared = MakeShared(std::move(bytes));
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   return PinnedBlock(this, InsertPinnedLocked(id, std::move(shared), 1));
 }
 
 bool BlockCache::Erase(const BlockId& id) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   Entry* entry = FindLocked(id);
   if (entry == nullptr) return false;
   RemoveFromCacheLocked(entry);
@@ -296,12 +296,12 @@ bool BlockCache::Erase(const BlockId& id) {
 }
 
 void BlockCache::Clear() {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   while (!table_.empty()) RemoveFromCacheLocked(table_.begin()->second);
 }
 
 CacheStats BlockCache::Stats() const {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   return stats_;
 }
 

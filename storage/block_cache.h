@@ -44,19 +44,18 @@
 // PinnedBlock::Share().
 #pragma once
 
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <exception>
 #include <list>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "storage/block_source.h"
 
 namespace octocosm {
@@ -109,35 +108,35 @@ class BlockCache {
   // thrown to the reader and to every waiter (each its own copy of the same
   // Error: kind and message) and nothing is cached for the block; a later
   // Get() tries again.
-  PinnedBlock Get(const BlockId& id);
+  PinnedBlock Get(const BlockId& id) EXCLUDES(mutex_);
 
   // Non-blocking: returns the block pinned if it is resident, else an empty
   // handle (also while a read of it is still in flight).
-  PinnedBlock TryGet(const BlockId& id);
+  PinnedBlock TryGet(const BlockId& id) EXCLUDES(mutex_);
 
   // If the block is resident, marks it most recently used and returns true.
   // Not counted as a lookup (the prefetcher uses it to skip resident blocks
   // and keeps its own count).
-  bool Touch(const BlockId& id);
+  bool Touch(const BlockId& id) EXCLUDES(mutex_);
 
   // True if the block is resident. No effect on recency or statistics.
-  bool Contains(const BlockId& id) const;
+  bool Contains(const BlockId& id) const EXCLUDES(mutex_);
 
   // Adds (or replaces) a block and returns it pinned; drop the handle to leave
   // it merely cached. A replaced entry that is still pinned stays valid for
   // its holders but is no longer findable.
-  PinnedBlock Insert(const BlockId& id, Bytes bytes);
+  PinnedBlock Insert(const BlockId& id, Bytes bytes) EXCLUDES(mutex_);
 
   // Removes the block if resident; returns whether it was. Pinned holders keep
   // valid bytes. A read of the block already in flight is not cancelled and
   // will insert its result when it completes.
-  bool Erase(const BlockId& id);
+  bool Erase(const BlockId& id) EXCLUDES(mutex_);
 
   // Erase() of every resident block.
-  void Clear();
+  void Clear() EXCLUDES(mutex_);
 
   std::size_t capacity_bytes() const { return capacity_bytes_; }
-  CacheStats Stats() const;
+  CacheStats Stats() const EXCLUDES(mutex_);
 
   // The charge of a block of `size` bytes against the budget.
   static constexpr std::size_t ChargeFor(std::size_t size) { return size + kEntryOverheadBytes; }
@@ -164,32 +163,33 @@ class BlockCache {
     std::exception_ptr other_error;
     std::size_t waiters = 0;           // Get() calls sleeping on this flight
     Entry* entry = nullptr;             // set once done without error
-    std::condition_variable done_cv;
+    CondVar done_cv;
   };
 
-  // All private helpers expect mutex_ held.
-  Entry* FindLocked(const BlockId& id);
-  PinnedBlock PinLocked(Entry* entry);
-  Entry* InsertPinnedLocked(const BlockId& id, std::shared_ptr<const Bytes> bytes,
-                            std::uint32_t pins);
-  void RemoveFromCacheLocked(Entry* entry);
-  void UnchargeLocked(Entry* entry);
-  void EvictLocked();
-  // Called by PinnedBlock::Release(); takes mutex_.
-  void Unpin(Entry* entry);
+  Entry* FindLocked(const BlockId& id) REQUIRES(mutex_);
+  PinnedBlock PinLocked(Entry* entry) REQUIRES(mutex_);
+  Entry* InsertPinnedLocked(const BlockId& id, std::shared_ptr<const Bytes> bytes, std::uint32_t pins)
+      REQUIRES(mutex_);
+  void RemoveFromCacheLocked(Entry* entry) REQUIRES(mutex_);
+  void UnchargeLocked(Entry* entry) REQUIRES(mutex_);
+  void EvictLocked() REQUIRES(mutex_);
+  // Called by PinnedBlock::Release().
+  void Unpin(Entry* entry) EXCLUDES(mutex_);
 
   const BlockSource* const source_;
   const std::size_t capacity_bytes_;
 
-  mutable std::mutex mutex_;
-  EntryList lru_;        // guarded by mutex_; unpinned, least recent first
-  std::vector<Bytes> spare_buffers_;  // guarded by mutex_; evicted buffers for reuse
-  EntryList in_use_;     // guarded by mutex_; pinned
-  EntryList detached_;   // guarded by mutex_; pinned but erased
+  // Guards the lists, the table, the flights and the entries and flights
+  // they hold.
+  mutable Mutex mutex_;
+  EntryList lru_ GUARDED_BY(mutex_);                     // unpinned, least recent first
+  std::vector<Bytes> spare_buffers_ GUARDED_BY(mutex_);  // evicted buffers for reuse
+  EntryList in_use_ GUARDED_BY(mutex_);                  // pinned
+  EntryList detached_ GUARDED_BY(mutex_);                // pinned but erased
   using Table = std::unordered_map<BlockId, Entry*, BlockIdHash>;
-  Table table_;  // guarded by mutex_
-  std::unordered_map<BlockId, std::shared_ptr<Flight>, BlockIdHash> flights_;  // guarded by mutex_
-  CacheStats stats_;  // guarded by mutex_; counters and gauges kept up to date in place
+  Table table_ GUARDED_BY(mutex_);
+  std::unordered_map<BlockId, std::shared_ptr<Flight>, BlockIdHash> flights_ GUARDED_BY(mutex_);
+  CacheStats stats_ GUARDED_BY(mutex_);  // counters and gauges kept up to date in place
 };
 
 // A pinned reference to one cached block. While any handle to a block is

@@ -43,11 +43,11 @@ DirectWriter::DirectWriter(std::string path, UniqueFd direct, UniqueFd plain, st
 
 DirectWriter::~DirectWriter() {
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     stopping_ = true;
     queue_.clear();
   }
-  work_.notify_all();
+  work_.SignalAll();
   thread_.join();
 }
 
@@ -55,7 +55,7 @@ void DirectWriter::ThrowIfFailed() const {
   if (failure_) std::rethrow_exception(failure_);
 }
 
-DirectWriter::Buffered DirectWriter::Acquire(std::size_t capacity, std::unique_lock<std::mutex>& lock) {
+DirectWriter::Buffered DirectWriter::Acquire(std::size_t capacity) {
   for (;;) {
     ThrowIfFailed();
     // The smallest free buffer that is large enough.
@@ -80,8 +80,8 @@ DirectWriter::Buffered DirectWriter::Acquire(std::size_t capacity, std::unique_l
       continue;
     }
     ++waiting_;  // the queue goes out now instead of waiting for a whole batch
-    work_.notify_one();
-    progress_.wait(lock);
+    work_.Signal();
+    progress_.Wait(mutex_);
     --waiting_;
   }
 }
@@ -97,15 +97,15 @@ void DirectWriter::Write(std::uint64_t offset, std::span<const std::uint8_t> byt
   job.offset = offset;
   job.length = length;
   {
-    std::unique_lock lock(mutex_);
-    job.memory = Acquire(length, lock);
+    MutexLock lock(mutex_);
+    job.memory = Acquire(length);
   }
   // The copy runs outside the lock: other threads queue their own meanwhile.
   std::memcpy(job.memory.buffer.get(), bytes.data(), bytes.size());
   std::memset(job.memory.buffer.get() + bytes.size(), 0, length - bytes.size());
   bool due = false;
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     ThrowIfFailed();
     queued_bytes_ += job.length;
     queue_.push_back(std::move(job));
@@ -115,14 +115,14 @@ void DirectWriter::Write(std::uint64_t offset, std::span<const std::uint8_t> byt
   // Woken for every block, the writer thread only found the batch short and
   // slept again: 1,800 wake-ups at 10^7 points, each taking a core from a
   // build thread for a moment.
-  if (due) work_.notify_one();
+  if (due) work_.Signal();
 }
 
 void DirectWriter::Drain() {
-  std::unique_lock lock(mutex_);
+  MutexLock lock(mutex_);
   ++waiting_;
-  work_.notify_one();
-  progress_.wait(lock, [&] { return jobs_unfinished_ == 0 || failure_; });
+  work_.Signal();
+  while (jobs_unfinished_ != 0 && !failure_) progress_.Wait(mutex_);
   --waiting_;
   ThrowIfFailed();
 }
@@ -164,23 +164,23 @@ void DirectWriter::WriteFully(const std::vector<Job>& batch) {
 }
 
 void DirectWriter::Run() {
-  std::unique_lock lock(mutex_);
+  MutexLock lock(mutex_);
   std::vector<Job> batch;
   for (;;) {
-    work_.wait(lock, [&] { return stopping_ || BatchDue(); });
+    while (!stopping_ && !BatchDue()) work_.Wait(mutex_);
     if (stopping_) return;
     // Small writes one by one would each wait for the disk (64 KiB direct
     // writes one at a time ran at a quarter of the disk's speed here) and
     // each cost a request to the host.
     TakeBatch(batch);
-    lock.unlock();
+    lock.Unlock();
     std::exception_ptr failed;
     try {
       WriteFully(batch);
     } catch (...) {
       failed = std::current_exception();
     }
-    lock.lock();
+    lock.Lock();
     for (Job& job : batch) free_.push_back(std::move(job.memory));
     jobs_unfinished_ -= batch.size();
     if (failed && !failure_) {
@@ -190,7 +190,7 @@ void DirectWriter::Run() {
       queue_.clear();
       queued_bytes_ = 0;
     }
-    progress_.notify_all();
+    progress_.SignalAll();
   }
 }
 

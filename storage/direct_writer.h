@@ -27,18 +27,17 @@
 // dropped. Drain() before relying on the file's contents.
 #pragma once
 
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <exception>
 #include <memory>
-#include <mutex>
 #include <span>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "base/mutex.h"
 #include "storage/file.h"
 
 namespace octocosm {
@@ -64,11 +63,11 @@ class DirectWriter {
   // from several threads at once for ranges that do not overlap. Waits while
   // max_bytes_in_flight bytes are queued (a single larger write still goes).
   // Throws an earlier write's failure.
-  void Write(std::uint64_t offset, std::span<const std::uint8_t> bytes);
+  void Write(std::uint64_t offset, std::span<const std::uint8_t> bytes) EXCLUDES(mutex_);
 
   // Writes everything queued and waits until it is on its way to the disk
   // (not fsynced); throws the first failure.
-  void Drain();
+  void Drain() EXCLUDES(mutex_);
 
  private:
   struct AlignedFree {
@@ -86,13 +85,14 @@ class DirectWriter {
   };
 
   DirectWriter(std::string path, UniqueFd direct, UniqueFd plain, std::size_t max_bytes_in_flight);
-  Buffered Acquire(std::size_t capacity, std::unique_lock<std::mutex>& lock);
-  void ThrowIfFailed() const;
-  void Run();
+  // Waits (releasing mutex_) while the memory in flight is at its limit.
+  Buffered Acquire(std::size_t capacity) REQUIRES(mutex_);
+  void ThrowIfFailed() const REQUIRES(mutex_);
+  void Run() EXCLUDES(mutex_);
   // Whether the thread should write now rather than wait for more jobs.
-  bool BatchDue() const;
+  bool BatchDue() const REQUIRES(mutex_);
   // Takes the queued job with the lowest offset and those that continue it.
-  void TakeBatch(std::vector<Job>& batch);
+  void TakeBatch(std::vector<Job>& batch) REQUIRES(mutex_);
   // Writes jobs that follow each other on disk with one call.
   void WriteFully(const std::vector<Job>& batch);
 
@@ -101,17 +101,17 @@ class DirectWriter {
   const UniqueFd plain_;  // for the fallback
   const std::size_t max_bytes_in_flight_;
 
-  mutable std::mutex mutex_;
-  std::condition_variable work_;      // a job was queued, or stopping
-  std::condition_variable progress_;  // a job finished: memory or Drain may proceed
-  std::deque<Job> queue_;
-  std::size_t queued_bytes_ = 0;
-  std::size_t waiting_ = 0;  // threads waiting for memory or in Drain
-  std::vector<Buffered> free_;
-  std::size_t allocated_bytes_ = 0;
-  std::size_t jobs_unfinished_ = 0;  // queued or being written
-  std::exception_ptr failure_;
-  bool stopping_ = false;
+  mutable Mutex mutex_;
+  CondVar work_;      // a job was queued, or stopping
+  CondVar progress_;  // a job finished: memory or Drain may proceed
+  std::deque<Job> queue_ GUARDED_BY(mutex_);
+  std::size_t queued_bytes_ GUARDED_BY(mutex_) = 0;
+  std::size_t waiting_ GUARDED_BY(mutex_) = 0;  // threads waiting for memory or in Drain
+  std::vector<Buffered> free_ GUARDED_BY(mutex_);
+  std::size_t allocated_bytes_ GUARDED_BY(mutex_) = 0;
+  std::size_t jobs_unfinished_ GUARDED_BY(mutex_) = 0;  // queued or being written
+  std::exception_ptr failure_ GUARDED_BY(mutex_);
+  bool stopping_ GUARDED_BY(mutex_) = false;
   bool fell_back_ = false;  // the writer thread's alone: no lock
   std::thread thread_;  // last: starts once the members above exist
 };

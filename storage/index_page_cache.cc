@@ -7,7 +7,7 @@ namespace octocosm {
 IndexPageCache::IndexPageCache(std::size_t capacity_pages) : capacity_(std::max<std::size_t>(1, capacity_pages)) {}
 
 std::shared_ptr<const IndexPage> IndexPageCache::Find(std::uint64_t page_number) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   if (root_ && root_->page_number == page_number) return root_;
   auto found = pages_.find(page_number);
   if (found == pages_.end()) return nullptr;
@@ -16,7 +16,7 @@ std::shared_ptr<const IndexPage> IndexPageCache::Find(std::uint64_t page_number)
 }
 
 void IndexPageCache::Insert(std::shared_ptr<const IndexPage> page) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   const std::uint64_t number = page->page_number;
   if (pages_.contains(number)) return;  // another thread read it first
   recency_.push_front(number);
@@ -28,23 +28,23 @@ void IndexPageCache::Insert(std::shared_ptr<const IndexPage> page) {
 }
 
 std::shared_ptr<const IndexPage> IndexPageCache::root() {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   return root_;
 }
 
 void IndexPageCache::SetRoot(std::shared_ptr<const IndexPage> page) {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   if (!root_) root_ = std::move(page);
 }
 
 void IndexPageCache::Clear() {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   pages_.clear();
   recency_.clear();
 }
 
 std::size_t IndexPageCache::size() {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   return pages_.size() + (root_ ? 1 : 0);
 }
 

@@ -11,9 +11,9 @@
 #include <cstdint>
 #include <list>
 #include <memory>
-#include <mutex>
 #include <unordered_map>
 
+#include "base/mutex.h"
 #include "storage/block_index_format.h"
 
 namespace octocosm {
@@ -22,15 +22,15 @@ class IndexPageCache {
  public:
   explicit IndexPageCache(std::size_t capacity_pages);
 
-  std::shared_ptr<const IndexPage> Find(std::uint64_t page_number);
-  void Insert(std::shared_ptr<const IndexPage> page);
+  std::shared_ptr<const IndexPage> Find(std::uint64_t page_number) EXCLUDES(mutex_);
+  void Insert(std::shared_ptr<const IndexPage> page) EXCLUDES(mutex_);
 
-  std::shared_ptr<const IndexPage> root();
-  void SetRoot(std::shared_ptr<const IndexPage> page);
+  std::shared_ptr<const IndexPage> root() EXCLUDES(mutex_);
+  void SetRoot(std::shared_ptr<const IndexPage> page) EXCLUDES(mutex_);
 
   // Drops every page but the root.
-  void Clear();
-  std::size_t size();
+  void Clear() EXCLUDES(mutex_);
+  std::size_t size() EXCLUDES(mutex_);
 
  private:
   struct Slot {
@@ -39,10 +39,10 @@ class IndexPageCache {
   };
 
   const std::size_t capacity_;
-  std::mutex mutex_;
-  std::shared_ptr<const IndexPage> root_;             // guarded by mutex_
-  std::list<std::uint64_t> recency_;                  // most recent first; guarded by mutex_
-  std::unordered_map<std::uint64_t, Slot> pages_;     // guarded by mutex_
+  Mutex mutex_;
+  std::shared_ptr<const IndexPage> root_ GUARDED_BY(mutex_);
+  std::list<std::uint64_t> recency_ GUARDED_BY(mutex_);  // most recent first
+  std::unordered_map<std::uint64_t, Slot> pages_ GUARDED_BY(mutex_);
 };
 
 }  // namespace octocosm

@@ -69,7 +69,7 @@ void PageFileWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> b
   entry.page_count = *pages;
   std::uint64_t offset = 0;
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     RequireNoFailedWrite("AddBlock");
     if (keys_.count(key) != 0) {
       throw Error::InvalidArgument("duplicate key: block " + Hex64(key) + " was already added to epoch " +
@@ -91,7 +91,7 @@ void PageFileWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> b
       file_->WriteUnbufferedAt(offset, bytes);
     }
   } catch (...) {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     failed_write_ = true;
     throw;
   }

@@ -10,13 +10,13 @@
 
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
 #include <unordered_set>
 #include <vector>
 
+#include "base/mutex.h"
 #include "storage/block_index_format.h"
 #include "storage/direct_writer.h"
 #include "storage/file.h"
@@ -44,23 +44,23 @@ class PageFileWriter {
   // use. A write may finish after AddBlock returns, so its failure (kIo)
   // comes from a later AddBlock or from Finish; after it the writer refuses
   // further blocks and Finish.
-  void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
+  void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count) EXCLUDES(mutex_);
 
   // Writes the index and header, makes the file durable and gives it its
   // final name. The writer cannot be used afterwards. Every AddBlock must
-  // have returned.
-  Summary Finish();
+  // have returned, so it reads the members mutex_ guards unlocked.
+  Summary Finish() NO_THREAD_SAFETY_ANALYSIS;
 
   // Bytes written to the file so far (data pages with padding, header page,
   // and after Finish the index pages). Not while blocks are being added.
   std::uint64_t bytes_written() const { return file_ ? file_->size() : finished_size_; }
-  std::uint64_t block_count() const { return entries_.size(); }
+  std::uint64_t block_count() const NO_THREAD_SAFETY_ANALYSIS { return entries_.size(); }
   const std::string& path() const { return path_; }
   std::string temporary_path() const { return path_ + ".tmp"; }
 
  private:
   void RequireOpen(const char* operation) const;
-  void RequireNoFailedWrite(const char* operation) const;
+  void RequireNoFailedWrite(const char* operation) const REQUIRES(mutex_);
 
   const std::string path_;
   const std::uint32_t page_size_;
@@ -69,11 +69,11 @@ class PageFileWriter {
   std::optional<WritableFile> file_;  // empty once finished
   std::unique_ptr<DirectWriter> direct_;  // blocks' writes; null where direct I/O is refused
   std::uint64_t finished_size_ = 0;
-  std::mutex mutex_;                  // guards the members below and file_'s end during AddBlock
-  std::uint64_t next_page_ = 1;       // page 0 is the header
-  std::vector<IndexEntry> entries_;   // in the order added
-  std::unordered_set<std::uint64_t> keys_;
-  bool failed_write_ = false;
+  Mutex mutex_;  // guards the members below, and file_'s end during AddBlock
+  std::uint64_t next_page_ GUARDED_BY(mutex_) = 1;  // page 0 is the header
+  std::vector<IndexEntry> entries_ GUARDED_BY(mutex_);  // in the order added
+  std::unordered_set<std::uint64_t> keys_ GUARDED_BY(mutex_);
+  bool failed_write_ GUARDED_BY(mutex_) = false;
 };
 
 }  // namespace octocosm

@@ -47,10 +47,10 @@ Prefetcher::Prefetcher(BlockCache& cache, Options options)
     // The destructor does not run for a half-built object: stop the workers
     // already started, or joining them would wait forever.
     {
-      std::lock_guard lock(mutex_);
+      MutexLock lock(mutex_);
       stopping_ = true;
     }
-    work_cv_.notify_all();
+    work_cv_.SignalAll();
     workers_.clear();
     throw;
   }
@@ -58,14 +58,14 @@ Prefetcher::Prefetcher(BlockCache& cache, Options options)
 
 Prefetcher::~Prefetcher() {
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     stopping_ = true;
     stats_.cancelled += queue_.size();
     queue_.clear();
     pending_.clear();
   }
-  work_cv_.notify_all();
-  idle_cv_.notify_all();
+  work_cv_.SignalAll();
+  idle_cv_.SignalAll();
   workers_.clear();  // joins; reads in flight finish first
 }
 
@@ -77,7 +77,7 @@ void Prefetcher::QueueLocked(const BlockId& id, Priority priority) {
 std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
   std::size_t depth = 0;
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     // The new queue is built in `next`, reusing the nodes of requests that
     // stay wanted, so a frame that re-asks for mostly the same blocks
     // allocates only for the new ones. Whatever is left in queue_ afterwards
@@ -111,14 +111,14 @@ std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
     queue_ = std::move(next);
     depth = queue_.size();
   }
-  if (depth > 0) work_cv_.notify_all();
-  idle_cv_.notify_all();  // cancellations may end a WaitFor() or Drain()
+  if (depth > 0) work_cv_.SignalAll();
+  idle_cv_.SignalAll();  // cancellations may end a WaitFor() or Drain()
   return depth;
 }
 
 bool Prefetcher::Add(const BlockId& id, Priority priority) {
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     if (in_flight_.contains(id)) return false;
     if (auto it = pending_.find(id); it != pending_.end()) {
       queue_.erase(it->second);
@@ -132,55 +132,55 @@ bool Prefetcher::Add(const BlockId& id, Priority priority) {
     ++stats_.queued;
     QueueLocked(id, priority);
   }
-  work_cv_.notify_one();
+  work_cv_.Signal();
   return true;
 }
 
 bool Prefetcher::Cancel(const BlockId& id) {
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     auto it = pending_.find(id);
     if (it == pending_.end()) return false;
     queue_.erase(it->second);
     pending_.erase(it);
     ++stats_.cancelled;
   }
-  idle_cv_.notify_all();
+  idle_cv_.SignalAll();
   return true;
 }
 
 std::size_t Prefetcher::CancelAll() {
   std::size_t dropped = 0;
   {
-    std::lock_guard lock(mutex_);
+    MutexLock lock(mutex_);
     dropped = queue_.size();
     queue_.clear();
     pending_.clear();
     stats_.cancelled += dropped;
   }
-  idle_cv_.notify_all();
+  idle_cv_.SignalAll();
   return dropped;
 }
 
 void Prefetcher::WaitFor(const BlockId& id) {
-  std::unique_lock lock(mutex_);
-  idle_cv_.wait(lock, [&] { return !pending_.contains(id) && !in_flight_.contains(id); });
+  MutexLock lock(mutex_);
+  while (pending_.contains(id) || in_flight_.contains(id)) idle_cv_.Wait(mutex_);
 }
 
 void Prefetcher::Drain() {
-  std::unique_lock lock(mutex_);
-  idle_cv_.wait(lock, [&] { return queue_.empty() && in_flight_.empty(); });
+  MutexLock lock(mutex_);
+  while (!queue_.empty() || !in_flight_.empty()) idle_cv_.Wait(mutex_);
 }
 
 std::optional<Error> Prefetcher::LastError(const BlockId& id) const {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   auto it = errors_.find(id);
   if (it == errors_.end()) return std::nullopt;
   return ThreadOwnCopy(it->second);
 }
 
 PrefetchStats Prefetcher::Stats() const {
-  std::lock_guard lock(mutex_);
+  MutexLock lock(mutex_);
   PrefetchStats snapshot = stats_;
   snapshot.queue_depth = queue_.size();
   snapshot.in_flight = in_flight_.size();
@@ -188,15 +188,15 @@ PrefetchStats Prefetcher::Stats() const {
 }
 
 void Prefetcher::WorkerLoop() {
-  std::unique_lock lock(mutex_);
+  MutexLock lock(mutex_);
   while (true) {
-    work_cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+    while (!stopping_ && queue_.empty()) work_cv_.Wait(mutex_);
     if (stopping_) return;
     const BlockId id = queue_.begin()->second;
     queue_.erase(queue_.begin());
     pending_.erase(id);
     in_flight_.insert(id);
-    lock.unlock();
+    lock.Unlock();
 
     bool was_resident = false;
     std::optional<Error> error;
@@ -225,7 +225,7 @@ void Prefetcher::WorkerLoop() {
       }
     }
 
-    lock.lock();
+    lock.Lock();
     in_flight_.erase(id);
     if (error) {
       ++stats_.failed;
@@ -235,7 +235,7 @@ void Prefetcher::WorkerLoop() {
       errors_.erase(id);
     }
     if (callback_threw) ++stats_.callback_errors;
-    idle_cv_.notify_all();
+    idle_cv_.SignalAll();
   }
 }
 

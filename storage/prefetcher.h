@@ -31,12 +31,10 @@
 // outlive the Prefetcher.
 #pragma once
 
-#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <map>
-#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -46,6 +44,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "storage/block_cache.h"
 #include "storage/block_source.h"
 
@@ -99,33 +98,33 @@ class Prefetcher {
   // keep their first position). Resident blocks are marked recently used in
   // the cache, least important first, so the most important are evicted last.
   // Returns how many requests are pending after the call.
-  std::size_t Submit(std::span<const BlockId> wanted);
+  std::size_t Submit(std::span<const BlockId> wanted) EXCLUDES(mutex_);
 
   // Queues one request, or re-ranks it if already pending. Returns false when
   // nothing was queued because the block is resident or already in flight.
-  bool Add(const BlockId& id, Priority priority);
+  bool Add(const BlockId& id, Priority priority) EXCLUDES(mutex_);
 
   // Drops a pending request; returns whether one was pending. A request
   // already in flight is not interrupted.
-  bool Cancel(const BlockId& id);
+  bool Cancel(const BlockId& id) EXCLUDES(mutex_);
 
   // Drops every pending request; returns how many there were.
-  std::size_t CancelAll();
+  std::size_t CancelAll() EXCLUDES(mutex_);
 
   // Blocks until `id` is neither pending nor in flight (at once if it never
   // was requested).
-  void WaitFor(const BlockId& id);
+  void WaitFor(const BlockId& id) EXCLUDES(mutex_);
 
   // Blocks until the queue is empty and nothing is in flight. Requests added
   // by other threads meanwhile are waited for too.
-  void Drain();
+  void Drain() EXCLUDES(mutex_);
 
   // The error of the block's most recent failed prefetch, if it has not been
   // read successfully since. One Error is kept per such block for the life of
   // the Prefetcher.
-  std::optional<Error> LastError(const BlockId& id) const;
+  std::optional<Error> LastError(const BlockId& id) const EXCLUDES(mutex_);
 
-  PrefetchStats Stats() const;
+  PrefetchStats Stats() const EXCLUDES(mutex_);
 
  private:
   struct QueueKey {
@@ -135,23 +134,23 @@ class Prefetcher {
   };
   using Queue = std::map<QueueKey, BlockId>;
 
-  void WorkerLoop();
-  // Puts `id` (not pending) on the queue; expects mutex_ held.
-  void QueueLocked(const BlockId& id, Priority priority);
+  void WorkerLoop() EXCLUDES(mutex_);
+  // Puts `id` (not pending) on the queue.
+  void QueueLocked(const BlockId& id, Priority priority) REQUIRES(mutex_);
 
   BlockCache& cache_;
   const CompletionCallback on_complete_;
 
-  mutable std::mutex mutex_;
-  std::condition_variable work_cv_;  // a request was queued, or stopping_
-  std::condition_variable idle_cv_;  // a request left the queue or finished
-  bool stopping_ = false;                                              // guarded by mutex_
-  std::uint64_t next_sequence_ = 0;                                    // guarded by mutex_
-  Queue queue_;                                                        // guarded by mutex_
-  std::unordered_map<BlockId, Queue::iterator, BlockIdHash> pending_;  // guarded by mutex_
-  std::unordered_set<BlockId, BlockIdHash> in_flight_;                 // guarded by mutex_
-  std::unordered_map<BlockId, Error, BlockIdHash> errors_;             // guarded by mutex_
-  PrefetchStats stats_;                                                // guarded by mutex_
+  mutable Mutex mutex_;
+  CondVar work_cv_;  // a request was queued, or stopping_
+  CondVar idle_cv_;  // a request left the queue or finished
+  bool stopping_ GUARDED_BY(mutex_) = false;
+  std::uint64_t next_sequence_ GUARDED_BY(mutex_) = 0;
+  Queue queue_ GUARDED_BY(mutex_);
+  std::unordered_map<BlockId, Queue::iterator, BlockIdHash> pending_ GUARDED_BY(mutex_);
+  std::unordered_set<BlockId, BlockIdHash> in_flight_ GUARDED_BY(mutex_);
+  std::unordered_map<BlockId, Error, BlockIdHash> errors_ GUARDED_BY(mutex_);
+  PrefetchStats stats_ GUARDED_BY(mutex_);
   // Last member: destroyed (joined) first, while everything above is alive.
   std::vector<std::jthread> workers_;
 };

@@ -29,8 +29,10 @@ packages=(
   libpcl-dev
   # benchmarks draw their plots with gnuplot
   gnuplot-nox
-  # Not here: clang and libclang-rt-14-dev, which only the long libFuzzer runs
-  # need (docs/TESTING.md); CI runs the fuzz targets under our own driver.
+  # clang, for the test that runs its thread-safety analysis (docs/TESTING.md)
+  clang
+  # Not here: libclang-rt-14-dev, which only the long libFuzzer runs need
+  # (docs/TESTING.md); CI runs the fuzz targets under our own driver.
 )
 
 install_packages() {
