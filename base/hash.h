@@ -21,4 +21,8 @@ inline std::uint64_t MixBits64(std::uint64_t x) {
 // before mixing.
 inline constexpr std::uint64_t kGoldenGamma = 0x9e3779b97f4a7c15ull;
 
+// splitmix64: the next value of a stream of uniform 64-bit values whose
+// whole state is `state` (seeding generators, reservoir sampling).
+inline std::uint64_t SplitMix64(std::uint64_t& state) { return MixBits64(state += kGoldenGamma); }
+
 }  // namespace octocosm

@@ -5,19 +5,12 @@
 #include <cstdio>
 
 #include "base/error.h"
+#include "base/hash.h"
 #include "base/progress.h"
 #include "index/cube.h"
 
 namespace octocosm {
 namespace {
-
-// splitmix64: a fixed-seed stream of uniform 64-bit values.
-std::uint64_t NextRandom(std::uint64_t& state) {
-  std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
 
 std::string Number(double x) {
   char text[32];
@@ -79,7 +72,7 @@ void PositionSurvey::Add(const ParticleChunk& chunk) {
     }
     // Reservoir sampling (Vitter's algorithm R): each particle stays in the
     // sample with probability capacity / (seen + 1).
-    const std::uint64_t slot = NextRandom(random_state_) % (seen + 1);
+    const std::uint64_t slot = SplitMix64(random_state_) % (seen + 1);
     if (slot < capacity_) sample_[slot] = p;
   }
 }

@@ -19,6 +19,8 @@
 #include <cmath>
 #include <cstdint>
 
+#include "base/hash.h"
+
 namespace octocosm::synth {
 
 class Random {
@@ -59,12 +61,6 @@ class Random {
   }
 
  private:
-  static std::uint64_t SplitMix64(std::uint64_t& x) {
-    std::uint64_t z = (x += 0x9e3779b97f4a7c15ULL);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return z ^ (z >> 31);
-  }
   static std::uint64_t Rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
 
   // xoshiro256++: every output bit is good, which the ziggurat needs (it
