@@ -6,31 +6,32 @@
 #include <thread>
 #include <vector>
 
-namespace octocosm {
-namespace {
+#include "base/mutex.h"
 
-// Runs run(part) for part in [0, parts), part 0 on the calling thread, and
-// rethrows the first part's exception once all are done.
-void RunParts(std::size_t parts, const std::function<void(std::size_t)>& run) {
-  std::vector<std::exception_ptr> errors(parts);
-  auto guarded = [&](std::size_t part) {
+namespace octocosm {
+
+void RunWorkers(int threads, const std::function<void(int worker, const std::atomic<bool>& stop)>& work) {
+  std::atomic<bool> stop{false};
+  Mutex mutex;
+  std::exception_ptr first_error;  // guarded by mutex
+  auto guarded = [&](int worker) {
     try {
-      run(part);
+      work(worker, stop);
     } catch (...) {
-      errors[part] = std::current_exception();
+      MutexLock lock(mutex);
+      if (!first_error) first_error = std::current_exception();
+      stop = true;
     }
   };
-  std::vector<std::thread> workers;
-  workers.reserve(parts - 1);
-  for (std::size_t part = 1; part < parts; ++part) workers.emplace_back(guarded, part);
-  guarded(0);
-  for (std::thread& worker : workers) worker.join();
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
+  {
+    std::vector<std::jthread> helpers;
+    helpers.reserve(static_cast<std::size_t>(std::max(threads, 1) - 1));
+    for (int worker = 1; worker < threads; ++worker) helpers.emplace_back(guarded, worker);
+    guarded(0);
   }
+  MutexLock lock(mutex);
+  if (first_error) std::rethrow_exception(first_error);
 }
-
-}  // namespace
 
 int ResolveThreadCount(int requested) {
   if (requested > 0) return requested;
@@ -46,7 +47,10 @@ void ParallelFor(std::size_t count, int threads, const std::function<void(std::s
     if (count > 0) body(0, count);
     return;
   }
-  RunParts(parts, [&](std::size_t part) { body(count * part / parts, count * (part + 1) / parts); });
+  RunWorkers(static_cast<int>(parts), [&](int worker, const std::atomic<bool>&) {
+    const auto part = static_cast<std::size_t>(worker);
+    body(count * part / parts, count * (part + 1) / parts);
+  });
 }
 
 void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
@@ -59,15 +63,9 @@ void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
     return;
   }
   std::atomic<std::size_t> next{0};
-  std::atomic<bool> failed{false};
-  RunParts(parts, [&](std::size_t) {
-    try {
-      for (std::size_t piece = next++; piece < pieces && !failed; piece = next++) {
-        body(piece * grain, std::min(count, (piece + 1) * grain));
-      }
-    } catch (...) {
-      failed = true;
-      throw;
+  RunWorkers(static_cast<int>(parts), [&](int, const std::atomic<bool>& stop) {
+    for (std::size_t piece = next++; piece < pieces && !stop; piece = next++) {
+      body(piece * grain, std::min(count, (piece + 1) * grain));
     }
   });
 }

@@ -3,6 +3,7 @@
 // other threads finish.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <functional>
 
@@ -28,6 +29,14 @@ void ParallelFor(std::size_t count, int threads, const std::function<void(std::s
 // calling thread.
 void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
                         const std::function<void(std::size_t, std::size_t)>& body);
+
+// Runs work(worker, stop) on `threads` threads (at least one), worker 0 on
+// the calling thread, and returns when all have returned. The first
+// exception to leave `work` sets `stop` and is rethrown here afterwards: a
+// worker that takes items in turn checks `stop` before taking the next, so
+// the others give up soon after one fails. The loops above, and any that
+// takes its items in an order of its own, run on this.
+void RunWorkers(int threads, const std::function<void(int worker, const std::atomic<bool>& stop)>& work);
 
 // The thread count to use for `requested` (0 means all hardware threads).
 int ResolveThreadCount(int requested);

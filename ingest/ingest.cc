@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <exception>
 #include <filesystem>
 #include <functional>
 #include <future>
@@ -24,6 +23,7 @@
 
 #include "base/error.h"
 #include "base/interrupt_cleanup.h"
+#include "base/parallel_for.h"
 #include "base/progress.h"
 #include "base/temp_directory.h"
 #include "index/block_codec.h"
@@ -363,51 +363,37 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
   std::vector<std::uint64_t> point_counts;
   for (const Chunk& chunk : chunks) point_counts.push_back(chunk.point_count);
   ChunkQueue queue(std::move(point_counts), kQueueWindowPerThread * std::size_t{threads});
-  std::atomic<bool> failed{false};
-  std::exception_ptr error;
-  std::mutex error_mutex;
   std::size_t largest_resident = 0;
   for (const Chunk& chunk : chunks) largest_resident = std::max(largest_resident, chunk.resident.size());
-  auto work = [&] {
-    try {
-      Bytes block;  // this worker's encoding buffer
-      SubtreeWorkspace workspace;
-      ChunkGatherer gatherer(*build.cube, build.tree->max_level);
-      gatherer.Reserve(resident, largest_resident);
-      for (std::size_t c = queue.Take(); c < chunks.size() && !failed; c = queue.Take()) {
-        const std::uint64_t count = chunks[c].point_count;
-        std::unordered_set<std::uint64_t> has_children;
-        const NodeSink sink = LeafAwareSink(build, has_children, block);
-        NodePoints root;
-        if (!chunks[c].resident.empty()) {
-          root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink,
-                              &workspace);
-          chunks[c].resident = {};
-          chunks[c].resident_lists.reset();  // the last chunk built frees the split's list
-        } else {
-          root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink, &workspace);
-        }
-        {
-          std::lock_guard lock(merge_mutex);
-          ready.emplace(c, std::move(root));
-          for (auto it = ready.begin(); it != ready.end() && it->first == next_to_merge; it = ready.erase(it)) {
-            merger.Add(chunks[next_to_merge].key, std::move(it->second));
-            ++next_to_merge;
-          }
-        }
-        build.progress->Add(count);
+  RunWorkers(static_cast<int>(threads), [&](int, const std::atomic<bool>& stop) {
+    Bytes block;  // this worker's encoding buffer
+    SubtreeWorkspace workspace;
+    ChunkGatherer gatherer(*build.cube, build.tree->max_level);
+    gatherer.Reserve(resident, largest_resident);
+    for (std::size_t c = queue.Take(); c < chunks.size() && !stop; c = queue.Take()) {
+      const std::uint64_t count = chunks[c].point_count;
+      std::unordered_set<std::uint64_t> has_children;
+      const NodeSink sink = LeafAwareSink(build, has_children, block);
+      NodePoints root;
+      if (!chunks[c].resident.empty()) {
+        root = BuildSubtree(gatherer.Gather(resident, chunks[c]), chunks[c].key, *build.cube, *build.tree, sink,
+                            &workspace);
+        chunks[c].resident = {};
+        chunks[c].resident_lists.reset();  // the last chunk built frees the split's list
+      } else {
+        root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink, &workspace);
       }
-    } catch (...) {
-      std::lock_guard lock(error_mutex);
-      if (!error) error = std::current_exception();
-      failed = true;
+      {
+        std::lock_guard lock(merge_mutex);
+        ready.emplace(c, std::move(root));
+        for (auto it = ready.begin(); it != ready.end() && it->first == next_to_merge; it = ready.erase(it)) {
+          merger.Add(chunks[next_to_merge].key, std::move(it->second));
+          ++next_to_merge;
+        }
+      }
+      build.progress->Add(count);
     }
-  };
-  std::vector<std::thread> workers;
-  for (unsigned t = 1; t < threads; ++t) workers.emplace_back(work);
-  work();
-  for (auto& worker : workers) worker.join();
-  if (error) std::rethrow_exception(error);
+  });
   chunks_built();
   return merger.Finish();
 }

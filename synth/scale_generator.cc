@@ -3,17 +3,15 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <exception>
 #include <filesystem>
 #include <memory>
 #include <mutex>
 #include <system_error>
-#include <thread>
 
 #include "base/error.h"
+#include "base/parallel_for.h"
 #include "synth/cosmic_web.h"
 #include "synth/gadget_writer.h"
-#include "base/parallel_for.h"
 #include "synth/scale_sampler.h"
 
 namespace octocosm::synth {
@@ -66,50 +64,36 @@ ScaleResult RunScaleGenerator(const ScaleOptions& options, const std::function<v
   // Closed files wait here, under their temporary names, for the final rename.
   std::vector<std::unique_ptr<GadgetFileWriter>> writers(static_cast<std::size_t>(file_count));
   std::atomic<int> next_file{0};
-  std::atomic<bool> failed{false};
   std::mutex mutex;  // guards the fields below and serialises progress calls
-  std::exception_ptr first_error;
   int files_done = 0;
   std::uint64_t particles_done = 0;
 
-  auto worker = [&] {
-    try {
-      ScaleChunk chunk;
-      for (int f = next_file++; f < file_count && !failed; f = next_file++) {
-        GadgetHeader file_header = header;
-        file_header.npart[kDarkMatterType] = static_cast<std::uint32_t>(sampler.FileParticleCount(f));
-        auto writer = std::make_unique<GadgetFileWriter>(result.files[f], file_header, options.format, id_bytes);
-        const std::uint64_t chunks = sampler.ChunkCount(f);
-        for (std::uint64_t k = 0; k < chunks && !failed; ++k) {
-          sampler.Fill(f, k, chunk);
-          writer->Append(chunk.positions, chunk.velocities, chunk.ids);
-        }
-        if (failed) break;
-        writer->Close();
-        const std::uint64_t written = writer->written();
-        writers[static_cast<std::size_t>(f)] = std::move(writer);
-        std::lock_guard lock(mutex);
-        ++files_done;
-        particles_done += written;
-        if (progress) {
-          progress(ScaleProgress{f, files_done, file_count, particles_done, options.particle_count, SecondsSince(start),
-                                 result.files[f]});
-        }
-      }
-    } catch (...) {
-      std::lock_guard lock(mutex);
-      if (!first_error) first_error = std::current_exception();
-      failed = true;
-    }
-  };
-
   result.threads = std::min(ResolveThreadCount(options.threads), file_count);
-  {
-    std::vector<std::jthread> helpers;
-    for (int t = 1; t < result.threads; ++t) helpers.emplace_back(worker);
-    worker();
-  }
-  if (first_error) std::rethrow_exception(first_error);  // `writers` unlinks the temporary files
+  // On failure `writers` unlinks the temporary files.
+  RunWorkers(result.threads, [&](int, const std::atomic<bool>& stop) {
+    ScaleChunk chunk;
+    for (int f = next_file++; f < file_count && !stop; f = next_file++) {
+      GadgetHeader file_header = header;
+      file_header.npart[kDarkMatterType] = static_cast<std::uint32_t>(sampler.FileParticleCount(f));
+      auto writer = std::make_unique<GadgetFileWriter>(result.files[f], file_header, options.format, id_bytes);
+      const std::uint64_t chunks = sampler.ChunkCount(f);
+      for (std::uint64_t k = 0; k < chunks && !stop; ++k) {
+        sampler.Fill(f, k, chunk);
+        writer->Append(chunk.positions, chunk.velocities, chunk.ids);
+      }
+      if (stop) break;
+      writer->Close();
+      const std::uint64_t written = writer->written();
+      writers[static_cast<std::size_t>(f)] = std::move(writer);
+      std::lock_guard lock(mutex);
+      ++files_done;
+      particles_done += written;
+      if (progress) {
+        progress(ScaleProgress{f, files_done, file_count, particles_done, options.particle_count, SecondsSince(start),
+                               result.files[f]});
+      }
+    }
+  });
 
   for (auto& writer : writers) writer->Commit();
   result.total_seconds = SecondsSince(start);

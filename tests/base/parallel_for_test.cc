@@ -110,5 +110,44 @@ TEST(ParallelFor, OneContiguousRangePerThread) {
   EXPECT_EQ(ranges.seen[2].second, 10000u);
 }
 
+TEST(RunWorkers, EachWorkerRunsOnceTheCallerAsWorkerZero) {
+  std::mutex mutex;
+  std::vector<int> seen;
+  std::thread::id zero;
+  RunWorkers(4, [&](int worker, const std::atomic<bool>&) {
+    std::lock_guard lock(mutex);
+    seen.push_back(worker);
+    if (worker == 0) zero = std::this_thread::get_id();
+  });
+  std::sort(seen.begin(), seen.end());
+  EXPECT_EQ(seen, (std::vector<int>{0, 1, 2, 3}));
+  EXPECT_EQ(zero, std::this_thread::get_id());
+}
+
+// A worker's error stops the others' loops (they see `stop`) and reaches
+// the caller once all have returned.
+TEST(RunWorkers, AnErrorStopsTheOthersAndIsRethrown) {
+  std::atomic<int> next{0};
+  std::atomic<int> taken_after_error{0};
+  std::atomic<bool> thrown{false};
+  EXPECT_THROW(RunWorkers(3,
+                          [&](int, const std::atomic<bool>& stop) {
+                            for (int item = next++; item < 100000 && !stop; item = next++) {
+                              if (thrown) ++taken_after_error;
+                              if (item == 30) {
+                                thrown = true;
+                                throw std::runtime_error("item 30");
+                              }
+                              std::this_thread::sleep_for(std::chrono::milliseconds(1));
+                            }
+                          }),
+               std::runtime_error);
+  EXPECT_TRUE(thrown);
+  // The others take items only until the error is recorded: a second,
+  // unless the throwing thread stalls that long.
+  EXPECT_LT(taken_after_error.load(), 1000);
+  EXPECT_LT(next.load(), 100000);
+}
+
 }  // namespace
 }  // namespace octocosm
