@@ -1,5 +1,6 @@
 #include "index/neighbour_radius.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -8,6 +9,7 @@
 #include <nanoflann.hpp>
 
 #include "base/error.h"
+#include "base/parallel_for.h"
 
 namespace octocosm {
 namespace {
@@ -33,16 +35,38 @@ constexpr std::size_t kLeafPoints = 16;
 
 }  // namespace
 
-struct NeighbourRadii::Tree {
-  explicit Tree(std::span<const double> positions)
+struct NeighbourRadii::Block {
+  explicit Block(std::span<const double> positions)
       : cloud{positions}, index(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafPoints)) {
     index.buildIndex();
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::numeric_limits<double>::infinity();
+      hi[a] = -std::numeric_limits<double>::infinity();
+    }
+    for (std::size_t i = 0; i < positions.size(); i += 3) {
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::min(lo[a], positions[i + a]);
+        hi[a] = std::max(hi[a], positions[i + a]);
+      }
+    }
+  }
+  // Squared distance from `p` to the block's bounding box.
+  double SquaredDistance(const double* p) const {
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double d = std::max({lo[a] - p[a], 0.0, p[a] - hi[a]});
+      d2 += d * d;
+    }
+    return d2;
   }
   PointCloud cloud;
   KdTree index;
+  double lo[3], hi[3];
 };
 
-NeighbourRadii::NeighbourRadii(std::span<const double> positions) : count_(positions.size() / 3) {
+NeighbourRadii::NeighbourRadii(std::span<const double> positions, std::span<const std::size_t> block_begins,
+                               int threads)
+    : count_(positions.size() / 3) {
   if (positions.size() % 3 != 0) {
     throw Error::InvalidArgument("NeighbourRadii: " + std::to_string(positions.size()) +
                                  " coordinates are not a whole number of points");
@@ -50,12 +74,28 @@ NeighbourRadii::NeighbourRadii(std::span<const double> positions) : count_(posit
   if (count_ > std::numeric_limits<std::uint32_t>::max()) {
     throw Error::InvalidArgument("NeighbourRadii: " + std::to_string(count_) + " points exceed 2^32 - 1");
   }
-  if (count_ > 0) tree_ = std::make_unique<Tree>(positions);
+  if (count_ == 0) return;
+  std::vector<std::size_t> begins(block_begins.begin(), block_begins.end());
+  if (begins.empty()) begins.push_back(0);
+  for (std::size_t b = 0; b < begins.size(); ++b) {
+    const std::size_t end = b + 1 < begins.size() ? begins[b + 1] : count_;
+    if ((b == 0 && begins[b] != 0) || begins[b] >= end) {
+      throw Error::InvalidArgument("NeighbourRadii: block " + std::to_string(b) + " starts at point " +
+                                   std::to_string(begins[b]) + ": blocks must start at 0, ascend and not be empty");
+    }
+  }
+  blocks_.resize(begins.size());
+  ParallelForDynamic(begins.size(), ResolveThreadCount(threads), 1, [&](std::size_t first, std::size_t last) {
+    for (std::size_t b = first; b < last; ++b) {
+      const std::size_t end = b + 1 < begins.size() ? begins[b + 1] : count_;
+      blocks_[b] = std::make_unique<Block>(positions.subspan(3 * begins[b], 3 * (end - begins[b])));
+    }
+  });
 }
 
 NeighbourRadii::~NeighbourRadii() = default;
 
-double NeighbourRadii::Radius(const double* query, int k) const {
+double NeighbourRadii::Radius(const double* query, int k, std::size_t first_block) const {
   if (k < 1) throw Error::InvalidArgument("NeighbourRadii: k must be at least 1, not " + std::to_string(k));
   if (count_ < static_cast<std::size_t>(k)) return std::numeric_limits<double>::infinity();
   thread_local std::vector<std::uint32_t> indices;
@@ -64,7 +104,18 @@ double NeighbourRadii::Radius(const double* query, int k) const {
   squared.resize(static_cast<std::size_t>(k));
   nanoflann::KNNResultSet<double, std::uint32_t> result(static_cast<std::size_t>(k));
   result.init(indices.data(), squared.data());
-  tree_->index.findNeighbors(result, query, nanoflann::SearchParams());
+  if (first_block >= blocks_.size()) {
+    throw Error::InvalidArgument("NeighbourRadii: block " + std::to_string(first_block) + " of " +
+                                 std::to_string(blocks_.size()));
+  }
+  // The result set keeps the k nearest over every block searched. After the
+  // first block the k-th distance is small; a block whose box lies farther
+  // cannot improve it.
+  blocks_[first_block]->index.findNeighbors(result, query, nanoflann::SearchParams());
+  for (std::size_t b = 0; b < blocks_.size(); ++b) {
+    if (b == first_block || (result.full() && blocks_[b]->SquaredDistance(query) > result.worstDist())) continue;
+    blocks_[b]->index.findNeighbors(result, query, nanoflann::SearchParams());
+  }
   return std::sqrt(squared[static_cast<std::size_t>(k) - 1]);
 }
 

@@ -15,6 +15,7 @@
 #include <cstddef>
 #include <memory>
 #include <span>
+#include <vector>
 
 namespace octocosm {
 
@@ -23,23 +24,35 @@ inline constexpr int kDefaultNeighbours = 32;
 class NeighbourRadii {
  public:
   // `positions` holds 3 * n coordinates, x,y,z interleaved; it must outlive
-  // this object and stay unchanged. Builds the tree (about n log n).
-  explicit NeighbourRadii(std::span<const double> positions);
+  // this object and stay unchanged. Builds a tree (about n log n) for each
+  // block of consecutive points, blocks side by side on up to `threads`
+  // threads (0: all cores); block b starts at point block_begins[b] (the
+  // first at 0, ascending; empty: one block of all points). A query
+  // searches one block, then the others only where their boxes come nearer
+  // than the k-th neighbour found so far, so the answer does not depend on
+  // the cut; the search is fastest when the blocks are compact and apart
+  // (ingest/smoothing_pass.h cuts them as octree cells).
+  explicit NeighbourRadii(std::span<const double> positions, std::span<const std::size_t> block_begins = {},
+                          int threads = 1);
   ~NeighbourRadii();
   NeighbourRadii(const NeighbourRadii&) = delete;
   NeighbourRadii& operator=(const NeighbourRadii&) = delete;
 
   std::size_t size() const { return count_; }
+  std::size_t blocks() const { return blocks_.size(); }
 
   // The distance from `query` (3 coordinates) to its k-th nearest point of
   // the set, counting a point at the query itself; infinity when the set has
-  // fewer than k points. k >= 1. Thread-safe (the tree is read only).
-  double Radius(const double* query, int k) const;
+  // fewer than k points. k >= 1. `first_block` (< blocks()) is searched
+  // first: the answer is the same whichever it is, but it comes fastest from
+  // the block that holds the query's neighbours. Thread-safe (the trees are
+  // read only).
+  double Radius(const double* query, int k, std::size_t first_block = 0) const;
 
  private:
-  struct Tree;
+  struct Block;
   std::size_t count_;
-  std::unique_ptr<Tree> tree_;
+  std::vector<std::unique_ptr<Block>> blocks_;
 };
 
 }  // namespace octocosm

@@ -30,6 +30,13 @@ namespace fs = std::filesystem;
 // Memory per particle held for a search: its position (24 bytes), the
 // tree's index entry and nodes (about 12), and its query or file record.
 constexpr std::uint64_t kBytesPerLoadedPoint = 48;
+// A task's k-d tree is built as blocks side by side, about this many per
+// thread (ahead of the slowest), none smaller than kMinBlockPoints: every
+// query tests each block's box, and a small block's tree saves little.
+constexpr std::size_t kBlocksPerThread = 4;
+constexpr std::size_t kMinBlockPoints = std::size_t{1} << 17;
+// A Morton key and the index of its point.
+using Keyed = std::pair<std::uint64_t, std::uint32_t>;
 constexpr std::uint64_t kDefaultBudget = std::uint64_t{1} << 30;
 // The count grid that cuts an out-of-core domain into regions: 2^7 cells a
 // side, 8 MiB of counts.
@@ -88,6 +95,10 @@ struct Task {
   std::vector<Piece> pieces;
   std::uint64_t estimate = 0;    // particles the load is expected to hold
   std::vector<double> positions;  // the loaded particles, in the task's frame
+  // Where NeighbourRadii's blocks start in `positions`, and the block whose
+  // key range holds each query (SortSpatially).
+  std::vector<std::size_t> block_begins;
+  std::vector<std::uint32_t> query_blocks;
 };
 
 struct Unresolved {
@@ -346,14 +357,14 @@ class SmoothingPass {
   // table, the others into `unresolved`. Frees the task's memory.
   void Search(Task& task, std::vector<Unresolved>& unresolved) {
     SortSpatially(task);
-    const NeighbourRadii radii(task.positions);
+    const NeighbourRadii radii(task.positions, task.block_begins, threads_);
     std::mutex mutex;
     float* table = table_->data();
     ParallelForDynamic(task.queries.size(), threads_, 1024, [&](std::size_t begin, std::size_t end) {
       std::vector<Unresolved> local;
       for (std::size_t q = begin; q < end; ++q) {
         const Query& query = task.queries[q];
-        const double radius = radii.Radius(query.position.data(), neighbours_);
+        const double radius = radii.Radius(query.position.data(), neighbours_, task.query_blocks[q]);
         if (SphereInsideLoad(query.position, radius, task.load, domain_)) {
           table[query.ordinal] = static_cast<float>(radius);
         } else {
@@ -369,16 +380,22 @@ class SmoothingPass {
     });
     if (!task.explicit_queries) report_.searched += task.queries.size();
     task.positions = {};
+    task.block_begins = {};
+    task.query_blocks = {};
     task.queries = {};
   }
 
   // Puts the loaded particles and the queries in Morton order, so that
   // consecutive searches walk the same nodes of the tree and read nearby
-  // points: in the order of a snapshot's files most of them missed the cache
-  // (measured: 2.5x slower on 2 x 10^6 clustered particles).
-  static void SortSpatially(Task& task) {
+  // points (in the order of a snapshot's files most of them missed the
+  // cache: measured 2.5x slower on 2 x 10^6 clustered particles), and so
+  // that NeighbourRadii's blocks of consecutive points are compact.
+  void SortSpatially(Task& task) const {
     const std::size_t n = task.positions.size() / 3;
-    if (n == 0) return;
+    if (n == 0) {
+      task.query_blocks.assign(task.queries.size(), 0);
+      return;
+    }
     Vec3 lo{kInfinity, kInfinity, kInfinity}, hi{-kInfinity, -kInfinity, -kInfinity};
     for (std::size_t i = 0; i < n; ++i) {
       for (int a = 0; a < 3; ++a) {
@@ -396,22 +413,121 @@ class SmoothingPass {
       }
       return code;
     };
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> order(n);
-    for (std::size_t i = 0; i < n; ++i) order[i] = {key(&task.positions[3 * i]), static_cast<std::uint32_t>(i)};
-    std::sort(order.begin(), order.end());
+    const std::vector<Keyed> order = MortonOrder(n, [&](std::size_t i) { return key(&task.positions[3 * i]); });
     std::vector<double> sorted(3 * n);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (int a = 0; a < 3; ++a) sorted[3 * i + a] = task.positions[3 * order[i].second + a];
-    }
+    ParallelFor(n, threads_, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        for (int a = 0; a < 3; ++a) sorted[3 * i + a] = task.positions[3 * std::size_t{order[i].second} + a];
+      }
+    });
     task.positions = std::move(sorted);
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> query_order(task.queries.size());
-    for (std::size_t q = 0; q < task.queries.size(); ++q) {
-      query_order[q] = {key(task.queries[q].position.data()), static_cast<std::uint32_t>(q)};
-    }
-    std::sort(query_order.begin(), query_order.end());
+    task.block_begins = CellBlocks(order, std::max(kMinBlockPoints, n / (kBlocksPerThread * static_cast<std::size_t>(threads_))));
+    const std::vector<Keyed> query_order =
+        MortonOrder(task.queries.size(), [&](std::size_t q) { return key(task.queries[q].position.data()); });
     std::vector<Query> queries(task.queries.size());
-    for (std::size_t q = 0; q < queries.size(); ++q) queries[q] = task.queries[query_order[q].second];
+    ParallelFor(queries.size(), threads_, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t q = begin; q < end; ++q) queries[q] = task.queries[query_order[q].second];
+    });
     task.queries = std::move(queries);
+    // Both in key order: a query's block is the last to start at or below
+    // its key.
+    task.query_blocks.resize(task.queries.size());
+    std::size_t block = 0;
+    for (std::size_t q = 0; q < query_order.size(); ++q) {
+      while (block + 1 < task.block_begins.size() && order[task.block_begins[block + 1]].first <= query_order[q].first) {
+        ++block;
+      }
+      task.query_blocks[q] = static_cast<std::uint32_t>(block);
+    }
+  }
+
+  // The starts of blocks of whole octree cells of the sorted keys: a cell
+  // of more than `most` points is cut into its octants (down to the finest
+  // level), then consecutive cells are merged while they hold at most
+  // `most` together. Cells are cubes apart from one another, so a search
+  // rarely looks beyond its own block.
+  static std::vector<std::size_t> CellBlocks(const std::vector<Keyed>& sorted, std::size_t most) {
+    std::vector<std::pair<std::size_t, std::size_t>> cells;  // [begin, end)
+    const auto cut = [&](const auto& self, std::size_t begin, std::size_t end, int level) -> void {
+      if (end - begin <= most || level >= 21) {
+        cells.emplace_back(begin, end);
+        return;
+      }
+      const int shift = 63 - 3 * (level + 1);
+      const std::uint64_t parent = sorted[begin].first >> (shift + 3);
+      std::size_t child_begin = begin;
+      for (std::uint64_t octant = 0; octant < 8; ++octant) {
+        const std::uint64_t next_key = ((parent << 3) + octant + 1) << shift;
+        const std::size_t child_end = static_cast<std::size_t>(
+            std::lower_bound(sorted.begin() + static_cast<std::ptrdiff_t>(child_begin),
+                             sorted.begin() + static_cast<std::ptrdiff_t>(end), Keyed{next_key, 0}) - sorted.begin());
+        if (child_end > child_begin) self(self, child_begin, child_end, level + 1);
+        child_begin = child_end;
+      }
+    };
+    if (!sorted.empty()) cut(cut, 0, sorted.size(), 0);
+    std::vector<std::size_t> begins;
+    std::size_t held = most;
+    for (const auto& [begin, end] : cells) {
+      if (held + (end - begin) > most) {
+        begins.push_back(begin);
+        held = 0;
+      }
+      held += end - begin;
+    }
+    return begins;
+  }
+
+  // The indices [0, n) with their keys, ordered by key_of(i) (a Morton code
+  // of 63 bits), on the pass's threads: the items are dealt into buckets by their top bits,
+  // then each bucket is sorted alone.
+  template <typename KeyOf>
+  std::vector<Keyed> MortonOrder(std::size_t n, KeyOf key_of) const {
+    constexpr int kBucketBits = 12;
+    constexpr int kShift = 63 - kBucketBits;
+    constexpr std::size_t kBuckets = std::size_t{1} << kBucketBits;
+    std::vector<Keyed> keyed(n);
+    const int threads = std::max(1, std::min<int>(threads_, static_cast<int>(n / 65536) + 1));
+    std::vector<std::vector<std::size_t>> counts(static_cast<std::size_t>(threads), std::vector<std::size_t>(kBuckets + 1, 0));
+    // Range r of the items is [n r / threads, n (r + 1) / threads).
+    const auto for_each_range = [&](const auto& body) {
+      ParallelFor(static_cast<std::size_t>(threads), threads, [&](std::size_t first, std::size_t last) {
+        for (std::size_t r = first; r < last; ++r) body(r, n * r / static_cast<std::size_t>(threads), n * (r + 1) / static_cast<std::size_t>(threads));
+      }, 1);
+    };
+    std::vector<Keyed> unsorted(n);
+    for_each_range([&](std::size_t r, std::size_t begin, std::size_t end) {
+      std::vector<std::size_t>& count = counts[r];
+      for (std::size_t i = begin; i < end; ++i) {
+        unsorted[i] = {key_of(i), static_cast<std::uint32_t>(i)};
+        ++count[(unsorted[i].first >> kShift) + 1];
+      }
+    });
+    // Each range's first slot in each bucket: buckets in order, ranges in
+    // order within a bucket.
+    std::vector<std::size_t> bucket_begin(kBuckets + 1, 0);
+    std::size_t at = 0;
+    for (std::size_t b = 0; b < kBuckets; ++b) {
+      bucket_begin[b] = at;
+      for (auto& count : counts) {
+        const std::size_t c = count[b + 1];
+        count[b + 1] = at;
+        at += c;
+      }
+    }
+    bucket_begin[kBuckets] = at;
+    for_each_range([&](std::size_t r, std::size_t begin, std::size_t end) {
+      std::vector<std::size_t>& next = counts[r];
+      for (std::size_t i = begin; i < end; ++i) keyed[next[(unsorted[i].first >> kShift) + 1]++] = unsorted[i];
+    });
+    unsorted = {};
+    ParallelForDynamic(kBuckets, threads, 16, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t b = begin; b < end; ++b) {
+        std::sort(keyed.begin() + static_cast<std::ptrdiff_t>(bucket_begin[b]),
+                  keyed.begin() + static_cast<std::ptrdiff_t>(bucket_begin[b + 1]));
+      }
+    });
+    return keyed;
   }
 
   // Step 1 to 3 when the particles do not fit in the budget together.

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "base/error.h"
+
 namespace octocosm {
 namespace {
 
@@ -43,6 +45,49 @@ TEST(NeighbourRadii, EqualsTheKthDistanceOfAllPointsOnClusteredPoints) {
   }
   // k = 1 at a particle is the particle itself.
   EXPECT_EQ(radii.Radius(&points[0], 1), 0.0);
+}
+
+// A set cut into blocks, each with its own tree, built on several threads:
+// every radius equals the one tree's, whether the blocks are compact (slabs
+// of points sorted along x) or overlap everywhere (points in random order).
+TEST(NeighbourRadii, BlocksBuiltOnSeveralThreadsGiveTheOneTreesRadii) {
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> clump(0.0, 0.02);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const std::size_t n = 200000;
+  std::vector<double> points;
+  points.reserve(3 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool in_clump = i % 3 == 0;
+    for (int a = 0; a < 3; ++a) points.push_back(in_clump ? 0.5 + clump(rng) : uniform(rng));
+  }
+  std::vector<double> sorted_by_x = points;  // slabs along x: compact blocks
+  {
+    std::vector<std::size_t> order(n);
+    for (std::size_t i = 0; i < n; ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return points[3 * a] < points[3 * b]; });
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int a = 0; a < 3; ++a) sorted_by_x[3 * i + a] = points[3 * order[i] + a];
+    }
+  }
+  const NeighbourRadii one(points);
+  EXPECT_EQ(one.blocks(), 1u);
+  std::vector<std::size_t> begins;
+  for (std::size_t b = 0; b < 9; ++b) begins.push_back(n * b * b / 81);  // uneven blocks
+  for (const std::vector<double>* set : {&points, &sorted_by_x}) {
+    const NeighbourRadii blocks(*set, begins, 4);
+    EXPECT_EQ(blocks.blocks(), 9u);
+    for (int k : {1, 32}) {
+      for (std::size_t i = 0; i < n; i += 331) {
+        EXPECT_EQ(blocks.Radius(&(*set)[3 * i], k), one.Radius(&(*set)[3 * i], k)) << k << " " << i;
+      }
+      const double far[3] = {3.0, -2.0, 0.5};
+      EXPECT_EQ(blocks.Radius(far, k), one.Radius(far, k));
+    }
+  }
+  // Blocks must start at 0, ascend and not be empty.
+  const std::size_t bad[][2] = {{1, 5}, {0, 0}, {0, n}};
+  for (const auto& b : bad) EXPECT_THROW(NeighbourRadii(points, std::span<const std::size_t>(b, 2), 2), Error);
 }
 
 TEST(NeighbourRadii, CoincidentPointsAndTooFewPoints) {

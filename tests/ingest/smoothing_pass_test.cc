@@ -152,6 +152,29 @@ TEST(SmoothingPass, RegionsThroughFilesEqualBruteForce) {
   ExpectExact({"small-regions-periodic", 100, 20000}, 4000, 16);
 }
 
+// Enough particles for the search to cut its tree into blocks built on
+// several threads and to sort on several: the same lengths as on one thread,
+// and those exact.
+TEST(SmoothingPass, SeveralThreadsGiveTheLengthsOfOne) {
+  const std::size_t n = 400000;
+  const double box = 100;
+  const std::vector<double> points = ClusteredPoints(n, box, 5);
+  std::vector<std::unique_ptr<SmoothingLengthTable>> tables;
+  for (unsigned threads : {1u, 3u}) {
+    VectorSource source(points, {}, box, 65536);
+    SmoothingPassOptions options;
+    options.box_size = box;
+    options.threads = threads;
+    options.quiet = true;
+    tables.push_back(ComputeSmoothingLengths(source, options));
+  }
+  for (std::size_t i = 0; i < n; ++i) ASSERT_EQ((*tables[0])[i], (*tables[1])[i]) << i;
+  for (std::size_t i = 0; i < n; i += 4001) {
+    const double truth = BruteForce(points, i, kDefaultNeighbours, box);
+    ASSERT_NEAR((*tables[1])[i], truth, 1e-6 * truth) << i;
+  }
+}
+
 TEST(SmoothingPass, FewerParticlesThanNeighboursTakeThemAll) { ExpectExact({"few", 0, 0}, 10, 32); }
 
 TEST(SmoothingPass, KeepsTheSnapshotsOwnSmoothingLengths) {
