@@ -3,23 +3,17 @@
 #include <algorithm>
 #include <cmath>
 
+#include "base/hash.h"
 #include "synth/gadget_writer.h"
 #include "synth/random.h"
 
 namespace octocosm::synth {
 namespace {
 
-// The 64-bit finalizer of MurmurHash3: every input bit affects every output bit.
-std::uint64_t Mix(std::uint64_t x) {
-  x ^= x >> 33;
-  x *= 0xff51afd7ed558ccdULL;
-  x ^= x >> 33;
-  x *= 0xc4ceb9fe1a85ec53ULL;
-  return x ^ (x >> 33);
-}
-
+// Each chunk's stream from its own seed, so that files and chunks can be
+// generated in any order and on any thread.
 std::uint64_t ChunkSeed(std::uint64_t seed, int file, std::uint64_t chunk) {
-  return Mix(Mix(Mix(seed) ^ static_cast<std::uint64_t>(file)) + chunk);
+  return MixBits64(MixBits64(MixBits64(seed) ^ static_cast<std::uint64_t>(file)) + chunk);
 }
 
 // Into [0, box). Structures reach less than a box length outside it, so one
