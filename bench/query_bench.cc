@@ -23,12 +23,12 @@
 
 #include "base/error.h"
 #include "index/dataset.h"
-#include "index/query.h"
-#include "index/region.h"
-#include "tools/cli_util.h"
 #include "ingest/ingest.h"
 #include "ingest/snapshot/snapshot_source.h"
+#include "query/query.h"
+#include "query/region.h"
 #include "synth/scale_generator.h"
+#include "tools/cli_util.h"
 
 namespace octocosm {
 namespace {

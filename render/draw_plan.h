@@ -21,8 +21,8 @@
 #include <functional>
 #include <vector>
 
-#include "index/lod_frontier.h"
 #include "index/node_hierarchy.h"
+#include "query/lod_frontier.h"
 
 namespace octocosm {
 

@@ -21,7 +21,7 @@ namespace octocosm {
 class GpuBlock {
  public:
   // Uploads the block `bytes` (a whole block or a column subset of one,
-  // index/column_reader.h) whose verified header is `header`, of node cube
+  // query/column_reader.h) whose verified header is `header`, of node cube
   // `node`, into `arena`, which must outlive it. Needs a current GL context.
   // Throws Error::NotSupported when the GPU is out of memory,
   // Error::Corruption (naming `where`) when a column's bytes lie outside

@@ -1,4 +1,4 @@
-// What a rendered image shows: a camera (index/frustum.h) and an image size,
+// What a rendered image shows: a camera (query/frustum.h) and an image size,
 // with the projection both rasterizers use, in double precision.
 //
 // Eye coordinates of a point p: x = (p - position) . right,
@@ -15,7 +15,7 @@
 
 #include <array>
 
-#include "index/frustum.h"
+#include "query/frustum.h"
 #include "render/splat_kernel.h"
 
 namespace octocosm {

@@ -2,10 +2,10 @@
 // (`octocosm render`, headless, and `octocosm view`, in a window).
 //
 // Per frame, on the CPU: the level of detail of each epoch drawn
-// (index/lod_frontier.h: frustum culling, screen-space error, point budget),
+// (query/lod_frontier.h: frustum culling, screen-space error, point budget),
 // the blocks that needs, requested from the block cache in priority order
 // (storage/prefetcher.h reads them on worker threads, only the columns the
-// frame needs: index/column_reader.h ColumnSubsetSource), uploads of blocks
+// frame needs: query/column_reader.h ColumnSubsetSource), uploads of blocks
 // that have arrived, and a draw plan (render/draw_plan.h) that lets loaded
 // parents stand in for children still on their way. Everything else happens
 // on the GPU (render/splat_renderer.h).
@@ -42,10 +42,10 @@
 #include <unordered_map>
 #include <vector>
 
-#include "index/column_reader.h"
 #include "index/dataset.h"
-#include "index/lod_frontier.h"
 #include "index/node_hierarchy.h"
+#include "query/column_reader.h"
+#include "query/lod_frontier.h"
 #include "render/draw_plan.h"
 #include "render/gpu_block.h"
 #include "render/selection_overlay.h"

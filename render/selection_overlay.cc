@@ -4,7 +4,7 @@
 #include <exception>
 
 #include "base/error.h"
-#include "index/particle_lookup.h"
+#include "query/particle_lookup.h"
 
 namespace octocosm {
 

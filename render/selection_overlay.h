@@ -5,7 +5,7 @@
 // however coarse the level that draws the rest. A coarse point that stands
 // for a cluster could only be highlighted whole or not at all.
 //
-// The particles are found through the ID index (index/particle_lookup.h)
+// The particles are found through the ID index (query/particle_lookup.h)
 // and kept as small blocks, one per leaf that holds some, in the frame's
 // columns, so the splat shader draws and moves them like any block. The
 // look-up reads leaves from disk and runs on a worker thread; the upload

@@ -8,7 +8,7 @@
 #include <string>
 
 #include "index/cube.h"
-#include "index/frustum.h"
+#include "query/frustum.h"
 
 namespace CLI {
 class App;

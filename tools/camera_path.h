@@ -30,7 +30,7 @@
 
 #include "index/cube.h"
 #include "index/dataset.h"
-#include "index/frustum.h"
+#include "query/frustum.h"
 
 namespace octocosm {
 

@@ -13,8 +13,8 @@
 #include <CLI/CLI.hpp>
 
 #include "base/error.h"
-#include "index/particle_lookup.h"
-#include "index/query.h"
+#include "query/particle_lookup.h"
+#include "query/query.h"
 #include "tools/camera_flags.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"

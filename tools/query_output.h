@@ -1,6 +1,6 @@
 // Writers for the points a query returns: CSV, raw binary and PLY
 // (docs/QUERIES.md describes each byte). A writer receives the batches of
-// index/query.h as they arrive and never holds more than one batch, except
+// query/query.h as they arrive and never holds more than one batch, except
 // that PLY, whose header must state the point count, spools its body to a
 // temporary file until Finish.
 #pragma once
@@ -12,7 +12,7 @@
 #include <string>
 
 #include "index/block_codec.h"
-#include "index/query.h"
+#include "query/query.h"
 
 namespace octocosm {
 

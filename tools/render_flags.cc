@@ -5,7 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "base/error.h"
-#include "index/particle_lookup.h"
+#include "query/particle_lookup.h"
 #include "tools/cli_util.h"
 #include "tools/cmd_query.h"
 

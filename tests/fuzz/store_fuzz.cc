@@ -2,7 +2,7 @@
 // and render paths do: the manifest (storage/manifest.h), each page file's
 // header and block index (storage/page_file_reader.h), the dataset metadata
 // (index/dataset.h), and each block read whole and by columns
-// (index/column_reader.h) and decoded (index/block_codec.h).
+// (query/column_reader.h) and decoded (index/block_codec.h).
 //
 // The input is a little archive of the store's files: a flag byte, then
 // sections of a u32 little-endian length and that many bytes (the last one
@@ -22,9 +22,9 @@
 
 #include "base/error.h"
 #include "index/block_codec.h"
-#include "index/column_reader.h"
 #include "index/dataset.h"
 #include "index/morton.h"
+#include "query/column_reader.h"
 #include "storage/coding.h"
 #include "storage/manifest.h"
 #include "storage/store_writer.h"

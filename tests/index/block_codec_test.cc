@@ -17,7 +17,7 @@
 
 #include "base/error.h"
 #include "index/extended_sum.h"
-#include "index/query.h"
+#include "query/query.h"
 
 namespace octocosm {
 namespace {

@@ -10,16 +10,16 @@
 #include <random>
 #include <thread>
 
-#include "index/particle_lookup.h"
 #include "ingest/ingest.h"
+#include "query/particle_lookup.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
 #include "render/reference_rasterizer.h"
 #include "render/selection_set.h"
+#include "synth/scale_generator.h"
 #include "tests/support/temp_dir.h"
 #include "tools/camera_flags.h"
 #include "tools/reference_render.h"
-#include "synth/scale_generator.h"
 
 namespace octocosm {
 namespace {

@@ -15,10 +15,10 @@
 #include <unistd.h>
 
 #include "base/error.h"
-#include "index/particle_lookup.h"
 #include "ingest/ingest.h"
-#include "tools/query_output.h"
 #include "ingest/snapshot/snapshot_source.h"
+#include "query/particle_lookup.h"
+#include "tools/query_output.h"
 
 namespace octocosm {
 namespace {

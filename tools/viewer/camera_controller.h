@@ -1,6 +1,6 @@
 // The viewer's camera, moved by the mouse and keyboard: orbit about a pivot
 // or fly. Pure arithmetic in double precision (the renderer takes a Camera in
-// double, index/frustum.h); no window, no GL, so tests drive it directly.
+// double, query/frustum.h); no window, no GL, so tests drive it directly.
 //
 // State: a position, a viewing direction given by yaw and pitch about the
 // world's up direction (the --up of the starting camera), and the distance
@@ -26,7 +26,7 @@
 
 #include <glm/vec3.hpp>
 
-#include "index/frustum.h"
+#include "query/frustum.h"
 
 namespace octocosm {
 

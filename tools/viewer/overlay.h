@@ -10,8 +10,8 @@
 #include <optional>
 #include <string>
 
-#include "index/column_reader.h"
-#include "index/lod_frontier.h"
+#include "query/column_reader.h"
+#include "query/lod_frontier.h"
 #include "render/gpu_stage_timer.h"
 #include "render/scene_renderer.h"
 #include "render/tone_map.h"

@@ -1,9 +1,9 @@
 // Box selection in the viewer: the part of the view frustum that lies under a
-// rectangle drawn on the screen, as six planes that index/region.h
+// rectangle drawn on the screen, as six planes that query/region.h
 // (MakeFrustumRegion) turns into a query region.
 #pragma once
 
-#include "index/frustum.h"
+#include "query/frustum.h"
 #include "render/render_view.h"
 
 namespace octocosm {

@@ -4,8 +4,8 @@
 #include <exception>
 
 #include "base/error.h"
-#include "index/particle_lookup.h"
-#include "index/region.h"
+#include "query/particle_lookup.h"
+#include "query/region.h"
 #include "tools/cmd_query.h"
 
 namespace octocosm {

@@ -1,6 +1,6 @@
 // The viewer's selections, worked out on a background thread so that the
 // frame loop never waits for the disk: the particles under a screen
-// rectangle (every leaf in a frustum, index/particle_lookup.h) or the IDs
+// rectangle (every leaf in a frustum, query/particle_lookup.h) or the IDs
 // of a file. One job counts at a time: starting another abandons the
 // previous one (it is asked to stop and its result is dropped). The result
 // is taken by the frame loop, which hands it to the GL thread's renderer
@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "index/dataset.h"
-#include "index/frustum.h"
+#include "query/frustum.h"
 
 namespace octocosm {
 

@@ -23,7 +23,7 @@
 #include <memory>
 
 #include "index/cube.h"
-#include "index/frustum.h"
+#include "query/frustum.h"
 
 namespace octocosm {
 

@@ -1,4 +1,4 @@
-#include "index/column_reader.h"
+#include "query/column_reader.h"
 
 #include <algorithm>
 #include <functional>

@@ -1,4 +1,4 @@
-#include "index/node_selection.h"
+#include "query/node_selection.h"
 
 #include <algorithm>
 #include <cmath>

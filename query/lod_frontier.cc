@@ -1,4 +1,4 @@
-#include "index/lod_frontier.h"
+#include "query/lod_frontier.h"
 
 #include <array>
 #include <cmath>

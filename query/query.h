@@ -1,11 +1,11 @@
 // Spatial queries on one epoch of a dataset: the points of a level of detail
-// (a level, or a screen-space error for a camera; index/node_selection.h)
-// that lie in a region (box, sphere, frustum; index/region.h), with only the
+// (a level, or a screen-space error for a camera; query/node_selection.h)
+// that lie in a region (box, sphere, frustum; query/region.h), with only the
 // columns asked for.
 //
 // Cost: node selection reads index pages only; then each selected node's
 // block is read once, in file order, fetching the header and the wanted
-// columns only (index/column_reader.h). Results are streamed: the callback
+// columns only (query/column_reader.h). Results are streamed: the callback
 // receives one batch per block, holding that block's points that lie in the
 // region, so a result larger than memory is fine. Points come back in stored
 // coordinates (see region.h for periodic boxes), dequantized to doubles.
@@ -16,10 +16,10 @@
 #include <optional>
 
 #include "index/block_codec.h"
-#include "index/column_reader.h"
 #include "index/dataset.h"
-#include "index/node_selection.h"
-#include "index/region.h"
+#include "query/column_reader.h"
+#include "query/node_selection.h"
+#include "query/region.h"
 
 namespace octocosm {
 

@@ -13,11 +13,11 @@
 #include <stop_token>
 #include <vector>
 
-#include "index/column_reader.h"
 #include "index/dataset.h"
 #include "index/id_index.h"
 #include "index/node_points.h"
-#include "index/region.h"
+#include "query/column_reader.h"
+#include "query/region.h"
 
 namespace octocosm {
 
@@ -88,7 +88,7 @@ ParticleIdCollection ParticleIdsInRegion(const Dataset& dataset, std::uint32_t e
                                          std::size_t max_ids = SIZE_MAX, std::stop_token stop = {});
 
 // The IDs of every particle of `epoch` inside the closed box [lo, hi]
-// (periodic boxes as in index/region.h): ParticleIdsInRegion of the box.
+// (periodic boxes as in query/region.h): ParticleIdsInRegion of the box.
 std::vector<std::uint64_t> ParticleIdsInBox(const Dataset& dataset, std::uint32_t epoch, const std::array<double, 3>& lo,
                                             const std::array<double, 3>& hi);
 

@@ -1,4 +1,4 @@
-#include "index/particle_lookup.h"
+#include "query/particle_lookup.h"
 
 #include <algorithm>
 #include <map>
@@ -6,8 +6,8 @@
 #include <unordered_map>
 
 #include "base/error.h"
-#include "index/query.h"
-#include "index/region.h"
+#include "query/query.h"
+#include "query/region.h"
 
 namespace octocosm {
 namespace {

@@ -1,4 +1,4 @@
-#include "index/region.h"
+#include "query/region.h"
 
 #include <algorithm>
 #include <cmath>

@@ -28,8 +28,8 @@
 #include <vector>
 
 #include "index/dataset.h"
-#include "index/frustum.h"
-#include "index/region.h"
+#include "query/frustum.h"
+#include "query/region.h"
 
 namespace octocosm {
 

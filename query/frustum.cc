@@ -1,4 +1,4 @@
-#include "index/frustum.h"
+#include "query/frustum.h"
 
 #include <cmath>
 #include <numbers>

@@ -3,7 +3,7 @@
 // first. Works on a NodeHierarchy in memory: no I/O.
 //
 // Starting from the root, nodes are taken in order of their screen-space
-// error (index/node_selection.h: projected point spacing in pixels, largest
+// error (query/node_selection.h: projected point spacing in pixels, largest
 // first). A node whose error exceeds the threshold and that has children is
 // refined: replaced by its children whose cubes meet the view frustum (the
 // others are culled). Refining adds the children's points and removes the
@@ -24,9 +24,9 @@
 #include <vector>
 
 #include "index/cube.h"
-#include "index/frustum.h"
 #include "index/node_hierarchy.h"
-#include "index/node_selection.h"
+#include "query/frustum.h"
+#include "query/node_selection.h"
 
 namespace octocosm {
 

@@ -1,4 +1,4 @@
-#include "index/query.h"
+#include "query/query.h"
 
 #include "base/error.h"
 

@@ -1,4 +1,4 @@
-// The level-of-detail frontier of a frame (index/lod_frontier.h) on trees
+// The level-of-detail frontier of a frame (query/lod_frontier.h) on trees
 // built in memory: a frontier, within its budget, coarse before fine.
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <set>
 
 #include "base/error.h"
-#include "index/lod_frontier.h"
+#include "query/lod_frontier.h"
 
 namespace octocosm {
 namespace {

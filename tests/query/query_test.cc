@@ -1,7 +1,7 @@
 // Indexed queries against brute force: every query must return exactly the
 // points that decoding every block of the same level of detail and filtering
 // by position returns, while touching fewer blocks and bytes.
-#include "index/query.h"
+#include "query/query.h"
 
 #include <gtest/gtest.h>
 
@@ -20,11 +20,11 @@
 #include "base/error.h"
 #include "index/block_codec.h"
 #include "index/dataset.h"
-#include "index/frustum.h"
-#include "index/node_selection.h"
-#include "index/particle_lookup.h"
-#include "index/region.h"
 #include "ingest/ingest.h"
+#include "query/frustum.h"
+#include "query/node_selection.h"
+#include "query/particle_lookup.h"
+#include "query/region.h"
 
 namespace octocosm {
 namespace {
@@ -223,7 +223,7 @@ TEST_F(QueryTest, BoxesAndSpheresMatchBruteForceAtEveryLevel) {
   }
 }
 
-// Selection by region (index/particle_lookup.h): the IDs of every particle
+// Selection by region (query/particle_lookup.h): the IDs of every particle
 // of the leaves in the region, each once; a cap stops reading with the first
 // max_ids of them, and a stop request ends it early.
 TEST_F(QueryTest, ParticleIdsInRegionAreTheLeavesParticlesUpToTheCap) {
