@@ -52,7 +52,6 @@ class ComputeSplatter {
   bool Prepare(int width, int height);
   // Blobs above this radius (pixels) are added by a workgroup each.
   void set_compute_radius(double pixels) { compute_radius_ = static_cast<float>(pixels); }
-  double compute_radius() const { return compute_radius_; }
   // Room for so many large blobs a dispatch (those past it are added by the
   // compute shader, more slowly). Tests shrink it.
   void set_large_blob_capacity(std::uint32_t blobs);

@@ -76,11 +76,6 @@ class SplatRenderer {
   double max_blob_radius() const { return max_blob_radius_; }
   // Whether this GL can take the compute path (render/compute_splatter.h).
   bool compute_supported() const { return compute_supported_; }
-  // Whether SplatPath::kAuto takes the compute path: where it is supported
-  // and the GL is not a software rasterizer (llvmpipe blends sprites 1.5-3x
-  // faster than it runs the compute path's atomics; a GPU, whose graphics
-  // units are few, the other way round).
-  bool compute_preferred() const { return compute_preferred_; }
   // The path the current (or last) frame takes: kRaster or kCompute. A frame
   // asking for kCompute takes the raster path where the compute path cannot
   // hold its image (one storage buffer's size) or the GL lacks it.
@@ -229,6 +224,10 @@ class SplatRenderer {
   std::size_t commands_used_ = 0;  // this frame
 
   bool compute_supported_ = false;
+  // Whether SplatPath::kAuto takes the compute path: where it is supported
+  // and the GL is not a software rasterizer (llvmpipe blends sprites 1.5-3x
+  // faster than it runs the compute path's atomics; a GPU, whose graphics
+  // units are few, the other way round).
   bool compute_preferred_ = false;
   std::unique_ptr<ComputeSplatter> compute_;  // made on the first frame that takes the compute path
   bool compute_frame_ = false;                // this frame takes it

@@ -30,13 +30,8 @@ void UploadRing::NextQuarter() {
   used_ = 0;
   GLsync& fence = fences_[current_];
   if (fence == nullptr) return;
-  GLenum status = glClientWaitSync(fence, 0, 0);
-  if (status == GL_TIMEOUT_EXPIRED) {
-    ++waits_;
-    do {
-      status = glClientWaitSync(fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000);
-    } while (status == GL_TIMEOUT_EXPIRED);
-  }
+  GLenum status = glClientWaitSync(fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000);
+  while (status == GL_TIMEOUT_EXPIRED) status = glClientWaitSync(fence, GL_SYNC_FLUSH_COMMANDS_BIT, 1'000'000'000);
   if (status == GL_WAIT_FAILED) throw Error::NotSupported("OpenGL", "waiting for an upload's staging failed");
   glDeleteSync(fence);
   fence = nullptr;

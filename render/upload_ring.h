@@ -31,8 +31,6 @@ class UploadRing {
   void Upload(std::span<const std::uint8_t> data, GLuint target, std::size_t offset);
 
   std::size_t bytes() const { return 4 * quarter_; }
-  // How often entering a quarter found the GPU still copying from it.
-  std::uint64_t waits() const { return waits_; }
 
  private:
   // Moves to the next quarter, fencing the one left and waiting for the one entered.
@@ -44,7 +42,6 @@ class UploadRing {
   std::size_t current_ = 0;  // quarter being filled
   std::size_t used_ = 0;     // bytes of it
   std::array<GLsync, 4> fences_{};
-  std::uint64_t waits_ = 0;
 };
 
 }  // namespace octocosm
