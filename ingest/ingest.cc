@@ -14,7 +14,6 @@
 #include <future>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <thread>
 #include <unordered_set>
@@ -23,13 +22,13 @@
 
 #include "base/error.h"
 #include "base/interrupt_cleanup.h"
+#include "base/mutex.h"
 #include "base/parallel_for.h"
 #include "base/progress.h"
 #include "base/temp_directory.h"
 #include "index/block_codec.h"
 #include "index/dataset_manifest.h"
 #include "index/id_index.h"
-#include "storage/store_writer.h"
 #include "ingest/chunk_gatherer.h"
 #include "ingest/chunk_queue.h"
 #include "ingest/chunker.h"
@@ -40,6 +39,7 @@
 #include "ingest/outliers.h"
 #include "ingest/resident_epoch.h"
 #include "ingest/smoothing_pass.h"
+#include "storage/store_writer.h"
 
 namespace octocosm {
 namespace {
@@ -304,8 +304,10 @@ struct EpochBuild {
   // unique and compact, else the sorter; both null without IDs.
   DenseIdTable* id_table = nullptr;
   ExternalSorter<IdLeafRecord>* id_pairs = nullptr;
-  std::mutex mutex;  // guards report (the store, the table and the sorter take blocks and pairs from several threads)
-  EpochReport* report = nullptr;
+  // The store, the table and the sorter take blocks and pairs from several
+  // threads; the report takes this lock.
+  Mutex mutex;
+  EpochReport* report PT_GUARDED_BY(mutex) = nullptr;
   Progress* progress = nullptr;
 
   // Encodes a finished node into `block` (the caller's buffer, reused from
@@ -324,7 +326,7 @@ struct EpochBuild {
     // at 10^8 points) happen outside their locks.
     store->AddBlock(key.value(), block, points.size());
     if (!pairs.empty()) id_pairs->Add(pairs);
-    std::lock_guard lock(mutex);
+    MutexLock lock(mutex);
     ++report->nodes;
     report->depth = std::max(report->depth, key.level());
     if (is_leaf) ++report->leaves;
@@ -357,7 +359,7 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
   TopLevelMerger merger(*build.cube, *build.tree, [&build, &merger_block](NodeKey key, const NodePoints& points) {
     build.Emit(key, points, /*is_leaf=*/false, merger_block);
   });
-  std::mutex merge_mutex;  // guards merger, ready, next_to_merge
+  Mutex merge_mutex;  // guards merger, ready, next_to_merge
   std::map<std::size_t, NodePoints> ready;
   std::size_t next_to_merge = 0;
   std::vector<std::uint64_t> point_counts;
@@ -384,7 +386,7 @@ NodePoints BuildChunks(std::vector<Chunk> chunks, const ResidentEpoch& resident,
         root = BuildSubtree(chunks[c].TakePoints(), chunks[c].key, *build.cube, *build.tree, sink, &workspace);
       }
       {
-        std::lock_guard lock(merge_mutex);
+        MutexLock lock(merge_mutex);
         ready.emplace(c, std::move(root));
         for (auto it = ready.begin(); it != ready.end() && it->first == next_to_merge; it = ready.erase(it)) {
           merger.Add(chunks[next_to_merge].key, std::move(it->second));

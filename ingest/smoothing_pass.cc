@@ -11,10 +11,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <limits>
-#include <mutex>
 #include <vector>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "base/parallel_for.h"
 #include "base/progress.h"
 #include "base/temp_directory.h"
@@ -358,7 +358,7 @@ class SmoothingPass {
   void Search(Task& task, std::vector<Unresolved>& unresolved) {
     SortSpatially(task);
     const NeighbourRadii radii(task.positions, task.block_begins, threads_);
-    std::mutex mutex;
+    Mutex mutex;  // guards unresolved
     float* table = table_->data();
     ParallelForDynamic(task.queries.size(), threads_, 1024, [&](std::size_t begin, std::size_t end) {
       std::vector<Unresolved> local;
@@ -375,7 +375,7 @@ class SmoothingPass {
       }
       if (progress_) progress_->Add(end - begin - local.size());
       if (local.empty()) return;
-      std::lock_guard lock(mutex);
+      MutexLock lock(mutex);
       unresolved.insert(unresolved.end(), local.begin(), local.end());
     });
     if (!task.explicit_queries) report_.searched += task.queries.size();

@@ -7,10 +7,10 @@
 #include <unistd.h>
 
 #include <array>
-#include <mutex>
 #include <string>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "render/gl_context.h"
 
 namespace octocosm {
@@ -76,7 +76,7 @@ const OsMesaLibrary& LoadOsMesa() {
 class CrashNote {
  public:
   CrashNote() {
-    std::lock_guard<std::mutex> lock(mutex_);
+    MutexLock lock(mutex_);
     if (users_++ > 0) return;
     struct sigaction action {};
     action.sa_sigaction = &Note;
@@ -86,7 +86,7 @@ class CrashNote {
     sigaction(SIGBUS, &action, &previous_bus_);
   }
   ~CrashNote() {
-    std::lock_guard<std::mutex> lock(mutex_);
+    MutexLock lock(mutex_);
     if (--users_ > 0) return;
     sigaction(SIGSEGV, &previous_segv_, nullptr);
     sigaction(SIGBUS, &previous_bus_, nullptr);
@@ -113,8 +113,9 @@ class CrashNote {
     signal(signal_number, SIG_DFL);
   }
 
-  static inline std::mutex mutex_;
-  static inline int users_ = 0;
+  static inline Mutex mutex_;
+  static inline int users_ GUARDED_BY(mutex_) = 0;
+  // Written under mutex_, read by the signal handler, which may not lock.
   static inline struct sigaction previous_segv_ {};
   static inline struct sigaction previous_bus_ {};
 };

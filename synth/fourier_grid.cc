@@ -3,17 +3,17 @@
 #include <fftw3.h>
 
 #include <cstring>
-#include <mutex>
 #include <string>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "base/parallel_for.h"
 
 namespace octocosm::synth {
 namespace {
 
-std::mutex& PlannerMutex() {
-  static std::mutex mutex;
+Mutex& PlannerMutex() {
+  static Mutex mutex;
   return mutex;
 }
 
@@ -37,7 +37,7 @@ FourierGrid::FourierGrid(int n, int threads)
   const int nz = n / 2 + 1;
   auto* column_buffer = fftw_alloc_complex(static_cast<std::size_t>(n) * nz);
   {
-    std::lock_guard<std::mutex> lock(PlannerMutex());
+    MutexLock lock(PlannerMutex());
     auto* complex_data = reinterpret_cast<fftw_complex*>(data_);
     plane_forward_ = fftw_plan_dft_r2c_2d(n, n, data_, complex_data, FFTW_ESTIMATE);
     plane_inverse_ = fftw_plan_dft_c2r_2d(n, n, complex_data, data_, FFTW_ESTIMATE);
@@ -53,7 +53,7 @@ FourierGrid::FourierGrid(int n, int threads)
   fftw_free(column_buffer);
   if (plane_forward_ == nullptr || plane_inverse_ == nullptr || column_forward_ == nullptr ||
       column_inverse_ == nullptr) {
-    std::lock_guard<std::mutex> lock(PlannerMutex());
+    MutexLock lock(PlannerMutex());
     DestroyPlan(plane_forward_);
     DestroyPlan(plane_inverse_);
     DestroyPlan(column_forward_);
@@ -64,7 +64,7 @@ FourierGrid::FourierGrid(int n, int threads)
 }
 
 FourierGrid::~FourierGrid() {
-  std::lock_guard<std::mutex> lock(PlannerMutex());
+  MutexLock lock(PlannerMutex());
   DestroyPlan(plane_forward_);
   DestroyPlan(plane_inverse_);
   DestroyPlan(column_forward_);

@@ -5,10 +5,10 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
-#include <mutex>
 #include <system_error>
 
 #include "base/error.h"
+#include "base/mutex.h"
 #include "base/parallel_for.h"
 #include "synth/cosmic_web.h"
 #include "synth/gadget_writer.h"
@@ -64,7 +64,7 @@ ScaleResult RunScaleGenerator(const ScaleOptions& options, const std::function<v
   // Closed files wait here, under their temporary names, for the final rename.
   std::vector<std::unique_ptr<GadgetFileWriter>> writers(static_cast<std::size_t>(file_count));
   std::atomic<int> next_file{0};
-  std::mutex mutex;  // guards the fields below and serialises progress calls
+  Mutex mutex;  // guards the fields below and serialises progress calls
   int files_done = 0;
   std::uint64_t particles_done = 0;
 
@@ -85,7 +85,7 @@ ScaleResult RunScaleGenerator(const ScaleOptions& options, const std::function<v
       writer->Close();
       const std::uint64_t written = writer->written();
       writers[static_cast<std::size_t>(f)] = std::move(writer);
-      std::lock_guard lock(mutex);
+      MutexLock lock(mutex);
       ++files_done;
       particles_done += written;
       if (progress) {
