@@ -11,9 +11,10 @@
 # Times only, by default: the reference rendering that gives the PSNR and
 # SSIM columns costs about 150 s a call at 10^8 points even on 16 cores (the
 # neighbour search of every particle); REFERENCE=1 adds it. On an H100 host
-# (16 cores) generating 10^8 points takes 2.4 s and ingesting them 147 s; the
-# overview sweep about 100 s, the zoomed one about 60 s, the particle-mesh
-# series 26 s. Keep the call under the device's per-call limit.
+# (16 cores) generating 10^8 points took 2.4 s and ingesting them 147 s (with
+# the neighbour pass's sort and tree build on one thread; they now run on
+# every core); the overview sweep about 100 s, the zoomed one about 60 s, the
+# particle-mesh series 26 s. Keep the call under the device's per-call limit.
 #
 # POINTS (default 1e8), PM_SIDE (default 128) and BACKEND (default egl) make a
 # dry run possible on any machine:
