@@ -413,7 +413,7 @@ class SmoothingPass {
       }
       return code;
     };
-    const std::vector<Keyed> order = MortonOrder(n, [&](std::size_t i) { return key(&task.positions[3 * i]); });
+    std::vector<Keyed> order = MortonOrder(n, [&](std::size_t i) { return key(&task.positions[3 * i]); });
     std::vector<double> sorted(3 * n);
     ParallelFor(n, threads_, [&](std::size_t begin, std::size_t end) {
       for (std::size_t i = begin; i < end; ++i) {
@@ -421,7 +421,11 @@ class SmoothingPass {
       }
     });
     task.positions = std::move(sorted);
-    task.block_begins = CellBlocks(order, std::max(kMinBlockPoints, n / (kBlocksPerThread * static_cast<std::size_t>(threads_))));
+    const std::size_t block_points = n / (kBlocksPerThread * static_cast<std::size_t>(threads_));
+    task.block_begins = CellBlocks(order, std::max(kMinBlockPoints, block_points));
+    std::vector<std::uint64_t> block_first_keys;
+    for (const std::size_t begin : task.block_begins) block_first_keys.push_back(order[begin].first);
+    order = {};
     const std::vector<Keyed> query_order =
         MortonOrder(task.queries.size(), [&](std::size_t q) { return key(task.queries[q].position.data()); });
     std::vector<Query> queries(task.queries.size());
@@ -434,9 +438,7 @@ class SmoothingPass {
     task.query_blocks.resize(task.queries.size());
     std::size_t block = 0;
     for (std::size_t q = 0; q < query_order.size(); ++q) {
-      while (block + 1 < task.block_begins.size() && order[task.block_begins[block + 1]].first <= query_order[q].first) {
-        ++block;
-      }
+      while (block + 1 < block_first_keys.size() && block_first_keys[block + 1] <= query_order[q].first) ++block;
       task.query_blocks[q] = static_cast<std::uint32_t>(block);
     }
   }
@@ -479,8 +481,8 @@ class SmoothingPass {
   }
 
   // The indices [0, n) with their keys, ordered by key_of(i) (a Morton code
-  // of 63 bits), on the pass's threads: the items are dealt into buckets by their top bits,
-  // then each bucket is sorted alone.
+  // of 63 bits), on the pass's threads: the items are dealt into buckets by
+  // their keys' top bits, then each bucket is sorted alone.
   template <typename KeyOf>
   std::vector<Keyed> MortonOrder(std::size_t n, KeyOf key_of) const {
     constexpr int kBucketBits = 12;
@@ -488,11 +490,12 @@ class SmoothingPass {
     constexpr std::size_t kBuckets = std::size_t{1} << kBucketBits;
     std::vector<Keyed> keyed(n);
     const int threads = std::max(1, std::min<int>(threads_, static_cast<int>(n / 65536) + 1));
-    std::vector<std::vector<std::size_t>> counts(static_cast<std::size_t>(threads), std::vector<std::size_t>(kBuckets + 1, 0));
-    // Range r of the items is [n r / threads, n (r + 1) / threads).
+    const auto ranges = static_cast<std::size_t>(threads);
+    std::vector<std::vector<std::size_t>> counts(ranges, std::vector<std::size_t>(kBuckets + 1, 0));
+    // Range r of the items is [n r / ranges, n (r + 1) / ranges).
     const auto for_each_range = [&](const auto& body) {
-      ParallelFor(static_cast<std::size_t>(threads), threads, [&](std::size_t first, std::size_t last) {
-        for (std::size_t r = first; r < last; ++r) body(r, n * r / static_cast<std::size_t>(threads), n * (r + 1) / static_cast<std::size_t>(threads));
+      ParallelFor(ranges, threads, [&](std::size_t first, std::size_t last) {
+        for (std::size_t r = first; r < last; ++r) body(r, n * r / ranges, n * (r + 1) / ranges);
       }, 1);
     };
     std::vector<Keyed> unsorted(n);
