@@ -74,7 +74,7 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     queue.pop();
     const NodeHierarchy::Node& node = hierarchy.node(index);
     f.load_order.push_back(index);
-    if (f.budget_reached || !(node_error > options.pixel_threshold) || node.is_leaf()) {
+    if (!(node_error > options.pixel_threshold) || node.is_leaf()) {
       f.selected.push_back(index);
       continue;
     }
@@ -92,6 +92,8 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     }
     const std::uint64_t refined_points = f.points - node.entry.point_count + child_points;
     if (options.point_budget > 0 && refined_points > options.point_budget) {
+      // Drawn as it is; a node further down the queue whose children cost
+      // less may still fit.
       f.budget_reached = true;
       f.selected.push_back(index);
       continue;

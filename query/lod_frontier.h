@@ -7,10 +7,11 @@
 // first). A node whose error exceeds the threshold and that has children is
 // refined: replaced by its children whose cubes meet the view frustum (the
 // others are culled). Refining adds the children's points and removes the
-// node's; when that would exceed the point budget, refinement stops there
-// and every node not yet refined is drawn as it is. So the budget is spent
-// where the picture needs it most, and the selection never exceeds the
-// budget unless the root alone does.
+// node's; a node whose refinement would exceed the point budget is drawn as
+// it is, and the nodes after it are still refined where their children fit
+// in what is left. So the budget is spent where the picture needs it most,
+// then filled, and the selection never exceeds the budget unless the root
+// alone does.
 //
 // The selection is a frontier: no selected node is an ancestor of another,
 // and (for nodes in view) every leaf below a refined node has exactly one
@@ -47,7 +48,7 @@ struct LodFrontier {
   std::uint64_t points = 0;              // points in the selected nodes
   std::uint64_t nodes_visited = 0;
   std::uint64_t nodes_culled = 0;
-  bool budget_reached = false;           // refinement stopped at the budget
+  bool budget_reached = false;           // some node was left unrefined for the budget
 };
 
 // Throws Error::InvalidArgument for a threshold that is not > 0 or a negative

@@ -2,6 +2,8 @@
 // built in memory: a frontier, within its budget, coarse before fine.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <random>
 #include <set>
 
@@ -106,6 +108,29 @@ TEST(LodFrontierTest, PointBudgetIsNeverExceededAndSpentCoarseFirst) {
   }
   // Without a budget the same view takes more.
   EXPECT_GT(SelectLodFrontier(h, cube, view, {0.01, 0, 0}).points, 100000u);
+}
+
+// A node whose children would overflow the budget is drawn as it is, and
+// the budget left goes to a node further down the queue whose children fit.
+TEST(LodFrontierTest, TheBudgetLeftAfterANodeTooCostlyToRefineGoesToTheNextThatFits) {
+  const NodeKey root = NodeKey::Root(), near = root.Child(0), far = root.Child(7);
+  std::vector<IndexEntry> entries = {{root.value(), 1, 1, 10, 0, 1}, {near.value(), 1, 1, 20, 0, 1},
+                                     {far.value(), 1, 1, 10, 0, 1}};
+  for (int o = 0; o < 8; ++o) {
+    entries.push_back({near.Child(o).value(), 1, 1, 100, 0, 1});  // refining `near`: +780 points
+    entries.push_back({far.Child(o).value(), 1, 1, 2, 0, 1});     // refining `far`: +6 points
+  }
+  const NodeHierarchy h = NodeHierarchy::FromEntries(entries, "test");
+  const Cube cube{{0, 0, 0}, 1, false};
+  const ScreenErrorView view = ViewFrom({-0.6, -0.6, -0.6}, 0.01);  // nearer `near`: its error comes first
+  const LodFrontier f = SelectLodFrontier(h, cube, view, {0.01, 150, 0});
+  EXPECT_TRUE(f.budget_reached);
+  EXPECT_EQ(f.points, 20u + 16u);  // `near` as it is, `far` as its eight children
+  const auto find = [&](NodeKey key) { return *h.Find(key); };
+  EXPECT_NE(std::find(f.selected.begin(), f.selected.end(), find(near)), f.selected.end());
+  EXPECT_NE(std::find(f.refined.begin(), f.refined.end(), find(far)), f.refined.end());
+  EXPECT_LT(std::find(f.load_order.begin(), f.load_order.end(), find(near)),
+            std::find(f.load_order.begin(), f.load_order.end(), find(far)));
 }
 
 TEST(LodFrontierTest, NodesOutOfViewAreCulled) {
