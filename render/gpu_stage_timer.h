@@ -16,13 +16,13 @@ namespace octocosm {
 
 struct GpuStageTimes {
   double draw_ms = 0;      // from the frame's start (the clear) to its measuring: the blobs
-  double measure_ms = 0;   // the image statistics' compute passes
+  double measure_ms = 0;   // the image statistics' compute passes (not the wait for their result)
   double tone_map_ms = 0;  // tone mapping into the display image or the window
 };
 
 class GpuStageTimer {
  public:
-  enum class Mark { kFrameStart, kMeasureStart, kToneMapStart, kToneMapEnd };
+  enum class Mark { kFrameStart, kMeasureStart, kMeasureEnd, kToneMapStart, kToneMapEnd };
 
   GpuStageTimer();
   GpuStageTimer(const GpuStageTimer&) = delete;
@@ -32,12 +32,12 @@ class GpuStageTimer {
   // Records a mark of the current frame; kFrameStart begins a new frame. A
   // mark given twice in a frame keeps the later one.
   void Record(Mark mark);
-  // The times of the newest frame whose four marks the GPU has written;
-  // `wait`: wait for the newest frame with all four marks recorded.
+  // The times of the newest frame whose marks the GPU has all written;
+  // `wait`: wait for the newest frame with every mark recorded.
   std::optional<GpuStageTimes> Latest(bool wait);
 
  private:
-  static constexpr int kMarks = 4;
+  static constexpr int kMarks = 5;
   static constexpr int kFrames = 4;  // frames in flight before a set of queries is reused
   struct FrameQueries {
     std::array<GLuint, kMarks> queries{};

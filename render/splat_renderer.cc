@@ -47,9 +47,10 @@ SplatRenderer::SplatRenderer() {
   glCreateVertexArrays(1, &vao);
   empty_vao_ = GlVertexArray(vao);
   frame_uniforms_ = MakeGlBuffer(sizeof(FrameUniforms), nullptr, GL_DYNAMIC_STORAGE_BIT);
+  statistics_work_ = MakeGlBuffer(kStatisticsWords * 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
   constexpr GLbitfield kMapped = GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
   for (PendingStatistics& pending : measures_) {
-    pending.buffer = MakeGlBuffer(kStatisticsWords * 4, nullptr, kMapped | GL_DYNAMIC_STORAGE_BIT);
+    pending.buffer = MakeGlBuffer(kStatisticsWords * 4, nullptr, kMapped);
     pending.words = static_cast<const std::uint32_t*>(
         glMapNamedBufferRange(pending.buffer.get(), 0, static_cast<GLsizeiptr>(kStatisticsWords * 4), kMapped));
     if (pending.words == nullptr) throw Error::NotSupported("OpenGL", "cannot map the image statistics' buffer");
@@ -380,10 +381,10 @@ void SplatRenderer::StartMeasure() {
   Collect(pending, true);  // the oldest in flight: its buffer is about to be written again
   std::vector<std::uint32_t> words(kStatisticsWords, 0);
   words[1] = 0xFFFFFFFFu;  // the ordered minimum starts at the largest value
-  glNamedBufferSubData(pending.buffer.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
+  glNamedBufferSubData(statistics_work_.get(), 0, static_cast<GLsizeiptr>(words.size() * 4), words.data());
   glUseProgram(statistics_.get());
   glBindTextureUnit(0, accumulation_.texture.get());
-  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, pending.buffer.get());
+  glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 2, statistics_work_.get());
   glProgramUniform2i(statistics_.get(), Location(statistics_, "u_offset"), margin_, margin_);
   glProgramUniform2i(statistics_.get(), Location(statistics_, "u_size"), width_, height_);
   glProgramUniform1i(statistics_.get(), Location(statistics_, "u_color_mode"), static_cast<GLint>(settings_.color));
@@ -394,7 +395,10 @@ void SplatRenderer::StartMeasure() {
     glDispatchCompute(static_cast<GLuint>((width_ + 15) / 16), static_cast<GLuint>((height_ + 15) / 16), 1);
     glMemoryBarrier(GL_SHADER_STORAGE_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
   }
-  // The writes reach the mapping before the fence signals.
+  glCopyNamedBufferSubData(statistics_work_.get(), pending.buffer.get(), 0, 0,
+                           static_cast<GLsizeiptr>(kStatisticsWords * 4));
+  timer_.Record(GpuStageTimer::Mark::kMeasureEnd);
+  // The copy reaches the mapping before the fence signals.
   glMemoryBarrier(GL_CLIENT_MAPPED_BUFFER_BARRIER_BIT);
   pending.fence = glFenceSync(GL_SYNC_GPU_COMMANDS_COMPLETE, 0);
   pending.color = settings_.color;

@@ -107,8 +107,8 @@ class SplatRenderer {
   void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count);
 
   // Starts measuring the frame so far (ImageStatistics: two compute passes
-  // into an 8 KiB buffer that the CPU reads where the GPU wrote it) without
-  // waiting for the GPU. A render loop takes LatestStatistics(), usually a
+  // into an 8 KiB buffer, copied where the CPU reads it) without waiting for
+  // the GPU. A render loop takes LatestStatistics(), usually a
   // frame late, and never stalls on a read-back.
   void StartMeasure();
   // The statistics of the newest measure the GPU has finished, without
@@ -146,8 +146,11 @@ class SplatRenderer {
   GlProgram statistics_;
   GlVertexArray empty_vao_;
   GlBuffer frame_uniforms_;
-  // Measures in flight: the GPU writes one buffer while the CPU may still
-  // read an older one.
+  // The statistics' passes add into this buffer in GPU memory (their
+  // atomics would cross the bus to a buffer the CPU maps), then copy it into
+  // a mapped one. Measures in flight: the GPU writes one mapped buffer while
+  // the CPU may still read an older one.
+  GlBuffer statistics_work_;
   struct PendingStatistics {
     GlBuffer buffer;
     const std::uint32_t* words = nullptr;  // mapped for good (persistent, coherent)
