@@ -14,6 +14,10 @@
 //     sweep, cold (block cache and OS page cache dropped) and warm (blocks on
 //     the GPU), with points drawn, bytes read, and PSNR and SSIM of the picture
 //     against the reference's, both tone mapped with the reference's exposure.
+//     A frame's time ends when the GPU has drawn and tone mapped it, as a
+//     viewer shows it; reading the picture back for the comparison is its own
+//     column. Warm frames take the image statistics of the frame before, as
+//     the viewer does (the same view: the same statistics).
 // It prints a table, writes it as CSV, and draws error against points drawn
 // and against time, per view and representation, with gnuplot (Debian's
 // gnuplot-nox) as render_bench.png. Optionally: the frame
@@ -31,6 +35,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -167,6 +172,7 @@ std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const Ren
   const Picture cold = renderer.Render(view, 0, settings, false);
   const std::uint64_t bytes = renderer.scene().disk_reads().bytes;
   std::vector<Row> rows;
+  renderer.SetStatisticsTiming(StatisticsTiming::kLatest);
   for (SplatPath path : paths) {
     renderer.scene().SetSplatPath(path);
     renderer.Render(view, 0, settings, false);  // builds the path's programs
@@ -176,8 +182,8 @@ std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const Ren
     row.points = warm.stats.points_drawn;
     row.nodes = warm.stats.nodes_selected;
     row.bytes = bytes;
-    row.cold = cold.seconds;
-    row.warm = warm.seconds;
+    row.cold = cold.frame_seconds;
+    row.warm = warm.frame_seconds;
     row.select_ms = warm.stats.select_ms;
     row.upload_ms = warm.stats.upload_ms;
     row.submit_ms = warm.stats.draw_ms;
@@ -276,7 +282,9 @@ void Plot(const fs::path& dir, const std::vector<Row>& rows, const std::vector<N
 // Playback as the viewer plays: one streamed frame after another (never
 // waiting for blocks; parents stand in for children on their way), the
 // playhead advancing 1/frames_per_epoch of an epoch a frame, each frame
-// measured and tone mapped on the GPU. Reports frames per second and how
+// measured on the GPU, tone mapped by the newest statistics the GPU has
+// finished (the viewer's way), and finished before the next is started
+// (the viewer lets the GPU run a frame or two behind). Reports frames per second and how
 // many frames drew stand-ins because blocks had not arrived.
 void Playback(const Flags& f, SplatPath path) {
   const Dataset dataset = Dataset::Open(f.playback);
@@ -309,7 +317,9 @@ void Playback(const Flags& f, SplatPath path) {
     const double time = static_cast<double>(frame) / f.frames_per_epoch;
     const auto start = std::chrono::steady_clock::now();
     const FrameStats stats = renderer.scene().Stream(view, time, true);
-    const ImageStatistics measured = renderer.splat().Measure();
+    renderer.splat().StartMeasure();  // the viewer's way: the newest statistics finished, never waited for
+    std::optional<ImageStatistics> latest = renderer.splat().LatestStatistics();
+    const ImageStatistics measured = latest ? *latest : *renderer.splat().LatestStatistics(true);
     const double elapsed = frame == 0 ? 0 : 1.0 / 30;  // as if played at 30 frames a second
     const ToneMapSettings settings;
     const double exposure = smoother.Update(AutomaticExposure(settings, measured), elapsed);
@@ -500,14 +510,14 @@ void MeasureSelection(const Dataset& dataset, const NamedView& named_view, const
   options.lod.pixel_threshold = 1;
   OffscreenRenderer renderer(dataset, backend, options);
   renderer.Render(view, 0, {}, false);
-  const double plain = renderer.Render(view, 0, {}, false).seconds;
+  const double plain = renderer.Render(view, 0, {}, false).frame_seconds;
   renderer.scene().SetSelection(ids);
   const Picture first = renderer.Render(view, 0, {}, false);  // looks the IDs up through the ID index
-  const double selected = renderer.Render(view, 0, {}, false).seconds;
+  const double selected = renderer.Render(view, 0, {}, false).frame_seconds;
   std::printf("selection: %s, threshold 1: %.3f s without, %.3f s with 10^6 IDs (%+.1f%%; %llu of them in the store, "
               "drawn at full detail; the first frame, which looks them up, %.3f s)\n",
               named_view.name.c_str(), plain, selected, 100 * (selected / plain - 1),
-              static_cast<unsigned long long>(first.stats.points_highlighted), first.seconds);
+              static_cast<unsigned long long>(first.stats.points_highlighted), first.frame_seconds);
 }
 
 void Run(const Flags& f) {

@@ -23,16 +23,25 @@ Picture OffscreenRenderer::Render(const RenderView& view, double time, const Ton
   Picture picture;
   scene_->SetColorMode(tone.color);
   picture.stats = scene_->Complete(view, time);
-  const ImageStatistics statistics = splat_->Measure();
+  ImageStatistics statistics;
+  if (statistics_timing_ == StatisticsTiming::kLatest) {
+    splat_->StartMeasure();
+    std::optional<ImageStatistics> latest = splat_->LatestStatistics();
+    statistics = latest ? *latest : *splat_->LatestStatistics(true);
+  } else {
+    statistics = splat_->Measure();
+  }
   const double exposure =
       smoother && tone.exposure == 0 ? smoother->Update(AutomaticExposure(tone, statistics), elapsed) : 0.0;
   picture.tone = ResolveToneMap(tone, statistics, exposure);
   splat_->ToneMapToImage(picture.tone);
-  const auto readback = std::chrono::steady_clock::now();
+  splat_->Finish();
+  const auto drawn = std::chrono::steady_clock::now();
   picture.rgb = splat_->ReadDisplay();
   if (read_hdr) picture.hdr = splat_->ReadHdr();
   const auto end = std::chrono::steady_clock::now();
-  picture.readback_ms = std::chrono::duration<double, std::milli>(end - readback).count();
+  picture.readback_ms = std::chrono::duration<double, std::milli>(end - drawn).count();
+  picture.frame_seconds = std::chrono::duration<double>(drawn - start).count();
   picture.seconds = std::chrono::duration<double>(end - start).count();
   picture.gpu_times = splat_->LatestGpuTimes(true);  // finished: the picture was read back
   return picture;

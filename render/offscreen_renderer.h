@@ -21,11 +21,20 @@ struct Picture {
   std::optional<HdrImage> hdr;   // the accumulation, when asked for
   FrameStats stats;
   ToneMapParameters tone;        // what the tone mapping used (the exposure, resolved)
-  double seconds = 0;            // the whole frame, GPU work included
+  double seconds = 0;            // the whole frame, GPU work and reading the picture back included
+  double frame_seconds = 0;      // the frame drawn and tone mapped (the GPU done), before the read-back
   // Where the time went besides stats' CPU times (select, upload, draw
   // calls): the GPU's stages, and reading the picture back.
   std::optional<GpuStageTimes> gpu_times;
   double readback_ms = 0;
+};
+
+// Which image statistics set a frame's tone mapping.
+enum class StatisticsTiming {
+  kThisFrame,  // this frame's, waited for: what one picture needs
+  kLatest,     // the newest the GPU has finished, as a render loop takes them
+               // (usually the frame before; this frame's where there is none):
+               // no wait inside the frame
 };
 
 class OffscreenRenderer {
@@ -39,6 +48,9 @@ class OffscreenRenderer {
   // the frames instead of taken from this frame alone.
   Picture Render(const RenderView& view, double time, const ToneMapSettings& tone, bool read_hdr,
                  ExposureSmoother* smoother = nullptr, double elapsed = 0);
+  // kThisFrame unless set. kLatest suits frames that repeat or continue the
+  // one before (a benchmark's warm frames, a movie's).
+  void SetStatisticsTiming(StatisticsTiming timing) { statistics_timing_ = timing; }
 
   SceneRenderer& scene() { return *scene_; }
   SplatRenderer& splat() { return *splat_; }
@@ -51,6 +63,7 @@ class OffscreenRenderer {
   std::unique_ptr<SplatRenderer> splat_;
   std::unique_ptr<SceneRenderer> scene_;
   std::string description_;
+  StatisticsTiming statistics_timing_ = StatisticsTiming::kThisFrame;
 };
 
 }  // namespace octocosm

@@ -213,6 +213,45 @@ TEST_F(GlRenderTest, GpuImageStatisticsMatchTheCpu) {
   EXPECT_EQ(gpu_lit, cpu_lit);
 }
 
+// A frame that repeats the one before, tone mapped by the statistics the GPU
+// finished last (the render loop's way), is the picture measured and waited
+// for; the first frame, with no statistics finished yet, waits for its own.
+// (Whether a frame's own statistics are finished by the time it tone maps
+// depends on the GPU; either gives this picture.)
+TEST_F(GlRenderTest, LatestStatisticsToneMapARepeatedFrameAsItsOwnDo) {
+  const Dataset d = Dataset::Open(scene->store);
+  SceneOptions o;
+  o.lod.pixel_threshold = 2;
+  OffscreenRenderer waited(d, HeadlessBackend::kOsMesa, o);
+  const Picture expected = waited.Render(Inside(d), 0, {}, false);
+  OffscreenRenderer looped(d, HeadlessBackend::kOsMesa, o);
+  looped.SetStatisticsTiming(StatisticsTiming::kLatest);
+  const Picture first = looped.Render(Inside(d), 0, {}, false);
+  const Picture second = looped.Render(Inside(d), 0, {}, false);
+  EXPECT_EQ(first.tone.exposure, expected.tone.exposure);
+  EXPECT_EQ(second.tone.exposure, expected.tone.exposure);
+  EXPECT_EQ(second.rgb.rgb, expected.rgb.rgb);
+}
+
+// The measure's GPU time is its compute passes: the CPU reading the result
+// before it tone maps (here, and 300 ms later) is in no stage.
+TEST_F(GlRenderTest, GpuStageTimesLeaveOutTheWaitForTheStatistics) {
+  const Dataset d = Dataset::Open(scene->store);
+  SceneOptions o;
+  o.lod.pixel_threshold = 8;
+  OffscreenRenderer renderer(d, HeadlessBackend::kOsMesa, o);
+  renderer.scene().Complete(Overview(d, 64, 36), 0);
+  const ImageStatistics measured = renderer.splat().Measure();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  renderer.splat().ToneMapToImage(ResolveToneMap({}, measured));
+  renderer.splat().Finish();
+  const std::optional<GpuStageTimes> times = renderer.splat().LatestGpuTimes(true);
+  ASSERT_TRUE(times.has_value());
+  EXPECT_GT(times->draw_ms, 0);
+  EXPECT_LT(times->measure_ms, 250);
+  EXPECT_LT(times->tone_map_ms, 250);
+}
+
 // A selection of 10^6 IDs, held on the GPU: half the store's particles plus
 // IDs that are not in it. The highlighted mass (channel 3) equals the
 // reference's, which tests each particle's ID exactly on the CPU, pixel by
