@@ -30,6 +30,7 @@ SceneRenderer::SceneRenderer(const Dataset& dataset, SplatRenderer& splat, const
     : dataset_(dataset), splat_(splat), options_(options) {
   if (options.io_threads == 0) throw Error::InvalidArgument("the renderer needs at least one I/O thread");
   hierarchies_.resize(dataset.epoch_count());
+  gpu_.resize(dataset.epoch_count());
   double mass = 0;
   for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) mass = std::max(mass, dataset.summary(e).mass.value_or(0));
   mass_unit_ = mass > 0 && std::isfinite(mass) ? mass / kMassUnitDivisor : 1;
@@ -86,7 +87,8 @@ void SceneRenderer::UseColumns(ColumnSet columns) {
   prefetcher_.reset();
   cache_.reset();
   // Blocks on the GPU hold the old columns: the next frames upload afresh.
-  gpu_.clear();
+  for (EpochResidents& epoch : gpu_) epoch = {};
+  gpu_blocks_ = 0;
   gpu_bytes_ = 0;
   columns_ = columns;
   source_ = std::make_unique<ColumnSubsetSource>(dataset_, columns);
@@ -141,7 +143,16 @@ std::vector<SceneRenderer::Copy> SceneRenderer::PlanCopies(double time, FrameSta
   return {Copy{t < 0.5 ? epoch : std::min(epoch + 1, last), +1, 1, {}}};
 }
 
-const SceneRenderer::Resident* SceneRenderer::Upload(const BlockId& id, const Bytes& bytes) {
+BlockId SceneRenderer::IdOf(NodeRef ref) { return BlockId{ref.epoch, hierarchy(ref.epoch).node(ref.node).key.value()}; }
+
+SceneRenderer::Resident* SceneRenderer::FindResident(NodeRef ref) {
+  const EpochResidents& epoch = gpu_[ref.epoch];
+  const auto node = static_cast<std::size_t>(ref.node);
+  return node < epoch.by_node.size() ? epoch.by_node[node].get() : nullptr;
+}
+
+const SceneRenderer::Resident* SceneRenderer::Upload(NodeRef ref, const Bytes& bytes) {
+  const BlockId id = IdOf(ref);
   const NodeKey key = NodeKey::FromValue(id.key);
   const std::string where = dataset_.Where(id.epoch, key);
   const BlockHeader header = DecodeBlockHeader(bytes, key, where);
@@ -149,23 +160,48 @@ const SceneRenderer::Resident* SceneRenderer::Upload(const BlockId& id, const By
     throw Error::Corruption(where, "a cached block of " + std::to_string(bytes.size()) + " bytes says it has " +
                                        std::to_string(header.block_size));
   }
-  Resident resident{GpuBlock::Upload(splat_.blocks(), bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where), frame_};
-  gpu_bytes_ += resident.block.gpu_bytes();
-  return &gpu_.insert_or_assign(Key(id), std::move(resident)).first->second;
+  GpuBlock block = GpuBlock::Upload(splat_.blocks(), bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where);
+  auto resident = std::make_unique<Resident>(Resident{std::move(block), frame_});
+  EpochResidents& epoch = gpu_[ref.epoch];
+  if (epoch.by_node.empty()) epoch.by_node.resize(hierarchy(ref.epoch).nodes().size());
+  std::unique_ptr<Resident>& slot = epoch.by_node[static_cast<std::size_t>(ref.node)];
+  if (slot) {
+    gpu_bytes_ -= slot->block.gpu_bytes();
+  } else {
+    ++epoch.count;
+    ++gpu_blocks_;
+  }
+  gpu_bytes_ += resident->block.gpu_bytes();
+  slot = std::move(resident);
+  return slot.get();
 }
 
 void SceneRenderer::EvictGpuBlocks() {
   if (gpu_bytes_ <= options_.gpu_cache_bytes) return;
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> candidates;  // (last frame, key)
-  for (const auto& [key, resident] : gpu_) {
-    if (resident.last_frame < frame_) candidates.emplace_back(resident.last_frame, key);
+  struct Candidate {
+    std::uint64_t last_frame;
+    NodeRef ref;
+  };
+  std::vector<Candidate> candidates;
+  for (std::uint32_t e = 0; e < gpu_.size(); ++e) {
+    if (gpu_[e].count == 0) continue;
+    const auto& by_node = gpu_[e].by_node;
+    for (std::size_t node = 0; node < by_node.size(); ++node) {
+      if (by_node[node] && by_node[node]->last_frame < frame_) {
+        candidates.push_back({by_node[node]->last_frame, NodeRef{e, static_cast<std::int32_t>(node)}});
+      }
+    }
   }
-  std::sort(candidates.begin(), candidates.end());
-  for (const auto& [last_frame, key] : candidates) {
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) { return a.last_frame < b.last_frame; });
+  for (const Candidate& c : candidates) {
     if (gpu_bytes_ <= options_.gpu_cache_bytes) break;
-    auto it = gpu_.find(key);
-    gpu_bytes_ -= it->second.block.gpu_bytes();
-    gpu_.erase(it);
+    EpochResidents& epoch = gpu_[c.ref.epoch];
+    std::unique_ptr<Resident>& slot = epoch.by_node[static_cast<std::size_t>(c.ref.node)];
+    gpu_bytes_ -= slot->block.gpu_bytes();
+    slot.reset();
+    --epoch.count;
+    --gpu_blocks_;
   }
 }
 
@@ -184,7 +220,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), options_.lod.pixel_threshold};
   SelectFrontiers(error_view, copies, stats);
   UseColumns(ColumnsFor(stats.interpolation, complete));
-  const std::vector<BlockId> needed = RequestBlocks(error_view, copies, complete, look_ahead);
+  const std::vector<NodeRef> needed = RequestBlocks(error_view, copies, complete, look_ahead);
   stats.select_ms = Milliseconds(clock);
 
   clock = std::chrono::steady_clock::now();
@@ -198,7 +234,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
 
   EvictGpuBlocks();
   ++frame_;
-  stats.gpu_blocks = gpu_.size();
+  stats.gpu_blocks = gpu_blocks_;
   stats.gpu_bytes = gpu_bytes_;
   for (const auto& overlay : overlays_) stats.gpu_bytes += overlay->gpu_bytes();
   return stats;
@@ -223,28 +259,24 @@ void SceneRenderer::SelectFrontiers(const ScreenErrorView& error_view, std::vect
   stats.epochs_drawn = static_cast<std::uint32_t>(copies.size());
 }
 
-BlockId SceneRenderer::IdOf(const Copy& copy, std::int32_t node) {
-  return BlockId{copy.epoch, hierarchy(copy.epoch).node(node).key.value()};
-}
-
-std::vector<BlockId> SceneRenderer::RequestBlocks(const ScreenErrorView& error_view, const std::vector<Copy>& copies,
-                                                  bool complete, bool look_ahead) {
+std::vector<SceneRenderer::NodeRef> SceneRenderer::RequestBlocks(const ScreenErrorView& error_view,
+                                                                  const std::vector<Copy>& copies, bool complete,
+                                                                  bool look_ahead) {
   // Blocks wanted, most important first: coarse before fine, the two copies
   // interleaved; then, when playing, the next interval's.
-  std::vector<BlockId> needed;  // what this frame draws
+  std::vector<NodeRef> needed;  // what this frame draws
   std::size_t longest = 0;
   for (const Copy& c : copies) longest = std::max(longest, complete ? c.frontier.selected.size() : c.frontier.load_order.size());
   for (std::size_t i = 0; i < longest; ++i) {
     for (const Copy& c : copies) {
       const auto& order = complete ? c.frontier.selected : c.frontier.load_order;
-      if (i < order.size()) needed.push_back(IdOf(c, order[i]));
+      if (i < order.size()) needed.push_back(NodeRef{c.epoch, order[i]});
     }
   }
   // What is on the GPU already needs no reading (a warm frame submits nothing).
   std::vector<BlockId> wanted;
-  wanted.reserve(needed.size());
-  for (const BlockId& id : needed) {
-    if (!gpu_.contains(Key(id))) wanted.push_back(id);
+  for (const NodeRef& ref : needed) {
+    if (FindResident(ref) == nullptr) wanted.push_back(IdOf(ref));
   }
   std::vector<std::uint32_t> overlay_epochs;
   for (const Copy& c : copies) overlay_epochs.push_back(c.epoch);
@@ -254,8 +286,7 @@ std::vector<BlockId> SceneRenderer::RequestBlocks(const ScreenErrorView& error_v
       overlay_epochs.push_back(ahead);
       const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, options_.lod);
       for (std::int32_t node : next.load_order) {
-        const BlockId id{ahead, hierarchy(ahead).node(node).key.value()};
-        if (!gpu_.contains(Key(id))) wanted.push_back(id);
+        if (FindResident({ahead, node}) == nullptr) wanted.push_back(IdOf({ahead, node}));
       }
     }
   }
@@ -266,16 +297,17 @@ std::vector<BlockId> SceneRenderer::RequestBlocks(const ScreenErrorView& error_v
 }
 
 // Uploads what has arrived (or, for a complete frame, waits for it).
-void SceneRenderer::UploadArrived(const std::vector<BlockId>& needed, bool complete, FrameStats& stats) {
-  for (const BlockId& id : needed) {
-    auto it = gpu_.find(Key(id));
-    if (it != gpu_.end()) {
-      it->second.last_frame = frame_;
+void SceneRenderer::UploadArrived(const std::vector<NodeRef>& needed, bool complete, FrameStats& stats) {
+  for (const NodeRef& ref : needed) {
+    if (Resident* resident = FindResident(ref)) {
+      resident->last_frame = frame_;
       continue;
     }
+    const BlockId id = IdOf(ref);
+    const Resident* uploaded = nullptr;
     if (complete) {
       const PinnedBlock block = cache_->Get(id);
-      Upload(id, block.bytes());
+      uploaded = Upload(ref, block.bytes());
     } else {
       if (stats.bytes_uploaded >= options_.upload_bytes_per_frame) continue;
       const PinnedBlock block = cache_->TryGet(id);
@@ -284,7 +316,7 @@ void SceneRenderer::UploadArrived(const std::vector<BlockId>& needed, bool compl
         continue;
       }
       try {
-        Upload(id, block.bytes());
+        uploaded = Upload(ref, block.bytes());
       } catch (const Error& e) {
         last_error_ = e.what();
         cache_->Erase(id);
@@ -292,7 +324,7 @@ void SceneRenderer::UploadArrived(const std::vector<BlockId>& needed, bool compl
       }
     }
     ++stats.blocks_uploaded;
-    stats.bytes_uploaded += gpu_.at(Key(id)).block.gpu_bytes();
+    stats.bytes_uploaded += uploaded->block.gpu_bytes();
   }
 }
 
@@ -338,15 +370,7 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
   splat_.SetSelection(probe_ids ? selection_.get() : nullptr);
   for (std::size_t copy = 0; copy < copies.size(); ++copy) {
     const Copy& c = copies[copy];
-    // Each frontier node's block on the GPU, or null: looked up once.
-    std::vector<const Resident*> resident_of(hierarchy(c.epoch).nodes().size(), nullptr);
-    for (const std::vector<std::int32_t>* nodes : {&c.frontier.selected, &c.frontier.refined}) {
-      for (std::int32_t node : *nodes) {
-        const auto it = gpu_.find(Key(IdOf(c, node)));
-        if (it != gpu_.end()) resident_of[static_cast<std::size_t>(node)] = &it->second;
-      }
-    }
-    const auto resident = [&](std::int32_t node) { return resident_of[static_cast<std::size_t>(node)]; };
+    const auto resident = [&](std::int32_t node) -> const Resident* { return FindResident({c.epoch, node}); };
     for (std::int32_t node : c.frontier.selected) stats.blocks_missing += resident(node) == nullptr;
     const DrawPlan plan = PlanDraws(
         hierarchy(c.epoch), c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },

@@ -39,7 +39,6 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "index/dataset.h"
@@ -141,6 +140,18 @@ class SceneRenderer {
     GpuBlock block;
     std::uint64_t last_frame = 0;
   };
+  // A node of an epoch's hierarchy, by its index there.
+  struct NodeRef {
+    std::uint32_t epoch = 0;
+    std::int32_t node = 0;
+  };
+  // The blocks of an epoch on the GPU, by node index: a frame looks each of
+  // its tens of thousands of nodes up several times, in an array rather than
+  // a hash table.
+  struct EpochResidents {
+    std::vector<std::unique_ptr<Resident>> by_node;
+    std::size_t count = 0;
+  };
 
   FrameStats Render(const RenderView& view, double time, bool complete, bool look_ahead);
   // The steps of Render, in order.
@@ -148,17 +159,17 @@ class SceneRenderer {
   void SelectFrontiers(const ScreenErrorView& error_view, std::vector<Copy>& copies, FrameStats& stats);
   // Submits the blocks wanted to the prefetcher and starts the selection
   // overlays; returns the blocks this frame draws.
-  std::vector<BlockId> RequestBlocks(const ScreenErrorView& error_view, const std::vector<Copy>& copies, bool complete,
+  std::vector<NodeRef> RequestBlocks(const ScreenErrorView& error_view, const std::vector<Copy>& copies, bool complete,
                                      bool look_ahead);
-  void UploadArrived(const std::vector<BlockId>& needed, bool complete, FrameStats& stats);
+  void UploadArrived(const std::vector<NodeRef>& needed, bool complete, FrameStats& stats);
   std::vector<const SelectionOverlay*> ReadyOverlays(const std::vector<Copy>& copies, bool complete, FrameStats& stats);
   void DrawCopies(const RenderView& view, const std::vector<Copy>& copies,
                   const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats);
-  BlockId IdOf(const Copy& copy, std::int32_t node);
+  BlockId IdOf(NodeRef ref);
+  Resident* FindResident(NodeRef ref);
   ColumnSet ColumnsFor(Interpolation interpolation, bool complete) const;
   void UseColumns(ColumnSet columns);
-  const Resident* Upload(const BlockId& id, const Bytes& bytes);
-  static std::uint64_t Key(const BlockId& id) { return id.key ^ (std::uint64_t{id.epoch} << 58); }
+  const Resident* Upload(NodeRef ref, const Bytes& bytes);
   void EvictGpuBlocks();
   // The selection overlay of `epoch` in the current columns, started if
   // need be; null when there is no selection to draw that way.
@@ -181,7 +192,8 @@ class SceneRenderer {
   std::unique_ptr<Prefetcher> prefetcher_;
   ReadCounters retired_reads_;  // of sources replaced when the columns changed
 
-  std::unordered_map<std::uint64_t, Resident> gpu_;  // by Key(BlockId)
+  std::vector<EpochResidents> gpu_;  // by epoch
+  std::size_t gpu_blocks_ = 0;
   std::size_t gpu_bytes_ = 0;
   std::uint64_t frame_ = 0;
   std::string last_error_;
