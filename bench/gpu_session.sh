@@ -2,8 +2,9 @@
 # The whole GPU measurement in one run, for a machine lent for minutes: the
 # render bench's sweep at 10^8 points (overview, mid, deep; every stage's
 # time) on the raster and the compute splat paths, the compute path's blob
-# radius, then playback through a particle-mesh series on both paths. Writes its tables and
-# logs under OUT. Run from the repository root on the GPU machine, after
+# radius, then playback through a particle-mesh series on both paths. Writes
+# its tables and logs under OUT, eight files (the most a lent machine gives
+# back). Run from the repository root on the GPU machine, after
 # ../shared/gpu/bundle.sh packed build/ (docs/BENCHMARKS.md):
 #
 #   bash .gpu/run.sh bash bench/gpu_session.sh "$OUT"
@@ -11,10 +12,8 @@
 # Times only, by default: the reference rendering that gives the PSNR and
 # SSIM columns costs about 150 s a call at 10^8 points even on 16 cores (the
 # neighbour search of every particle); REFERENCE=1 adds it. On an H100 host
-# (16 cores) generating 10^8 points took 2.4 s and ingesting them 147 s (with
-# the neighbour pass's sort and tree build on one thread; they now run on
-# every core); the overview sweep about 100 s, the zoomed one about 60 s, the
-# particle-mesh series 26 s. Keep the call under the device's per-call limit.
+# (16 cores) generating 10^8 points took 1.9 s, ingesting them 75 s, and the
+# whole run about 260 s. Keep the call under the device's per-call limit.
 #
 # POINTS (default 1e8), PM_SIDE (default 128) and BACKEND (default egl) make a
 # dry run possible on any machine:
@@ -31,7 +30,8 @@ log() { echo "== $*" | tee -a "$out/session.log"; }
 reference=--no-reference
 [ "${REFERENCE:-0}" = 1 ] && reference=
 
-log "$(date -u +%FT%TZ) $(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || echo no nvidia-smi)"
+gpu=$(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || echo no nvidia-smi)
+log "$(date -u +%FT%TZ) $gpu, $(nproc) cores"
 log "render bench: $points points, overview at thresholds and budgets, mid and deep"
 "$bench" --backend "$backend" --dir "$work/rb" --points "$points" $reference --views overview --splat raster,compute \
   --thresholds 16,8,4,2,1 --budgets 0,2e6 --coarse clusters 2>&1 | tee "$out/render_overview.txt"
@@ -40,16 +40,22 @@ cp "$work/rb/render_bench.csv" "$out/render_overview.csv"
   --thresholds 16,8,4 --budgets 0 --coarse clusters 2>&1 | tee "$out/render_zoomed.txt"
 cp "$work/rb/render_bench.csv" "$out/render_zoomed.csv"
 
-log "playback: a 128^3 particle-mesh series, 5 epochs, Hermite interpolation, raster and compute"
+log "playback: a 128^3 particle-mesh series, 5 epochs, Hermite interpolation, compute and raster"
 if [ ! -f "$work/pm/store/manifest.json" ]; then
-  "$octocosm" synth pm -o "$work/pm/snapshots" --particles-per-side "${PM_SIDE:-128}" --outputs 5 > "$out/synth_pm.txt" 2>&1
-  "$octocosm" ingest "$work"/pm/snapshots/snap_00? -o "$work/pm/store" --capacity 4000 > "$out/ingest_pm.txt" 2>&1
+  "$octocosm" synth pm -o "$work/pm/snapshots" --particles-per-side "${PM_SIDE:-128}" --outputs 5 \
+    > "$out/pm_prepare.txt" 2>&1
+  "$octocosm" ingest "$work"/pm/snapshots/snap_00? -o "$work/pm/store" --capacity 4000 >> "$out/pm_prepare.txt" 2>&1
 fi
-"$bench" --backend "$backend" --playback "$work/pm/store" --frames-per-epoch 60 --splat raster,compute 2>&1 |
+# The raster path draws this series' large blobs at a few frames a second:
+# fewer frames tell its rate.
+"$bench" --backend "$backend" --playback "$work/pm/store" --frames-per-epoch 60 --splat compute 2>&1 |
   tee "$out/playback.txt"
+"$bench" --backend "$backend" --playback "$work/pm/store" --frames-per-epoch 15 --splat raster 2>&1 |
+  tee -a "$out/playback.txt"
 log "compute path: largest blob drawn by the compute shader, 2 and 8 pixels (4 above)"
 for radius in 2 8; do
   "$bench" --backend "$backend" --dir "$work/rb" --points "$points" $reference --views overview,deep --splat compute \
-    --compute-radius $radius --thresholds 4 --budgets 0 --no-full --coarse clusters 2>&1 | tee "$out/render_radius_$radius.txt"
+    --compute-radius $radius --thresholds 4 --budgets 0 --no-full --coarse clusters 2>&1 |
+    tee -a "$out/render_radius.txt"
 done
 log "$(date -u +%FT%TZ) done"
