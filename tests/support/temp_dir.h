@@ -1,10 +1,12 @@
 // A fresh scratch directory for a test, removed with everything in it when the
-// object dies; and a whole-file read for byte comparisons.
+// object dies; a whole-file read for byte comparisons, and a value read from
+// such bytes.
 #pragma once
 
 #include <unistd.h>
 
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -40,6 +42,15 @@ class TempDir {
 inline std::vector<std::uint8_t> ReadFileBytes(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   return std::vector<std::uint8_t>(std::istreambuf_iterator<char>(in), {});
+}
+
+// The value of type T at `offset` of `bytes`, in the host's byte order (the
+// test hosts are little endian, like the files the tests read).
+template <typename T>
+T LoadHostOrder(const std::vector<std::uint8_t>& bytes, std::size_t offset) {
+  T value;
+  std::memcpy(&value, bytes.data() + offset, sizeof value);
+  return value;
 }
 
 }  // namespace octocosm::testing_support

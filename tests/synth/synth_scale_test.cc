@@ -8,7 +8,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -32,20 +31,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A scratch directory per use.
-class TempDir : public testing_support::TempDir {
- public:
-  TempDir() : testing_support::TempDir("synth-scale-test") {}
-};
+using testing_support::LoadHostOrder;
+using testing_support::ReadFileBytes;
+using testing_support::TempDir;
 
-std::vector<std::uint8_t> ReadAll(const fs::path& path) { return testing_support::ReadFileBytes(path); }
-
-template <typename T>
-T Load(const std::vector<std::uint8_t>& bytes, std::size_t offset) {
-  T value;
-  std::memcpy(&value, bytes.data() + offset, sizeof value);  // the test host is little endian, like the files
-  return value;
-}
 
 ScaleOptions SmallOptions(const fs::path& dir) {
   ScaleOptions options;
@@ -172,7 +161,7 @@ TEST(RandomTest, DirectionsAreUnitAndIsotropic) {
 // ---- Whole snapshots ----------------------------------------------------
 
 TEST(SynthScaleTest, FilesHoldEveryIdOnceInsideTheBox) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   const ScaleOptions options = SmallOptions(dir.path());
   const ScaleResult result = RunScaleGenerator(options);
   ASSERT_EQ(result.files.size(), 7u);
@@ -201,26 +190,26 @@ TEST(SynthScaleTest, FilesHoldEveryIdOnceInsideTheBox) {
 }
 
 TEST(SynthScaleTest, HeadersCountEachFileAndTheWhole) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   const ScaleOptions options = SmallOptions(dir.path());
   const ScaleResult result = RunScaleGenerator(options);
   std::uint64_t sum = 0;
   for (int f = 0; f < 7; ++f) {
     const fs::path path = dir.path() / ("snap." + std::to_string(f));
     ASSERT_EQ(result.files[f], path.string());
-    const auto bytes = ReadAll(path);
+    const auto bytes = ReadFileBytes(path);
     ASSERT_GT(bytes.size(), 20u + kGadgetHeaderSize);
     ASSERT_EQ(std::string(bytes.begin() + 4, bytes.begin() + 8), "HEAD");  // format 2 block name
     const std::size_t header = 20;
-    const auto npart = Load<std::uint32_t>(bytes, header + kHeaderNpartOffset + 4);
+    const auto npart = LoadHostOrder<std::uint32_t>(bytes, header + kHeaderNpartOffset + 4);
     EXPECT_EQ(npart, (100'003u - f + 6) / 7) << path;  // stride-7 share: 14287 or 14286
-    EXPECT_EQ(Load<std::uint32_t>(bytes, header + kHeaderNpartOffset), 0u);  // no gas
-    EXPECT_EQ(Load<std::uint32_t>(bytes, header + kHeaderNpartTotalOffset + 4), 100'003u);
-    EXPECT_EQ(Load<std::uint32_t>(bytes, header + kHeaderNpartTotalHighOffset + 4), 0u);
-    EXPECT_EQ(Load<std::int32_t>(bytes, header + kHeaderNumFilesOffset), 7);
-    EXPECT_DOUBLE_EQ(Load<double>(bytes, header + kHeaderBoxSizeOffset), 100'000.0);
-    EXPECT_DOUBLE_EQ(Load<double>(bytes, header + kHeaderMassOffset + 8), result.particle_mass);
-    EXPECT_DOUBLE_EQ(Load<double>(bytes, header + kHeaderTimeOffset), 1.0);
+    EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, header + kHeaderNpartOffset), 0u);  // no gas
+    EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, header + kHeaderNpartTotalOffset + 4), 100'003u);
+    EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, header + kHeaderNpartTotalHighOffset + 4), 0u);
+    EXPECT_EQ(LoadHostOrder<std::int32_t>(bytes, header + kHeaderNumFilesOffset), 7);
+    EXPECT_DOUBLE_EQ(LoadHostOrder<double>(bytes, header + kHeaderBoxSizeOffset), 100'000.0);
+    EXPECT_DOUBLE_EQ(LoadHostOrder<double>(bytes, header + kHeaderMassOffset + 8), result.particle_mass);
+    EXPECT_DOUBLE_EQ(LoadHostOrder<double>(bytes, header + kHeaderTimeOffset), 1.0);
     // HEAD, POS, VEL and 4-byte IDs, each with a 16-byte name record and two markers.
     EXPECT_EQ(bytes.size(), 4 * 24 + kGadgetHeaderSize + 28u * npart);
     sum += npart;
@@ -230,7 +219,7 @@ TEST(SynthScaleTest, HeadersCountEachFileAndTheWhole) {
 }
 
 TEST(SynthScaleTest, SameSeedSameBytesWhateverTheThreadCount) {
-  TempDir one, three, reseeded;
+  TempDir one("synth-scale-test"), three("synth-scale-test"), reseeded("synth-scale-test");
   ScaleOptions options = SmallOptions(one.path());
   options.threads = 1;
   RunScaleGenerator(options);
@@ -242,14 +231,14 @@ TEST(SynthScaleTest, SameSeedSameBytesWhateverTheThreadCount) {
   RunScaleGenerator(options);
   for (int f = 0; f < 7; ++f) {
     const std::string name = "snap." + std::to_string(f);
-    const auto reference = ReadAll(one.path() / name);
-    EXPECT_TRUE(reference == ReadAll(three.path() / name)) << name << " differs between 1 and 3 threads";
-    EXPECT_FALSE(reference == ReadAll(reseeded.path() / name)) << name << " ignores the seed";
+    const auto reference = ReadFileBytes(one.path() / name);
+    EXPECT_TRUE(reference == ReadFileBytes(three.path() / name)) << name << " differs between 1 and 3 threads";
+    EXPECT_FALSE(reference == ReadFileBytes(reseeded.path() / name)) << name << " ignores the seed";
   }
 }
 
 TEST(SynthScaleTest, IsolatedHaloFollowsNfw) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   ScaleOptions options = SmallOptions(dir.path());
   options.particle_count = 100'000;
   options.files = 2;
@@ -302,7 +291,7 @@ TEST(SynthScaleTest, IsolatedHaloFollowsNfw) {
 
 TEST(SynthScaleTest, ClusteringIsFarAboveUniform) {
   auto densest_share = [](double halo_fraction, double filament_fraction) {
-    TempDir dir;
+    TempDir dir("synth-scale-test");
     ScaleOptions options = SmallOptions(dir.path());
     options.particle_count = 200'000;
     options.files = 2;
@@ -322,7 +311,7 @@ TEST(SynthScaleTest, ClusteringIsFarAboveUniform) {
 }
 
 TEST(SynthScaleTest, ParticlesPerFileBoundsEachFileAndFormat1Reads) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   ScaleOptions options = SmallOptions(dir.path());
   options.particle_count = 50'000;
   options.files = 0;
@@ -335,13 +324,13 @@ TEST(SynthScaleTest, ParticlesPerFileBoundsEachFileAndFormat1Reads) {
   EXPECT_EQ(snapshot.header.format, "gadget1");
   EXPECT_EQ(snapshot.header.total_count, 50'000u);
   for (const auto& file : result.files) {
-    const auto bytes = ReadAll(file);
-    EXPECT_EQ(Load<std::uint32_t>(bytes, 4 + kHeaderNpartOffset + 4), 10'000u) << file;
+    const auto bytes = ReadFileBytes(file);
+    EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, 4 + kHeaderNpartOffset + 4), 10'000u) << file;
   }
 }
 
 TEST(SynthScaleTest, OneFileTakesThePrefixAsItsName) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   ScaleOptions options = SmallOptions(dir.path());
   options.particle_count = 1000;
   options.files = 1;
@@ -387,7 +376,7 @@ TEST(SynthScaleTest, ChunksOfBillionsOfParticlesIndexWithoutOverflow) {
 }
 
 TEST(SynthScaleTest, RejectsImpossibleOptions) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   auto expect_invalid = [&](const std::function<void(ScaleOptions&)>& change) {
     ScaleOptions options = SmallOptions(dir.path());
     change(options);
@@ -417,7 +406,7 @@ TEST(SynthScaleTest, RejectsImpossibleOptions) {
 }
 
 TEST(SynthScaleTest, UnwritableDirectoryIsAnIoErrorAndLeavesNoFiles) {
-  TempDir dir;
+  TempDir dir("synth-scale-test");
   const fs::path blocker = dir.path() / "not_a_directory";
   std::ofstream(blocker) << "x";
   ScaleOptions options = SmallOptions(blocker / "out");

@@ -31,22 +31,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A scratch directory per use.
-class TempDir : public testing_support::TempDir {
- public:
-  TempDir() : testing_support::TempDir("synth-test") {}
-};
-
-std::vector<std::uint8_t> ReadAll(const fs::path& path) { return testing_support::ReadFileBytes(path); }
+using testing_support::LoadHostOrder;
+using testing_support::ReadFileBytes;
+using testing_support::TempDir;
 
 // ---- A small independent GADGET-2 reader -----------------------------------
-
-template <typename T>
-T Load(const std::vector<std::uint8_t>& bytes, std::size_t offset) {
-  T value;
-  std::memcpy(&value, bytes.data() + offset, sizeof value);  // the test host is little endian, like the files
-  return value;
-}
 
 struct ParsedBlock {
   std::string name;             // empty in format 1
@@ -75,13 +64,13 @@ ParsedFile ParseGadget(const std::vector<std::uint8_t>& bytes, int format) {
     ParsedBlock block;
     std::uint32_t announced = 0;
     if (format == 2) {
-      EXPECT_EQ(Load<std::uint32_t>(bytes, at), 8u);
+      EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, at), 8u);
       block.name.assign(reinterpret_cast<const char*>(bytes.data() + at + 4), 4);
-      announced = Load<std::uint32_t>(bytes, at + 8);
-      EXPECT_EQ(Load<std::uint32_t>(bytes, at + 12), 8u);
+      announced = LoadHostOrder<std::uint32_t>(bytes, at + 8);
+      EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, at + 12), 8u);
       at += 16;
     }
-    const std::uint32_t size = Load<std::uint32_t>(bytes, at);
+    const std::uint32_t size = LoadHostOrder<std::uint32_t>(bytes, at);
     if (format == 2) {
       EXPECT_EQ(announced, size + 8) << block.name;
     }
@@ -89,7 +78,7 @@ ParsedFile ParseGadget(const std::vector<std::uint8_t>& bytes, int format) {
     block.payload_size = size;
     EXPECT_LE(at + 8 + size, bytes.size());
     if (at + 8 + size > bytes.size()) break;
-    EXPECT_EQ(Load<std::uint32_t>(bytes, at + 4 + size), size) << "trailing marker of block " << file.blocks.size();
+    EXPECT_EQ(LoadHostOrder<std::uint32_t>(bytes, at + 4 + size), size) << "trailing marker of block " << file.blocks.size();
     at += 8 + size;
     file.blocks.push_back(block);
   }
@@ -99,18 +88,18 @@ ParsedFile ParseGadget(const std::vector<std::uint8_t>& bytes, int format) {
   const std::size_t h = file.blocks[0].payload_offset;
   EXPECT_EQ(file.blocks[0].payload_size, 256u);
   for (int t = 0; t < 6; ++t) {
-    file.npart[t] = Load<std::uint32_t>(bytes, h + 4 * t);
-    file.mass[t] = Load<double>(bytes, h + 24 + 8 * t);
-    file.total_low[t] = Load<std::uint32_t>(bytes, h + 96 + 4 * t);
-    file.total_high[t] = Load<std::uint32_t>(bytes, h + 168 + 4 * t);
+    file.npart[t] = LoadHostOrder<std::uint32_t>(bytes, h + 4 * t);
+    file.mass[t] = LoadHostOrder<double>(bytes, h + 24 + 8 * t);
+    file.total_low[t] = LoadHostOrder<std::uint32_t>(bytes, h + 96 + 4 * t);
+    file.total_high[t] = LoadHostOrder<std::uint32_t>(bytes, h + 168 + 4 * t);
   }
-  file.time = Load<double>(bytes, h + 72);
-  file.redshift = Load<double>(bytes, h + 80);
-  file.num_files = Load<std::int32_t>(bytes, h + 124);
-  file.box = Load<double>(bytes, h + 128);
-  file.omega0 = Load<double>(bytes, h + 136);
-  file.omega_lambda = Load<double>(bytes, h + 144);
-  file.hubble = Load<double>(bytes, h + 152);
+  file.time = LoadHostOrder<double>(bytes, h + 72);
+  file.redshift = LoadHostOrder<double>(bytes, h + 80);
+  file.num_files = LoadHostOrder<std::int32_t>(bytes, h + 124);
+  file.box = LoadHostOrder<double>(bytes, h + 128);
+  file.omega0 = LoadHostOrder<double>(bytes, h + 136);
+  file.omega_lambda = LoadHostOrder<double>(bytes, h + 144);
+  file.hubble = LoadHostOrder<double>(bytes, h + 152);
   for (std::size_t b = 196; b < 256; ++b) EXPECT_EQ(bytes[h + b], 0) << "header padding byte " << b;
   const std::uint32_t n = std::accumulate(std::begin(file.npart), std::end(file.npart), 0u);
   EXPECT_EQ(file.blocks[1].payload_size, 12u * n);
@@ -336,7 +325,7 @@ PmOptions SmallRun(const fs::path& directory) {
 }
 
 TEST(RunParticleMeshTest, WritesGadgetFormat2SplitOverFiles) {
-  TempDir dir;
+  TempDir dir("synth-test");
   PmOptions options = SmallRun(dir.path());
   options.files_per_snapshot = 3;
   std::vector<PmProgress::Event> events;
@@ -357,7 +346,7 @@ TEST(RunParticleMeshTest, WritesGadgetFormat2SplitOverFiles) {
       char name[32];
       std::snprintf(name, sizeof name, "snap_%03zu.%d", s, f);
       EXPECT_EQ(fs::path(snapshots[s].files[f]).filename(), name);
-      const ParsedFile file = ParseGadget(ReadAll(snapshots[s].files[f]), 2);
+      const ParsedFile file = ParseGadget(ReadFileBytes(snapshots[s].files[f]), 2);
       EXPECT_EQ(file.npart[0], 0u);
       EXPECT_GT(file.npart[1], 1300u);
       EXPECT_EQ(file.total_low[1], 4096u);
@@ -399,7 +388,7 @@ TEST(RunParticleMeshTest, WritesGadgetFormat2SplitOverFiles) {
 }
 
 TEST(RunParticleMeshTest, WritesGadgetFormat1SingleFileAtListedRedshifts) {
-  TempDir dir;
+  TempDir dir("synth-test");
   PmOptions options = SmallRun(dir.path());
   options.format = GadgetFormat::kFormat1;
   options.output_redshifts = {0.0, 3.0};  // any order
@@ -410,7 +399,7 @@ TEST(RunParticleMeshTest, WritesGadgetFormat1SingleFileAtListedRedshifts) {
   EXPECT_NEAR(snapshots[1].redshift, 0.0, 1e-9);
   ASSERT_EQ(snapshots[0].files.size(), 1u);
   EXPECT_EQ(fs::path(snapshots[0].files[0]).filename(), "snap_000");
-  const ParsedFile file = ParseGadget(ReadAll(snapshots[1].files[0]), 1);
+  const ParsedFile file = ParseGadget(ReadFileBytes(snapshots[1].files[0]), 1);
   EXPECT_EQ(file.box, 32.0);
   EXPECT_EQ(file.num_files, 1);
   EXPECT_EQ(file.npart[1], 4096u);
@@ -422,7 +411,7 @@ TEST(RunParticleMeshTest, WritesGadgetFormat1SingleFileAtListedRedshifts) {
 }
 
 TEST(RunParticleMeshTest, SameSeedGivesIdenticalBytes) {
-  TempDir a, b, c;
+  TempDir a("synth-test"), b("synth-test"), c("synth-test");
   PmOptions options = SmallRun(a.path());
   options.output_count = 1;
   const auto first = RunParticleMesh(options);
@@ -431,15 +420,15 @@ TEST(RunParticleMeshTest, SameSeedGivesIdenticalBytes) {
   options.output_directory = c.path().string();
   options.seed += 1;
   const auto other = RunParticleMesh(options);
-  const auto bytes = ReadAll(first[0].files[0]);
+  const auto bytes = ReadFileBytes(first[0].files[0]);
   EXPECT_GT(bytes.size(), 4096u * 28);
-  EXPECT_TRUE(bytes == ReadAll(second[0].files[0]));
-  EXPECT_FALSE(bytes == ReadAll(other[0].files[0]));
+  EXPECT_TRUE(bytes == ReadFileBytes(second[0].files[0]));
+  EXPECT_FALSE(bytes == ReadFileBytes(other[0].files[0]));
 }
 
 TEST(RunParticleMeshTest, ThreadCountDoesNotChangeTheBytes) {
   // threads = 0 means "all cores", so a run must not depend on the machine.
-  TempDir a, b;
+  TempDir a("synth-test"), b("synth-test");
   PmOptions options = SmallRun(a.path());
   options.output_count = 1;
   options.threads = 1;
@@ -447,11 +436,11 @@ TEST(RunParticleMeshTest, ThreadCountDoesNotChangeTheBytes) {
   options.output_directory = b.path().string();
   options.threads = 2;
   const auto two = RunParticleMesh(options);
-  EXPECT_TRUE(ReadAll(one[0].files[0]) == ReadAll(two[0].files[0]));
+  EXPECT_TRUE(ReadFileBytes(one[0].files[0]) == ReadFileBytes(two[0].files[0]));
 }
 
 TEST(RunParticleMeshTest, RejectsBadOptions) {
-  TempDir dir;
+  TempDir dir("synth-test");
   PmOptions options = SmallRun(dir.path());
   options.z_end = 40.0;  // after z_start = 30
   EXPECT_THROW(RunParticleMesh(options), Error);
@@ -509,7 +498,7 @@ GadgetSnapshotInfo TinySnapshot(int files) {
 }
 
 TEST(GadgetWriterTest, StreamsChunksAcrossFileBoundaries) {
-  TempDir dir;
+  TempDir dir("synth-test");
   GadgetSnapshotWriter writer((dir.path() / "s").string(), TinySnapshot(3), GadgetFormat::kFormat2);
   // Chunks of 4, 4, 2 against files of 3, 3, 4 particles.
   for (std::uint64_t first = 0; first < 10; first += 4) {
@@ -531,7 +520,7 @@ TEST(GadgetWriterTest, StreamsChunksAcrossFileBoundaries) {
   std::uint32_t next = 0;
   const std::uint32_t sizes[3] = {3, 3, 4};
   for (int f = 0; f < 3; ++f) {
-    const ParsedFile file = ParseGadget(ReadAll(dir.path() / ("s." + std::to_string(f))), 2);
+    const ParsedFile file = ParseGadget(ReadFileBytes(dir.path() / ("s." + std::to_string(f))), 2);
     ASSERT_EQ(file.npart[1], sizes[f]);
     for (std::uint32_t i = 0; i < sizes[f]; ++i, ++next) {
       EXPECT_EQ(file.ids[i], 100 + next);
@@ -543,7 +532,7 @@ TEST(GadgetWriterTest, StreamsChunksAcrossFileBoundaries) {
 }
 
 TEST(GadgetWriterTest, WrongParticleCountsAreErrorsAndLeaveNoFiles) {
-  TempDir dir;
+  TempDir dir("synth-test");
   const std::vector<float> pos(33, 1.0f), vel(33, 0.0f);
   const std::vector<std::uint64_t> ids(11, 1);
   {
@@ -557,7 +546,7 @@ TEST(GadgetWriterTest, WrongParticleCountsAreErrorsAndLeaveNoFiles) {
 }
 
 TEST(GadgetWriterTest, UnwritableDirectoryIsAnIoErrorNamingTheFile) {
-  TempDir dir;
+  TempDir dir("synth-test");
   const std::string base = (dir.path() / "no_such_dir" / "snap").string();
   try {
     GadgetSnapshotWriter writer(base, TinySnapshot(1), GadgetFormat::kFormat2);
