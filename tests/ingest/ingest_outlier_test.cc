@@ -29,24 +29,16 @@ namespace {
 namespace fs = std::filesystem;
 using namespace testing_support;
 
-// Clustered points in [origin, origin + size)^3: Gaussian halos on a uniform background.
+// Clustered points in [origin, origin + size)^3.
 std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double origin, double size) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> uniform(0, size);
-  std::normal_distribution<double> gauss(0, size / 40);
-  std::vector<std::array<double, 3>> centres(5);
-  for (auto& c : centres) c = {uniform(rng), uniform(rng), uniform(rng)};
-  std::vector<Particle> particles(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    Particle& p = particles[i];
-    for (int a = 0; a < 3; ++a) {
-      const double t = i % 3 == 0 ? uniform(rng) : centres[i % centres.size()][a] + gauss(rng);
-      p.x[a] = origin + std::clamp(t, 0.0, size * 0.999999);
-    }
-    p.mass = 1.0 + static_cast<double>(i % 5);
-    p.id = 7 + i;
-  }
-  return particles;
+  ClusteredSpec spec;
+  spec.origin = origin;
+  spec.size = size;
+  spec.halos = 5;
+  spec.mass_cycle = 5;
+  spec.first_id = 7;
+  spec.id_step = 1;
+  return testing_support::Clustered(n, seed, spec);
 }
 
 PositionSurvey Survey(const std::vector<Particle>& particles) {
@@ -61,16 +53,6 @@ PositionSurvey Survey(const std::vector<Particle>& particles) {
   return survey;
 }
 
-template <typename Run>
-void ExpectBadInputFrom(Run run, const std::vector<std::string>& parts) {
-  try {
-    run();
-    ADD_FAILURE() << "no error (expected \"" << parts.back() << "\")";
-  } catch (const Error& error) {
-    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
-    for (const std::string& part : parts) EXPECT_NE(std::string(error.what()).find(part), std::string::npos) << error.what();
-  }
-}
 
 // The "dropped" entries the manifest records in the epoch's input.
 nlohmann::json DroppedInManifest(const std::string& store, std::size_t epoch) {

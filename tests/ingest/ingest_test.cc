@@ -34,26 +34,11 @@ namespace fs = std::filesystem;
 using namespace testing_support;
 
 
-// Clustered points: a few Gaussian halos on a uniform background.
+// Clustered points in [0, box)^3.
 std::vector<Particle> Clustered(std::size_t n, std::uint64_t seed, double box) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> uniform(0, box);
-  std::normal_distribution<double> gauss(0, box / 40);
-  std::vector<std::array<double, 3>> centres(6);
-  for (auto& c : centres) c = {uniform(rng), uniform(rng), uniform(rng)};
-  std::vector<Particle> particles(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    Particle& p = particles[i];
-    if (i % 3 == 0) {
-      for (double& x : p.x) x = uniform(rng);
-    } else {
-      const auto& c = centres[i % centres.size()];
-      for (int a = 0; a < 3; ++a) p.x[a] = std::clamp(c[a] + gauss(rng), 0.0, box * 0.999999);
-    }
-    p.mass = 1.0 + static_cast<double>(i % 7);
-    p.id = 1000 + i * 3;
-  }
-  return particles;
+  ClusteredSpec spec;
+  spec.size = box;
+  return testing_support::Clustered(n, seed, spec);
 }
 
 class IngestTest : public IngestFixture {
@@ -773,17 +758,6 @@ TEST_F(IngestTest, MalformedInputLeavesNoStoreAndNoTemporaryFiles) {
   EXPECT_NO_THROW(Dataset::Open(o.output));
 }
 
-// Expects `run` to throw BadInput whose message holds each of `parts`.
-template <typename Run>
-void ExpectBadInputFrom(Run run, const std::vector<std::string>& parts) {
-  try {
-    run();
-    ADD_FAILURE() << "no error (expected \"" << parts.back() << "\")";
-  } catch (const Error& error) {
-    EXPECT_EQ(error.kind(), ErrorKind::kBadInput) << error.what();
-    for (const std::string& part : parts) EXPECT_NE(std::string(error.what()).find(part), std::string::npos) << error.what();
-  }
-}
 
 // Particle IDs must be unique, whichever way ingest gathers them: the ID
 // table (IDs in a compact range), sorted ID pairs (IDs far apart) or the
