@@ -20,6 +20,7 @@
 
 #include "tests/fuzz/fuzz_target.h"
 #include "tests/fuzz/snapshot_fuzz.h"
+#include "tests/support/hdf5_writer.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static const bool isolated = [] {
@@ -36,59 +37,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 namespace octocosm::fuzz {
 namespace {
 
-// Writes a small snapshot file with the C API. Chunked datasets (with
-// deflate) when `chunked`, contiguous ones otherwise.
-class Hdf5SeedWriter {
- public:
-  Hdf5SeedWriter(const std::string& path, bool chunked) : chunked_(chunked) {
-    file_ = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-  }
-  ~Hdf5SeedWriter() { H5Fclose(file_); }
-  Hdf5SeedWriter(const Hdf5SeedWriter&) = delete;
-  Hdf5SeedWriter& operator=(const Hdf5SeedWriter&) = delete;
-
-  template <typename T>
-  void Attribute(const char* group, const char* name, hid_t type, const std::vector<T>& values) {
-    const hid_t location = Group(group);
-    const hsize_t dims[1] = {values.size()};
-    const hid_t space = H5Screate_simple(1, dims, nullptr);
-    const hid_t attribute = H5Acreate2(location, name, type, space, H5P_DEFAULT, H5P_DEFAULT);
-    H5Awrite(attribute, type, values.data());
-    H5Aclose(attribute);
-    H5Sclose(space);
-    H5Gclose(location);
-  }
-  template <typename T>
-  void Dataset(const char* group, const char* name, hid_t type, const std::vector<T>& values, hsize_t columns) {
-    const hid_t location = Group(group);
-    const hsize_t dims[2] = {values.size() / columns, columns};
-    const int rank = columns == 1 ? 1 : 2;
-    const hid_t space = H5Screate_simple(rank, dims, nullptr);
-    const hid_t properties = H5Pcreate(H5P_DATASET_CREATE);
-    if (chunked_) {
-      const hsize_t chunk[2] = {2, columns};
-      H5Pset_chunk(properties, rank, chunk);
-      H5Pset_deflate(properties, 1);
-    }
-    const hid_t dataset = H5Dcreate2(location, name, type, space, H5P_DEFAULT, properties, H5P_DEFAULT);
-    H5Dwrite(dataset, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data());
-    H5Dclose(dataset);
-    H5Pclose(properties);
-    H5Sclose(space);
-    H5Gclose(location);
-  }
-
- private:
-  hid_t Group(const char* name) {
-    if (H5Lexists(file_, name, H5P_DEFAULT) > 0) return H5Gopen2(file_, name, H5P_DEFAULT);
-    return H5Gcreate2(file_, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  }
-  bool chunked_;
-  hid_t file_;
-};
+using testing_support::Hdf5Writer;
 
 // The particles of one type: distinct positions inside a box of 100.
-void WriteParticles(Hdf5SeedWriter& w, const char* group, int n, std::uint64_t first_id, bool masses,
+void WriteParticles(Hdf5Writer& w, const char* group, int n, std::uint64_t first_id, bool masses,
                     const char* smoothing_name) {
   std::vector<double> coordinates;
   std::vector<float> velocities, mass, smoothing;
@@ -102,17 +54,18 @@ void WriteParticles(Hdf5SeedWriter& w, const char* group, int n, std::uint64_t f
     mass.push_back(0.5f + static_cast<float>(i));
     smoothing.push_back(0.125f * static_cast<float>(i + 1));
   }
-  w.Dataset(group, "Coordinates", H5T_NATIVE_DOUBLE, coordinates, 3);
-  w.Dataset(group, "Velocities", H5T_NATIVE_FLOAT, velocities, 3);
-  w.Dataset(group, "ParticleIDs", H5T_NATIVE_UINT64, ids, 1);
-  if (masses) w.Dataset(group, "Masses", H5T_NATIVE_FLOAT, mass, 1);
-  if (smoothing_name != nullptr) w.Dataset(group, smoothing_name, H5T_NATIVE_FLOAT, smoothing, 1);
+  const std::string prefix = std::string(group) + "/";
+  w.Dataset(prefix + "Coordinates", H5T_NATIVE_DOUBLE, coordinates, 3);
+  w.Dataset(prefix + "Velocities", H5T_NATIVE_FLOAT, velocities, 3);
+  w.Dataset(prefix + "ParticleIDs", H5T_NATIVE_UINT64, ids, 1);
+  if (masses) w.Dataset(prefix + "Masses", H5T_NATIVE_FLOAT, mass, 1);
+  if (smoothing_name != nullptr) w.Dataset(prefix + smoothing_name, H5T_NATIVE_FLOAT, smoothing, 1);
 }
 
 // GADGET-4 / AREPO: gas with masses and smoothing lengths, dark matter with a table mass.
 std::string Gadget4Seed(const std::string& path, bool chunked) {
   {
-    Hdf5SeedWriter w(path, chunked);
+    Hdf5Writer w(path, chunked);
     w.Attribute<std::uint32_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT32, {3, 5});
     w.Attribute<std::uint64_t>("Header", "NumPart_Total", H5T_NATIVE_UINT64, {3, 5});
     w.Attribute<std::uint32_t>("Header", "NumPart_Total_HighWord", H5T_NATIVE_UINT32, {0, 0});
@@ -134,7 +87,7 @@ std::string Gadget4Seed(const std::string& path, bool chunked) {
 // SWIFT: per-axis box, the cosmology in its own group, SmoothingLengths.
 std::string SwiftSeed(const std::string& path) {
   {
-    Hdf5SeedWriter w(path, false);
+    Hdf5Writer w(path, false);
     w.Attribute<std::uint64_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT64, {4, 2});
     w.Attribute<std::uint64_t>("Header", "NumPart_Total", H5T_NATIVE_UINT64, {4, 2});
     w.Attribute<double>("Header", "BoxSize", H5T_NATIVE_DOUBLE, {100, 100, 100});

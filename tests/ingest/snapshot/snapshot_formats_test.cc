@@ -14,6 +14,7 @@
 #include "base/error.h"
 #include "ingest/snapshot/snapshot_source.h"
 #include "tests/ingest/snapshot/snapshot_test_util.h"
+#include "tests/support/hdf5_writer.h"
 
 namespace octocosm {
 namespace {
@@ -25,48 +26,7 @@ void WriteFile(const std::string& path, const std::string& bytes) {
 
 // ---------------------------------------------------------------- HDF5 ----
 
-// Writes a GADGET-style HDF5 snapshot file with the C API.
-class Hdf5Writer {
- public:
-  explicit Hdf5Writer(const std::string& path) {
-    file_ = H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-    EXPECT_GE(file_, 0) << path;
-    header_ = H5Gcreate2(file_, "Header", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  }
-  ~Hdf5Writer() {
-    H5Gclose(header_);
-    H5Fclose(file_);
-  }
-  template <typename T>
-  void Attribute(const char* group, const char* name, hid_t type, const std::vector<T>& values) {
-    hid_t location = std::strcmp(group, "Header") == 0 ? header_ : EnsureGroup(group);
-    hsize_t dims[1] = {values.size()};
-    hid_t space = H5Screate_simple(1, dims, nullptr);
-    hid_t attribute = H5Acreate2(location, name, type, space, H5P_DEFAULT, H5P_DEFAULT);
-    H5Awrite(attribute, type, values.data());
-    H5Aclose(attribute);
-    H5Sclose(space);
-    if (location != header_) H5Gclose(location);
-  }
-  template <typename T>
-  void Dataset(const std::string& name, hid_t type, const std::vector<T>& values, hsize_t columns) {
-    std::string group = name.substr(0, name.find('/'));
-    H5Gclose(EnsureGroup(group.c_str()));
-    hsize_t dims[2] = {values.size() / columns, columns};
-    hid_t space = H5Screate_simple(columns == 1 ? 1 : 2, dims, nullptr);
-    hid_t dataset = H5Dcreate2(file_, name.c_str(), type, space, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-    H5Dwrite(dataset, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data());
-    H5Dclose(dataset);
-    H5Sclose(space);
-  }
-
- private:
-  hid_t EnsureGroup(const char* name) {
-    if (H5Lexists(file_, name, H5P_DEFAULT) > 0) return H5Gopen2(file_, name, H5P_DEFAULT);
-    return H5Gcreate2(file_, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  }
-  hid_t file_, header_;
-};
+using testing_support::Hdf5Writer;
 
 // SWIFT's defaults: eta 1.2348 with its cubic spline, gamma 1.825742, and the
 // target number of neighbours that follows, (4 pi / 3) (gamma eta)^3.
