@@ -10,6 +10,7 @@
 
 #include "ingest/ingest.h"
 #include "render/offscreen_renderer.h"
+#include "tests/support/hdr_compare.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm {
@@ -93,15 +94,7 @@ MassMoments Moments(const HdrImage& image, const RenderView& view, Where where) 
 
 double Total(const HdrImage& image) { return Moments(image, TopView(), [](double) { return true; }).mass; }
 
-// Sum |a - b| / sum |b| over one channel.
-double RelativeL1(const HdrImage& a, const HdrImage& b, int channel = 0) {
-  double diff = 0, norm = 0;
-  for (std::size_t i = static_cast<std::size_t>(channel); i < a.rgba.size(); i += 4) {
-    diff += std::fabs(a.rgba[i] - b.rgba[i]);
-    norm += std::fabs(b.rgba[i]);
-  }
-  return diff / norm;
-}
+using testing_support::RelativeL1;
 
 // A tight clump of n particles around `centre`, all with velocity `v`.
 std::vector<Particle> Clump(std::size_t n, std::array<double, 3> centre, std::array<double, 3> v, std::uint64_t seed) {

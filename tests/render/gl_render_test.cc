@@ -17,6 +17,7 @@
 #include "render/reference_rasterizer.h"
 #include "render/selection_set.h"
 #include "synth/scale_generator.h"
+#include "tests/support/hdr_compare.h"
 #include "tests/support/temp_dir.h"
 #include "tools/camera_flags.h"
 #include "tools/reference_render.h"
@@ -104,15 +105,7 @@ double Total(const HdrImage& image, int channel = 0) {
   return sum;
 }
 
-// Sum |a - b| / sum |b| over one channel.
-double RelativeL1(const HdrImage& a, const HdrImage& b, int channel = 0) {
-  double diff = 0, norm = 0;
-  for (std::size_t i = static_cast<std::size_t>(channel); i < a.rgba.size(); i += 4) {
-    diff += std::fabs(a.rgba[i] - b.rgba[i]);
-    norm += std::fabs(b.rgba[i]);
-  }
-  return diff / norm;
-}
+using testing_support::RelativeL1;
 
 // At full detail the GPU draws every particle, from 16-bit node-relative
 // positions in float, with float sums: against the CPU's double-precision
