@@ -139,38 +139,33 @@ void WriteOrThrow(std::ostream& out, const std::string& bytes) {
   if (!out) throw Error::Io("query output", "write failed (disk full or closed pipe?)");
 }
 
-class CsvWriter final : public PointWriter {
+// A header, then each batch's records straight to the stream: CSV (a text
+// line a point) or the binary format (fixed-size little-endian records).
+class StreamWriter final : public PointWriter {
  public:
-  CsvWriter(ColumnSet columns, std::ostream& out) : columns_(columns), out_(out) {
+  using AppendRecord = void (*)(const QueryBatch& batch, std::size_t i, ColumnSet columns, std::string& out);
+  StreamWriter(ColumnSet columns, std::ostream& out, const std::string& header, AppendRecord append)
+      : columns_(columns), out_(out), append_(append) {
+    WriteOrThrow(out_, header);
+  }
+  static std::unique_ptr<PointWriter> Csv(ColumnSet columns, std::ostream& out) {
     std::string header;
     for (const Field& f : FieldsOf(columns)) header += (header.empty() ? "" : ",") + std::string(f.name);
-    WriteOrThrow(out_, header + "\n");
+    return std::make_unique<StreamWriter>(columns, out, header + "\n",
+                                          [](const QueryBatch& batch, std::size_t i, ColumnSet c, std::string& o) {
+                                            AppendText(batch, i, c, ',', o);
+                                          });
   }
-  void Write(const QueryBatch& batch) override {
-    buffer_.clear();
-    for (std::size_t i = 0; i < batch.count; ++i) AppendText(batch, i, columns_, ',', buffer_);
-    WriteOrThrow(out_, buffer_);
-  }
-  void Finish() override { out_.flush(); }
-
- private:
-  ColumnSet columns_;
-  std::ostream& out_;
-  std::string buffer_;
-};
-
-class BinaryWriter final : public PointWriter {
- public:
-  BinaryWriter(ColumnSet columns, std::ostream& out) : columns_(columns), out_(out) {
+  static std::unique_ptr<PointWriter> Binary(ColumnSet columns, std::ostream& out) {
     std::string header(kBinaryMagic, 4);
     PutLittleEndian(header, static_cast<std::uint32_t>(columns));
     PutLittleEndian(header, static_cast<std::uint32_t>(BinaryRecordSize(columns)));
     PutLittleEndian(header, std::uint32_t{0});
-    WriteOrThrow(out_, header);
+    return std::make_unique<StreamWriter>(columns, out, header, &AppendBinary);
   }
   void Write(const QueryBatch& batch) override {
     buffer_.clear();
-    for (std::size_t i = 0; i < batch.count; ++i) AppendBinary(batch, i, columns_, buffer_);
+    for (std::size_t i = 0; i < batch.count; ++i) append_(batch, i, columns_, buffer_);
     WriteOrThrow(out_, buffer_);
   }
   void Finish() override { out_.flush(); }
@@ -178,6 +173,7 @@ class BinaryWriter final : public PointWriter {
  private:
   ColumnSet columns_;
   std::ostream& out_;
+  AppendRecord append_;
   std::string buffer_;
 };
 
@@ -273,8 +269,8 @@ std::size_t BinaryRecordSize(ColumnSet columns) {
 std::unique_ptr<PointWriter> MakePointWriter(PointFormat format, ColumnSet columns, std::ostream& out) {
   columns = (columns & kAllColumns) | ColumnBit(ColumnId::kPosition);
   switch (format) {
-    case PointFormat::kCsv: return std::make_unique<CsvWriter>(columns, out);
-    case PointFormat::kBinary: return std::make_unique<BinaryWriter>(columns, out);
+    case PointFormat::kCsv: return StreamWriter::Csv(columns, out);
+    case PointFormat::kBinary: return StreamWriter::Binary(columns, out);
     case PointFormat::kPly: return std::make_unique<PlyWriter>(columns, false, out);
     case PointFormat::kPlyAscii: return std::make_unique<PlyWriter>(columns, true, out);
   }
