@@ -53,17 +53,14 @@ FourierGrid::FourierGrid(int n, int threads)
   fftw_free(column_buffer);
   if (plane_forward_ == nullptr || plane_inverse_ == nullptr || column_forward_ == nullptr ||
       column_inverse_ == nullptr) {
-    MutexLock lock(PlannerMutex());
-    DestroyPlan(plane_forward_);
-    DestroyPlan(plane_inverse_);
-    DestroyPlan(column_forward_);
-    DestroyPlan(column_inverse_);
-    fftw_free(data_);
+    Release();
     throw Error::InvalidArgument("FFTW could not plan a " + std::to_string(n) + "^3 transform");
   }
 }
 
-FourierGrid::~FourierGrid() {
+FourierGrid::~FourierGrid() { Release(); }
+
+void FourierGrid::Release() {
   MutexLock lock(PlannerMutex());
   DestroyPlan(plane_forward_);
   DestroyPlan(plane_inverse_);

@@ -65,6 +65,8 @@ class FourierGrid {
  private:
   // 1-D transforms along x of every (j, k) column, in the given direction.
   void TransformColumns(void* plan);
+  // Frees the plans made so far and the data.
+  void Release();
 
   int n_;
   int threads_;
