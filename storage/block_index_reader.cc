@@ -17,13 +17,13 @@ BlockIndexReader::BlockIndexReader(std::string path, std::uint32_t epoch, std::u
       cache_(options.cache_pages) {
   std::uint64_t first = layout_.first_page;
   // The header decoder has checked that the layout matches this shape.
-  const std::uint64_t interior_capacity = InteriorCapacity(page_size);
+  interior_capacity_ = InteriorCapacity(page_size);
   std::uint64_t pages = layout_.leaf_page_count;
   for (std::uint32_t level = 0; level < layout_.height; ++level) {
     level_first_page_.push_back(first);
     level_page_count_.push_back(pages);
     first += pages;
-    pages = (pages + interior_capacity - 1) / interior_capacity;
+    pages = (pages + interior_capacity_ - 1) / interior_capacity_;
   }
 }
 
@@ -65,10 +65,22 @@ std::shared_ptr<const IndexPage> BlockIndexReader::FindLeaf(std::uint64_t key) c
     std::size_t index = after == entries.begin() ? 0 : static_cast<std::size_t>(after - entries.begin()) - 1;
     const InteriorEntry& link = entries[index];
     const auto child_level = static_cast<std::uint8_t>(page->level - 1);
-    const std::uint64_t level_first = level_first_page_[child_level];
-    if (link.child_page < level_first || link.child_page - level_first >= level_page_count_[child_level]) {
-      throw TreeCorruption(page->page_number, "child page " + std::to_string(link.child_page) +
-                                                  " is not a page of level " + std::to_string(child_level));
+    // The shape fixes which pages a page links and how many: a page that
+    // links fewer would hide the others' blocks from look-ups, which a scan,
+    // going leaf by leaf, still finds.
+    const std::uint64_t first_child = (page->page_number - level_first_page_[page->level]) * interior_capacity_;
+    const std::uint64_t children = level_page_count_[child_level];
+    const std::uint64_t expected_count =
+        first_child < children ? std::min(interior_capacity_, children - first_child) : 0;
+    if (entries.size() != expected_count) {
+      throw TreeCorruption(page->page_number, "links " + std::to_string(entries.size()) +
+                                                  " pages; the index's shape says " + std::to_string(expected_count));
+    }
+    const std::uint64_t expected_child = level_first_page_[child_level] + first_child + index;
+    if (link.child_page != expected_child) {
+      throw TreeCorruption(page->page_number, "entry " + std::to_string(index) + " links page " +
+                                                  std::to_string(link.child_page) + "; the index's shape says " +
+                                                  std::to_string(expected_child));
     }
     std::shared_ptr<const IndexPage> child = LoadPage(link.child_page, child_level);
     // The separator must be the child's first key, and the child must end
@@ -78,6 +90,16 @@ std::shared_ptr<const IndexPage> BlockIndexReader::FindLeaf(std::uint64_t key) c
         (index + 1 < entries.size() && child->last_key() >= entries[index + 1].first_key)) {
       throw TreeCorruption(page->page_number, "child page " + std::to_string(link.child_page) +
                                                   " holds keys outside its separator " + Hex64(link.first_key));
+    }
+    // A key between this child's last and the next separator is in no page,
+    // unless the next separator is wrong: then it would lie in the next child.
+    if (key > child->last_key() && index + 1 < entries.size()) {
+      const InteriorEntry& next = entries[index + 1];
+      if (next.child_page != expected_child + 1 ||
+          LoadPage(next.child_page, child_level)->first_key() != next.first_key) {
+        throw TreeCorruption(page->page_number, "child page " + std::to_string(next.child_page) +
+                                                    " does not begin at its separator " + Hex64(next.first_key));
+      }
     }
     page = std::move(child);
   }
@@ -111,6 +133,12 @@ void BlockIndexReader::Scan(std::uint64_t lo, std::uint64_t hi,
     if (next_leaf->first_key() <= leaf->last_key()) {
       throw TreeCorruption(next, "leaf keys out of order: first key " + Hex64(next_leaf->first_key()) +
                                      " is not above the previous leaf's last key " + Hex64(leaf->last_key()));
+    }
+    // A scan goes leaf by leaf, a look-up down the tree: both must find the
+    // same blocks (the pages of the way down are cached).
+    if (FindLeaf(next_leaf->first_key())->page_number != next) {
+      throw TreeCorruption(next, "the tree leads its first key " + Hex64(next_leaf->first_key()) +
+                                     " to another leaf");
     }
     leaf = std::move(next_leaf);
   }

@@ -66,7 +66,10 @@ class BlockIndexReader {
   const std::uint32_t epoch_;
   const std::uint32_t page_size_;
   const IndexLayout layout_;
-  // First page of each level (leaves first), from the bulk-load rule.
+  // The tree's shape, from the bulk-load rule: each level's first page and
+  // page count (leaves first); a level's pages are filled in order,
+  // interior_capacity_ children to a page, the last page with the rest.
+  std::uint64_t interior_capacity_ = 0;
   std::vector<std::uint64_t> level_first_page_;
   std::vector<std::uint64_t> level_page_count_;
   const PageReader read_page_;

@@ -399,6 +399,58 @@ TEST(PageFileCorruption, EveryIndexByteIsChecked) {
   file.ReadEverything();
 }
 
+// Edits the root page's entries and re-seals its checksum, as a buggy writer
+// would; `edit` gets the entry count and the entries.
+template <typename Edit>
+void RewriteRoot(const std::string& path, Edit edit) {
+  auto header = PageFileReader::Open(path)->header();
+  Bytes file_bytes = storagetest::ReadFileBytes(path);
+  const std::uint64_t root = header.index.root_page;
+  std::uint8_t* page = &file_bytes[root * header.page_size];
+  edit(page + 8, page + kIndexPageHeaderSize);
+  const std::uint32_t count = GetU32(page + 8);
+  std::span<const std::uint8_t> span(page, header.page_size);
+  PutU64(page + 24, Checksum64(span.first(24), span.subspan(32, count * kInteriorEntrySize)));
+  storagetest::WriteBytesAt(path, root * header.page_size, Bytes(page, page + header.page_size));
+}
+
+// A root that is consistent in itself but hides part of the leaves from the
+// tree: a scan, going leaf by leaf, would find blocks a look-up cannot. Both
+// refuse the index instead.
+TEST(PageFileCorruption, ARootThatHidesLeavesIsRefused) {
+  struct Case {
+    const char* what;
+    void (*edit)(std::uint8_t* count, std::uint8_t* entries);
+  };
+  const std::vector<Case> cases = {
+      {"one child fewer", [](std::uint8_t* count, std::uint8_t*) { PutU32(count, GetU32(count) - 1); }},
+      {"a separator past its child's first key",
+       [](std::uint8_t*, std::uint8_t* entries) {
+         std::uint8_t* second = entries + kInteriorEntrySize;
+         PutU64(second, GetU64(second) + 1);
+       }},
+      {"a child linked twice",
+       [](std::uint8_t*, std::uint8_t* entries) {
+         std::uint8_t* second = entries + kInteriorEntrySize;
+         PutU64(second + 8, GetU64(entries + 8));
+       }},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    SmallFile file(400);  // 5 leaves and a root at 4 KiB pages
+    RewriteRoot(file.path, c.edit);
+    auto reader = PageFileReader::Open(file.path);
+    // The second leaf's first key: the one a look-up misses when the root is wrong.
+    std::vector<std::uint64_t> keys;
+    for (const auto& [key, want] : file.expected) keys.push_back(key);
+    const std::uint64_t hidden = keys[LeafCapacity(file.page_size)];
+    std::string message = ExpectError(ErrorKind::kCorruption, [&] { reader->Lookup(hidden); });
+    EXPECT_NE(message.find("index page"), std::string::npos) << message;
+    ExpectError(ErrorKind::kCorruption,
+                [&] { reader->Scan(0, UINT64_MAX, [](const IndexEntry&) { return true; }); });
+  }
+}
+
 TEST(PageFileCorruption, TruncationAtManyOffsets) {
   SmallFile file(100);
   const Bytes original = storagetest::ReadFileBytes(file.path);
