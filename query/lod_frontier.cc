@@ -26,8 +26,7 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
   // face is tested there too, a box length away (each axis on its own, so a
   // corner's images are all tried).
   const bool wrapped = cube.periodic && options.cull_margin > 0;
-  const auto visible = [&](std::int32_t index) {
-    const NodeCube c = cube.NodeCubeOf(hierarchy.node(index).key);
+  const auto visible = [&](const NodeCube& c) {
     const double m = options.cull_margin;
     const std::array<double, 3> lo = {c.origin[0] - m, c.origin[1] - m, c.origin[2] - m};
     const std::array<double, 3> hi = {c.origin[0] + c.size + m, c.origin[1] + c.size + m, c.origin[2] + c.size + m};
@@ -54,21 +53,19 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     }
     return false;
   };
-  const auto error = [&](std::int32_t index) {
-    const NodeHierarchy::Node& n = hierarchy.node(index);
-    return ScreenSpaceError(cube.NodeCubeOf(n.key), n.entry.point_count, view);
-  };
+  const ScreenErrorMeter error(view);
 
   using Candidate = std::pair<double, std::int32_t>;  // (error, node): largest error first
   std::priority_queue<Candidate> queue;
   ++f.nodes_visited;
-  if (!visible(0)) {
+  const NodeCube root = cube.NodeCubeOf(hierarchy.node(0).key);
+  if (!visible(root)) {
     ++f.nodes_culled;
     return f;
   }
-  queue.emplace(error(0), 0);
+  queue.emplace(error(root, hierarchy.node(0).entry.point_count), 0);
   f.points = hierarchy.node(0).entry.point_count;
-  std::vector<std::int32_t> children;
+  std::vector<Candidate> children;  // in view, with their errors
   while (!queue.empty()) {
     const auto [node_error, index] = queue.top();
     queue.pop();
@@ -83,12 +80,14 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     for (std::int32_t c : node.children) {
       if (c < 0) continue;
       ++f.nodes_visited;
-      if (!visible(c)) {
+      const NodeHierarchy::Node& child = hierarchy.node(c);
+      const NodeCube child_cube = cube.NodeCubeOf(child.key);
+      if (!visible(child_cube)) {
         ++f.nodes_culled;
         continue;
       }
-      children.push_back(c);
-      child_points += hierarchy.node(c).entry.point_count;
+      children.push_back({error(child_cube, child.entry.point_count), c});
+      child_points += child.entry.point_count;
     }
     const std::uint64_t refined_points = f.points - node.entry.point_count + child_points;
     if (options.point_budget > 0 && refined_points > options.point_budget) {
@@ -100,7 +99,7 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     }
     f.points = refined_points;
     f.refined.push_back(index);
-    for (std::int32_t c : children) queue.emplace(error(c), c);
+    for (const Candidate& c : children) queue.push(c);
   }
   return f;
 }

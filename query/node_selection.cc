@@ -73,18 +73,25 @@ std::vector<IndexEntry> SelectLevel(const Dataset& dataset, std::uint32_t epoch,
       stats);
 }
 
-double ScreenSpaceError(const NodeCube& node, std::uint64_t points, const ScreenErrorView& view) {
-  const Camera& camera = view.camera;
+ScreenErrorMeter::ScreenErrorMeter(const ScreenErrorView& view)
+    : position_(view.camera.position),
+      near_(view.camera.near),
+      pixels_per_unit_at_unit_distance_(view.viewport_height /
+                                        (2 * std::tan(view.camera.fov_y_degrees * std::numbers::pi / 360))) {}
+
+double ScreenErrorMeter::operator()(const NodeCube& node, std::uint64_t points) const {
   double distance2 = 0;
   for (int a = 0; a < 3; ++a) {
-    const double d = std::max({node.origin[a] - camera.position[a], 0.0, camera.position[a] - (node.origin[a] + node.size)});
+    const double d = std::max({node.origin[a] - position_[a], 0.0, position_[a] - (node.origin[a] + node.size)});
     distance2 += d * d;
   }
-  const double distance = std::max(std::sqrt(distance2), camera.near);
+  const double distance = std::max(std::sqrt(distance2), near_);
   const double spacing = node.size / std::cbrt(static_cast<double>(std::max<std::uint64_t>(points, 1)));
-  const double pixels_per_unit_at_unit_distance =
-      view.viewport_height / (2 * std::tan(camera.fov_y_degrees * std::numbers::pi / 360));
-  return spacing / distance * pixels_per_unit_at_unit_distance;
+  return spacing / distance * pixels_per_unit_at_unit_distance_;
+}
+
+double ScreenSpaceError(const NodeCube& node, std::uint64_t points, const ScreenErrorView& view) {
+  return ScreenErrorMeter(view)(node, points);
 }
 
 std::vector<IndexEntry> SelectByScreenError(const Dataset& dataset, std::uint32_t epoch, const Region& region,

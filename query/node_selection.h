@@ -24,6 +24,7 @@
 // (contiguous in key order); a node without children is a leaf.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -61,5 +62,18 @@ std::vector<IndexEntry> SelectByScreenError(const Dataset& dataset, std::uint32_
 
 // The projected point spacing of a node in pixels (the formula above).
 double ScreenSpaceError(const NodeCube& node, std::uint64_t points, const ScreenErrorView& view);
+
+// ScreenSpaceError for many nodes seen from one view, the view's part of the
+// formula computed once; the same numbers.
+class ScreenErrorMeter {
+ public:
+  explicit ScreenErrorMeter(const ScreenErrorView& view);
+  double operator()(const NodeCube& node, std::uint64_t points) const;
+
+ private:
+  std::array<double, 3> position_;
+  double near_;
+  double pixels_per_unit_at_unit_distance_;
+};
 
 }  // namespace octocosm
