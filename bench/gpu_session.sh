@@ -12,8 +12,8 @@
 # Times only, by default: the reference rendering that gives the PSNR and
 # SSIM columns costs about 150 s a call at 10^8 points even on 16 cores (the
 # neighbour search of every particle); REFERENCE=1 adds it. On an H100 host
-# (16 cores) generating 10^8 points took 1.9 s, ingesting them 75 s, and the
-# whole run about 260 s. Keep the call under the device's per-call limit.
+# (16 cores) generating 10^8 points took 2-3 s, ingesting them 75-82 s, and
+# the whole run 200-260 s. Keep the call under the device's per-call limit.
 #
 # POINTS (default 1e8), PM_SIDE (default 128) and BACKEND (default egl) make a
 # dry run possible on any machine:
