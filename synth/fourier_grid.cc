@@ -96,32 +96,33 @@ void FourierGrid::TransformColumns(void* plan) {
       1);
 }
 
-void FourierGrid::Forward() {
+void FourierGrid::TransformPlanes(bool forward) {
   auto* modes = reinterpret_cast<fftw_complex*>(data_);
   ParallelFor(
       static_cast<std::size_t>(n_),
       threads_,
       [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
-          fftw_execute_dft_r2c(static_cast<fftw_plan>(plane_forward_), data_ + i * plane_, modes + i * (plane_ / 2));
+          double* values = data_ + i * plane_;
+          fftw_complex* plane_modes = modes + i * (plane_ / 2);
+          if (forward) {
+            fftw_execute_dft_r2c(static_cast<fftw_plan>(plane_forward_), values, plane_modes);
+          } else {
+            fftw_execute_dft_c2r(static_cast<fftw_plan>(plane_inverse_), plane_modes, values);
+          }
         }
       },
       1);
+}
+
+void FourierGrid::Forward() {
+  TransformPlanes(true);
   TransformColumns(column_forward_);
 }
 
 void FourierGrid::Inverse() {
   TransformColumns(column_inverse_);
-  auto* modes = reinterpret_cast<fftw_complex*>(data_);
-  ParallelFor(
-      static_cast<std::size_t>(n_),
-      threads_,
-      [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) {
-          fftw_execute_dft_c2r(static_cast<fftw_plan>(plane_inverse_), modes + i * (plane_ / 2), data_ + i * plane_);
-        }
-      },
-      1);
+  TransformPlanes(false);
 }
 
 }  // namespace octocosm::synth

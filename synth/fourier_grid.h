@@ -65,6 +65,9 @@ class FourierGrid {
  private:
   // 1-D transforms along x of every (j, k) column, in the given direction.
   void TransformColumns(void* plan);
+  // The 2-D transform of every x-plane, in place: real to modes (forward)
+  // or back.
+  void TransformPlanes(bool forward);
   // Frees the plans made so far and the data.
   void Release();
 
