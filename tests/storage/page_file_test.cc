@@ -399,58 +399,6 @@ TEST(PageFileCorruption, EveryIndexByteIsChecked) {
   file.ReadEverything();
 }
 
-// Edits the root page's entries and re-seals its checksum, as a buggy writer
-// would; `edit` gets the entry count and the entries.
-template <typename Edit>
-void RewriteRoot(const std::string& path, Edit edit) {
-  auto header = PageFileReader::Open(path)->header();
-  Bytes file_bytes = storagetest::ReadFileBytes(path);
-  const std::uint64_t root = header.index.root_page;
-  std::uint8_t* page = &file_bytes[root * header.page_size];
-  edit(page + 8, page + kIndexPageHeaderSize);
-  const std::uint32_t count = GetU32(page + 8);
-  std::span<const std::uint8_t> span(page, header.page_size);
-  PutU64(page + 24, Checksum64(span.first(24), span.subspan(32, count * kInteriorEntrySize)));
-  storagetest::WriteBytesAt(path, root * header.page_size, Bytes(page, page + header.page_size));
-}
-
-// A root that is consistent in itself but hides part of the leaves from the
-// tree: a scan, going leaf by leaf, would find blocks a look-up cannot. Both
-// refuse the index instead.
-TEST(PageFileCorruption, ARootThatHidesLeavesIsRefused) {
-  struct Case {
-    const char* what;
-    void (*edit)(std::uint8_t* count, std::uint8_t* entries);
-  };
-  const std::vector<Case> cases = {
-      {"one child fewer", [](std::uint8_t* count, std::uint8_t*) { PutU32(count, GetU32(count) - 1); }},
-      {"a separator past its child's first key",
-       [](std::uint8_t*, std::uint8_t* entries) {
-         std::uint8_t* second = entries + kInteriorEntrySize;
-         PutU64(second, GetU64(second) + 1);
-       }},
-      {"a child linked twice",
-       [](std::uint8_t*, std::uint8_t* entries) {
-         std::uint8_t* second = entries + kInteriorEntrySize;
-         PutU64(second + 8, GetU64(entries + 8));
-       }},
-  };
-  for (const Case& c : cases) {
-    SCOPED_TRACE(c.what);
-    SmallFile file(400);  // 5 leaves and a root at 4 KiB pages
-    RewriteRoot(file.path, c.edit);
-    auto reader = PageFileReader::Open(file.path);
-    // The second leaf's first key: the one a look-up misses when the root is wrong.
-    std::vector<std::uint64_t> keys;
-    for (const auto& [key, want] : file.expected) keys.push_back(key);
-    const std::uint64_t hidden = keys[LeafCapacity(file.page_size)];
-    std::string message = ExpectError(ErrorKind::kCorruption, [&] { reader->Lookup(hidden); });
-    EXPECT_NE(message.find("index page"), std::string::npos) << message;
-    ExpectError(ErrorKind::kCorruption,
-                [&] { reader->Scan(0, UINT64_MAX, [](const IndexEntry&) { return true; }); });
-  }
-}
-
 TEST(PageFileCorruption, TruncationAtManyOffsets) {
   SmallFile file(100);
   const Bytes original = storagetest::ReadFileBytes(file.path);
@@ -517,22 +465,30 @@ TEST(PageFileCorruption, NotAPageFile) {
   ExpectError(ErrorKind::kIo, [&] { PageFileReader::Open(dir.File("dir.pages")); });
 }
 
-// Rewrites one leaf entry's location and re-seals the page with a valid
-// checksum, as a buggy writer would: the structural checks must still catch it.
-void RewriteFirstLeafEntry(const std::string& path, std::uint64_t first_page, std::uint32_t page_count,
-                           std::uint64_t byte_length) {
+// Edits one index page and re-seals it with a valid checksum, as a buggy
+// writer would: the structural checks must still catch what the edit breaks.
+// `edit` gets the page's entry count and its entries.
+template <typename Edit>
+void RewriteIndexPage(const std::string& path, std::uint64_t page_number, std::size_t entry_size, Edit edit) {
   auto header = PageFileReader::Open(path)->header();
   Bytes file_bytes = storagetest::ReadFileBytes(path);
-  const std::uint64_t leaf = header.index.first_page;
-  std::uint8_t* page = &file_bytes[leaf * header.page_size];
-  std::uint8_t* entry = page + kIndexPageHeaderSize;
-  PutU64(entry + 8, first_page);
-  PutU64(entry + 16, byte_length);
-  PutU32(entry + 40, page_count);
-  std::uint32_t count = GetU32(page + 8);
+  std::uint8_t* page = &file_bytes[page_number * header.page_size];
+  edit(page + 8, page + kIndexPageHeaderSize);
+  const std::uint32_t count = GetU32(page + 8);
   std::span<const std::uint8_t> span(page, header.page_size);
-  PutU64(page + 24, Checksum64(span.first(24), span.subspan(32, count * kLeafEntrySize)));
-  storagetest::WriteBytesAt(path, leaf * header.page_size, Bytes(page, page + header.page_size));
+  PutU64(page + 24, Checksum64(span.first(24), span.subspan(32, count * entry_size)));
+  storagetest::WriteBytesAt(path, page_number * header.page_size, Bytes(page, page + header.page_size));
+}
+
+// Rewrites the first leaf entry's location.
+void RewriteFirstLeafEntry(const std::string& path, std::uint64_t first_page, std::uint32_t page_count,
+                           std::uint64_t byte_length) {
+  const std::uint64_t leaf = PageFileReader::Open(path)->header().index.first_page;
+  RewriteIndexPage(path, leaf, kLeafEntrySize, [&](std::uint8_t*, std::uint8_t* entry) {
+    PutU64(entry + 8, first_page);
+    PutU64(entry + 16, byte_length);
+    PutU32(entry + 40, page_count);
+  });
 }
 
 TEST(PageFileCorruption, IndexEntriesOutsideTheDataPages) {
@@ -561,6 +517,44 @@ TEST(PageFileCorruption, IndexEntriesOutsideTheDataPages) {
     std::string message = ExpectError(ErrorKind::kCorruption, [&] { reader->Lookup(first_key); });
     EXPECT_NE(message.find("block " + Hex64(first_key) + " (epoch 0): bad index entry"), std::string::npos)
         << c.what << ": " << message;
+  }
+}
+
+// A root that is consistent in itself but hides part of the leaves from the
+// tree: a scan, going leaf by leaf, would find blocks a look-up cannot. Both
+// refuse the index instead.
+TEST(PageFileCorruption, ARootThatHidesLeavesIsRefused) {
+  struct Case {
+    const char* what;
+    void (*edit)(std::uint8_t* count, std::uint8_t* entries);
+  };
+  const std::vector<Case> cases = {
+      {"one child fewer", [](std::uint8_t* count, std::uint8_t*) { PutU32(count, GetU32(count) - 1); }},
+      {"a separator past its child's first key",
+       [](std::uint8_t*, std::uint8_t* entries) {
+         std::uint8_t* second = entries + kInteriorEntrySize;
+         PutU64(second, GetU64(second) + 1);
+       }},
+      {"a child linked twice",
+       [](std::uint8_t*, std::uint8_t* entries) {
+         std::uint8_t* second = entries + kInteriorEntrySize;
+         PutU64(second + 8, GetU64(entries + 8));
+       }},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    SmallFile file(400);  // 5 leaves and a root at 4 KiB pages
+    RewriteIndexPage(file.path, PageFileReader::Open(file.path)->header().index.root_page, kInteriorEntrySize,
+                     c.edit);
+    auto reader = PageFileReader::Open(file.path);
+    // The second leaf's first key: the one a look-up misses when the root is wrong.
+    std::vector<std::uint64_t> keys;
+    for (const auto& [key, want] : file.expected) keys.push_back(key);
+    const std::uint64_t hidden = keys[LeafCapacity(file.page_size)];
+    std::string message = ExpectError(ErrorKind::kCorruption, [&] { reader->Lookup(hidden); });
+    EXPECT_NE(message.find("index page"), std::string::npos) << message;
+    ExpectError(ErrorKind::kCorruption,
+                [&] { reader->Scan(0, UINT64_MAX, [](const IndexEntry&) { return true; }); });
   }
 }
 
