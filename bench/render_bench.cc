@@ -35,7 +35,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -317,9 +316,7 @@ void Playback(const Flags& f, SplatPath path) {
     const double time = static_cast<double>(frame) / f.frames_per_epoch;
     const auto start = std::chrono::steady_clock::now();
     const FrameStats stats = renderer.scene().Stream(view, time, true);
-    renderer.splat().StartMeasure();  // the viewer's way: the newest statistics finished, never waited for
-    std::optional<ImageStatistics> latest = renderer.splat().LatestStatistics();
-    const ImageStatistics measured = latest ? *latest : *renderer.splat().LatestStatistics(true);
+    const ImageStatistics measured = renderer.splat().MeasureLate();
     const double elapsed = frame == 0 ? 0 : 1.0 / 30;  // as if played at 30 frames a second
     const ToneMapSettings settings;
     const double exposure = smoother.Update(AutomaticExposure(settings, measured), elapsed);

@@ -23,14 +23,8 @@ Picture OffscreenRenderer::Render(const RenderView& view, double time, const Ton
   Picture picture;
   scene_->SetColorMode(tone.color);
   picture.stats = scene_->Complete(view, time);
-  ImageStatistics statistics;
-  if (statistics_timing_ == StatisticsTiming::kLatest) {
-    splat_->StartMeasure();
-    std::optional<ImageStatistics> latest = splat_->LatestStatistics();
-    statistics = latest ? *latest : *splat_->LatestStatistics(true);
-  } else {
-    statistics = splat_->Measure();
-  }
+  const ImageStatistics statistics =
+      statistics_timing_ == StatisticsTiming::kLatest ? splat_->MeasureLate() : splat_->Measure();
   const double exposure =
       smoother && tone.exposure == 0 ? smoother->Update(AutomaticExposure(tone, statistics), elapsed) : 0.0;
   picture.tone = ResolveToneMap(tone, statistics, exposure);

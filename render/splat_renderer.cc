@@ -446,6 +446,12 @@ ImageStatistics SplatRenderer::Measure() {
   return *LatestStatistics(true);
 }
 
+ImageStatistics SplatRenderer::MeasureLate() {
+  StartMeasure();
+  const std::optional<ImageStatistics> latest = LatestStatistics();
+  return latest ? *latest : *LatestStatistics(true);
+}
+
 void SplatRenderer::ToneMap(const ToneMapParameters& p, int x, int y) {
   Flush();
   Resolve();

@@ -117,6 +117,10 @@ class SplatRenderer {
   std::optional<ImageStatistics> LatestStatistics(bool wait = false);
   // StartMeasure, waiting for the result: the statistics of the frame so far.
   ImageStatistics Measure();
+  // StartMeasure, then the newest statistics the GPU has finished (a render
+  // loop's way: usually a frame or two old); this frame's, waited for, when
+  // none has finished yet.
+  ImageStatistics MeasureLate();
   // GPU time of the stages of the newest frame the GPU has finished (frame
   // start to measure, measure, tone map); `wait`: of the last frame drawn,
   // waiting for it.

@@ -102,10 +102,7 @@ ToneMapParameters ToneMapIntoWindow(const ToneMapSettings& tone, double seconds,
                                     ExposureSmoother& smoother) {
   // The statistics come a frame or two late, so that the CPU never waits
   // for the GPU to finish drawing; only the first frame waits for its own.
-  splat.StartMeasure();
-  std::optional<ImageStatistics> measured = splat.LatestStatistics();
-  if (!measured) measured = splat.LatestStatistics(true);
-  const ImageStatistics& image = *measured;
+  const ImageStatistics image = splat.MeasureLate();
   if (tone.exposure == 0 && image.max_density > 0) smoother.Update(AutomaticExposure(tone, image), seconds);
   const ToneMapParameters parameters = ResolveToneMap(tone, image, tone.exposure > 0 ? 0.0 : smoother.current());
   window.BindAndClear();
