@@ -20,6 +20,7 @@
 #include "storage/store_reader.h"
 #include "storage/store_writer.h"
 #include "ingest/ingest.h"
+#include "tests/storage/storage_test_util.h"
 
 namespace octocosm {
 namespace {
@@ -39,15 +40,7 @@ std::string AllFaults(const VerifyReport& report) {
   return all;
 }
 
-void FlipByte(const fs::path& file, std::uint64_t offset) {
-  std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
-  f.seekg(static_cast<std::streamoff>(offset));
-  char c = 0;
-  f.read(&c, 1);
-  c = static_cast<char>(c ^ 0x5A);
-  f.seekp(static_cast<std::streamoff>(offset));
-  f.write(&c, 1);
-}
+void FlipByte(const fs::path& file, std::uint64_t offset) { storagetest::FlipByte(file.string(), offset, 0x5A); }
 
 class VerifyTest : public ::testing::Test {
  protected:

@@ -25,6 +25,7 @@
 #include "query/node_selection.h"
 #include "query/particle_lookup.h"
 #include "query/region.h"
+#include "tests/storage/storage_test_util.h"
 
 namespace octocosm {
 namespace {
@@ -516,15 +517,7 @@ TEST_F(QueryTest, DamagedColumnIsCorruptionOnlyWhenRead) {
     offset = entry->first_page * dataset.store().page_size() + velocity->offset + velocity->length / 2;
     page_file = (copy / dataset.store().epochs()[0].file).string();
   }
-  {
-    std::fstream file(page_file, std::ios::in | std::ios::out | std::ios::binary);
-    file.seekg(static_cast<std::streamoff>(offset));
-    char byte = 0;
-    file.read(&byte, 1);
-    byte = static_cast<char>(byte ^ 0x5a);
-    file.seekp(static_cast<std::streamoff>(offset));
-    file.write(&byte, 1);
-  }
+  storagetest::FlipByte(page_file, offset, 0x5a);
   const Dataset dataset = Dataset::Open(copy.string());
   const auto everything = MakeEverythingRegion();
   QueryOptions options;
