@@ -9,13 +9,16 @@
 #include <numbers>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
+#include <string_view>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 #include "base/error.h"
 #include "ingest/snapshot/binary_file.h"
 #include "ingest/snapshot/file_set.h"
-#include "ingest/snapshot/isolated_call.h"
+#include "ingest/snapshot/isolated_process.h"
 #include "ingest/snapshot/segmented_source.h"
 
 namespace octocosm {
@@ -368,6 +371,8 @@ std::optional<double> SwiftKernelGamma(hid_t file, const std::string& path) {
 
 std::string GroupName(int type) { return "PartType" + std::to_string(type); }
 
+[[noreturn]] void ThrowAnswered(std::string_view answer);
+
 class Hdf5Source final : public SegmentedSource {
  public:
   // Walks the snapshot's structure with libhdf5: every file's header and
@@ -403,9 +408,10 @@ class Hdf5Source final : public SegmentedSource {
   }
 
   // A source from what the walk above found (State()), without asking
-  // libhdf5 again: the parent side of OpenHdf5Snapshot.
-  Hdf5Source(const nlohmann::json& state, const ReadOptions& options) : SegmentedSource(options.chunk_particles) {
-    SilenceHdf5ErrorPrinting();
+  // libhdf5 again, that has `reader` (the process that walked) read its
+  // particles: the owner's side of OpenHdf5Snapshot.
+  Hdf5Source(const nlohmann::json& state, const ReadOptions& options, std::unique_ptr<IsolatedProcess> reader)
+      : SegmentedSource(options.chunk_particles), reader_(std::move(reader)) {
     read_velocity_ = options.read_velocity;
     read_id_ = options.read_id;
     read_smoothing_ = options.read_smoothing;
@@ -479,9 +485,9 @@ class Hdf5Source final : public SegmentedSource {
 
   // Reads the first and the last particle of every segment as Next() would:
   // each dataset read is opened, its hyperslab selected, and its first and
-  // last chunk (when chunked) read through the filters. In the child of
-  // OpenHdf5Snapshot, so that a dataset whose storage crashes libhdf5 fails
-  // there; the chunks between stay trusted (docs/INPUT_FORMATS.md).
+  // last chunk (when chunked) read through the filters. In the reader
+  // process, at open, so that a dataset whose storage fails libhdf5 fails
+  // before a long ingest begins.
   void Probe() {
     ParticleChunk chunk;
     for (const Segment& segment : segments_) {
@@ -492,8 +498,21 @@ class Hdf5Source final : public SegmentedSource {
     CloseSegment();
   }
 
+  // In the reader process: the range its owner asked for, as AppendRange.
+  void ReadForOwner(const Segment& segment, std::uint64_t begin, std::size_t count, ParticleChunk& chunk) {
+    if (segment.file >= files_.size() || segment.type < 0 ||
+        static_cast<std::size_t>(segment.type) >= files_[segment.file].this_file.size()) {
+      throw std::invalid_argument("a read of a segment the HDF5 reader does not have");
+    }
+    AppendRange(segment, begin, count, chunk);
+  }
+
  protected:
   void AppendRange(const Segment& segment, std::uint64_t begin, std::size_t count, ParticleChunk& chunk) override {
+    if (reader_) {
+      AppendRangeFromReader(segment, begin, count, chunk);
+      return;
+    }
     OpenSegment(segment);
     const std::size_t old = chunk.size();
     const std::string group = GroupName(segment.type);
@@ -851,6 +870,69 @@ class Hdf5Source final : public SegmentedSource {
     }
   }
 
+  // Particles [begin, begin + count) of `segment`, read by the reader
+  // process (AnswerHdf5Request) and appended to `chunk` as AppendRange does.
+  void AppendRangeFromReader(const Segment& segment, std::uint64_t begin, std::size_t count, ParticleChunk& chunk) {
+    const std::string& path = files_[segment.file].path;
+    const std::string request = RangeRequest(segment, begin, count);
+    if (read_ahead_ != request) {
+      if (!read_ahead_.empty()) reader_->Receive();  // not what was asked for after all
+      reader_->Send(request);
+    }
+    read_ahead_.clear();
+    const IsolatedResult result = reader_->Receive();
+    // Reads come in order: the reader reads the next range of the segment
+    // while this process works on this one.
+    const std::uint64_t next = begin + count;
+    if (result.returned && !result.bytes.empty() && result.bytes[0] == 'C' && next < segment.count) {
+      read_ahead_ =
+          RangeRequest(segment, next, static_cast<std::size_t>(std::min<std::uint64_t>(count, segment.count - next)));
+      reader_->Send(read_ahead_);
+    }
+    const std::string rows =
+        GroupName(segment.type) + " particles " + std::to_string(begin) + " to " + std::to_string(begin + count - 1);
+    if (!result.returned) {
+      throw Error::BadInput(path, "libhdf5 failed reading " + rows + ": the process reading them " + result.failure +
+                                      "; the file is damaged");
+    }
+    std::string_view answer = result.bytes;
+    if (!answer.empty() && answer[0] == 'E') ThrowAnswered(answer);
+    const std::size_t old = chunk.size();
+    const std::size_t bytes_per_particle = 3 * sizeof(double) + sizeof(double) +
+                                           (header_.has_velocity ? 3 * sizeof(float) : 0) +
+                                           (header_.has_id ? sizeof(std::uint64_t) : 0) +
+                                           (header_.has_smoothing ? sizeof(float) : 0);
+    if (answer.size() != 1 + count * bytes_per_particle || answer[0] != 'C') {
+      throw Error::BadInput(path, "the process reading " + rows + " with libhdf5 sent a malformed answer (" +
+                                      std::to_string(answer.size()) + " bytes)");
+    }
+    answer.remove_prefix(1);
+    auto take = [&](auto& column, std::size_t values) {
+      using Value = typename std::decay_t<decltype(column)>::value_type;
+      const std::size_t first = column.size();
+      column.resize(first + values);
+      std::memcpy(column.data() + first, answer.data(), values * sizeof(Value));
+      answer.remove_prefix(values * sizeof(Value));
+    };
+    take(chunk.position, 3 * count);
+    take(chunk.mass, count);
+    if (header_.has_velocity) take(chunk.velocity, 3 * count);
+    if (header_.has_id) take(chunk.id, count);
+    if (header_.has_smoothing) take(chunk.smoothing, count);
+    chunk.type.resize(old + count, static_cast<std::uint8_t>(segment.type));
+  }
+
+  static std::string RangeRequest(const Segment& segment, std::uint64_t begin, std::size_t count) {
+    std::string request = "R";
+    for (std::uint64_t value : {std::uint64_t{segment.file}, static_cast<std::uint64_t>(segment.type), begin,
+                                std::uint64_t{count}}) {
+      request.append(reinterpret_cast<const char*>(&value), sizeof value);
+    }
+    return request;
+  }
+
+  std::unique_ptr<IsolatedProcess> reader_;  // reads the particles when set (OpenHdf5Snapshot)
+  std::string read_ahead_;                   // the range request sent to reader_ and not yet received
   std::vector<Hdf5File> files_;
   bool read_velocity_ = true, read_id_ = true, read_smoothing_ = true;
   double smoothing_scale_ = 1;  // what the file's smoothing lengths are multiplied by (SwiftKernelGamma)
@@ -860,6 +942,86 @@ class Hdf5Source final : public SegmentedSource {
   int open_type_ = -1;
 };
 
+// libhdf5 parses a file's structure without guarding against damage: on a
+// crafted or damaged file it can crash, read past its buffers, loop or ask
+// for gigabytes (docs/TESTING.md). So every call into libhdf5 on a snapshot
+// runs in a reader process of its own (isolated_process.h), started when
+// the snapshot is opened and ended with its source. It walks the structure
+// (the constructor above), reads the first and last value of each dataset
+// (Probe) and hands back what it found (State, as CBOR) or the Error it
+// threw; the owner builds its source from that without parsing the headers
+// again, and then asks the reader for its particles a range at a time. A
+// reader that dies, fails to allocate within its cap, or goes
+// kReaderTimeLimit without opening another file (a structure that loops) or
+// answering a read becomes an Error naming the file it was reading.
+constexpr const char* kHdf5ReaderService = "hdf5-reader";
+constexpr std::chrono::seconds kReaderTimeLimit{30};
+// The reader's allocations: the walk needs little, a read of a range at
+// most a chunk (kMaxChunkBytes) and its compressed bytes, and the range's
+// particles (SegmentedSource reads at most 2^16 at a time).
+constexpr std::uint64_t kReaderAddressSpace = std::uint64_t{1} << 30;
+
+// Requests: 'O' and CBOR {file, options} opens a snapshot; 'R' and four
+// native u64 (file index, type, first particle, count) reads a range.
+// Answers: 'S' and the state as CBOR; 'C' and the range's columns
+// (positions, masses, then velocities, IDs and smoothing lengths as the
+// header has them), native bytes; or 'E', the error kind and its message.
+std::string AnswerHdf5Request(std::string_view request) {
+  static std::unique_ptr<Hdf5Source> source;
+  try {
+    if (!request.empty() && request[0] == 'O') {
+      const nlohmann::json open = nlohmann::json::from_cbor(request.substr(1));
+      const nlohmann::json& o = open.at("options");
+      ReadOptions options;
+      options.format = "hdf5";
+      options.types = o.at("types").get<std::vector<int>>();
+      options.chunk_particles = o.at("chunk_particles").get<std::size_t>();
+      options.read_velocity = o.at("read_velocity").get<bool>();
+      options.read_id = o.at("read_id").get<bool>();
+      options.read_smoothing = o.at("read_smoothing").get<bool>();
+      options.box_size_override = o.at("box_size_override").get<double>();
+      options.ignore_box = o.at("ignore_box").get<bool>();
+      source = std::make_unique<Hdf5Source>(open.at("file").get<std::string>(), options);
+      source->Probe();
+      const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(source->State());
+      return 'S' + std::string(cbor.begin(), cbor.end());
+    }
+    std::uint64_t values[4];
+    if (request.size() != 1 + sizeof values || request[0] != 'R' || !source) {
+      throw std::invalid_argument("a request the HDF5 reader does not know");
+    }
+    std::memcpy(values, request.data() + 1, sizeof values);
+    ParticleChunk chunk;
+    source->ReadForOwner(Segment{values[0], static_cast<int>(values[1]), 0}, values[2],
+                         static_cast<std::size_t>(values[3]), chunk);
+    std::string answer = "C";
+    answer.reserve(1 + chunk.position.size() * sizeof(double) + chunk.mass.size() * sizeof(double) +
+                   chunk.velocity.size() * sizeof(float) + chunk.id.size() * sizeof(std::uint64_t) +
+                   chunk.smoothing.size() * sizeof(float));
+    auto put = [&](const auto& column) {
+      answer.append(reinterpret_cast<const char*>(column.data()), column.size() * sizeof column[0]);
+    };
+    put(chunk.position);
+    put(chunk.mass);
+    put(chunk.velocity);
+    put(chunk.id);
+    put(chunk.smoothing);
+    return answer;
+  } catch (const Error& e) {
+    return 'E' + std::string(1, static_cast<char>(e.kind())) + e.what();
+  }
+}
+
+// A program that can open an HDF5 snapshot can be its reader: started as
+// one, it serves here and exits before its main() runs.
+[[maybe_unused]] const bool kServedAsReader = ServeIfStartedAs(kHdf5ReaderService, &AnswerHdf5Request);
+
+// An 'E' answer: the Error the reader threw, thrown here as it was.
+[[noreturn]] void ThrowAnswered(std::string_view answer) {
+  if (answer.size() < 2) throw Error::BadInput("", "the HDF5 reader process sent an empty error");
+  throw Error(static_cast<ErrorKind>(answer[1]), std::string(answer.substr(2)));
+}
+
 }  // namespace
 
 bool IsHdf5Signature(const std::uint8_t bytes[8]) {
@@ -867,53 +1029,31 @@ bool IsHdf5Signature(const std::uint8_t bytes[8]) {
   return std::memcmp(bytes, kSignature, 8) == 0;
 }
 
-// libhdf5 parses a file's structure without guarding against damage: on a
-// crafted or damaged file it can crash, read past its buffers, loop or ask
-// for gigabytes (docs/TESTING.md). So the walk of the structure, which
-// decides everything the reader trusts, runs in a child process, together
-// with a read of the first and last value of each dataset (Probe). The child
-// hands back what it found (State, as CBOR) or the Error it threw, and the
-// parent builds its source from that without parsing the headers again; it
-// then opens and reads only the datasets the child read. A child that dies,
-// fails to allocate within its cap, or goes kChildTimeLimit without opening
-// another file (a structure that loops) becomes an Error naming the file it
-// was reading.
-//
-// The child is a fork() of this process running only this thread; libhdf5
-// is not used by another thread meanwhile (ParticleSource: HDF5 sources are
-// not read concurrently), and glibc's malloc survives fork(), so the child
-// finds libhdf5 and the heap in a consistent state.
-constexpr std::chrono::seconds kChildTimeLimit{30};
-// The child's allocations beyond the parent's: the walk needs little, and a
-// probe read at most a chunk (kMaxChunkBytes) and its compressed bytes.
-constexpr std::uint64_t kChildAddressSpace = std::uint64_t{1} << 30;
-
 std::unique_ptr<ParticleSource> OpenHdf5Snapshot(const std::string& file, const ReadOptions& options) {
   if (!options.isolate_hdf5) return std::make_unique<Hdf5Source>(file, options);
-  // The child's answer: 'S' and the state as CBOR, or 'E', the error kind and its message.
-  const IsolatedResult result = CallIsolated(
-      [&]() -> std::string {
-        try {
-          Hdf5Source source(file, options);
-          source.Probe();
-          const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(source.State());
-          return 'S' + std::string(cbor.begin(), cbor.end());
-        } catch (const Error& e) {
-          return 'E' + std::string(1, static_cast<char>(e.kind())) + e.what();
-        }
-      },
-      IsolationLimits{kChildTimeLimit, kChildAddressSpace});
+  auto reader =
+      std::make_unique<IsolatedProcess>(kHdf5ReaderService, IsolationLimits{kReaderTimeLimit, kReaderAddressSpace});
+  const nlohmann::json open = {{"file", file},
+                               {"options",
+                                {{"types", options.types},
+                                 {"chunk_particles", options.chunk_particles},
+                                 {"read_velocity", options.read_velocity},
+                                 {"read_id", options.read_id},
+                                 {"read_smoothing", options.read_smoothing},
+                                 {"box_size_override", options.box_size_override},
+                                 {"ignore_box", options.ignore_box}}}};
+  const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(open);
+  const IsolatedResult result = reader->Call('O' + std::string(cbor.begin(), cbor.end()));
   if (!result.returned) {
     throw Error::BadInput(result.last_note.empty() ? file : result.last_note,
-                          "libhdf5 failed reading this file's metadata: the child process reading it " +
-                              result.failure + "; the file is damaged, or not an HDF5 snapshot this reader understands");
+                          "libhdf5 failed reading this file's metadata: the process reading it " + result.failure +
+                              "; the file is damaged, or not an HDF5 snapshot this reader understands");
   }
   const std::string& answer = result.bytes;
-  if (answer.size() >= 2 && answer[0] == 'E') {
-    throw Error(static_cast<ErrorKind>(answer[1]), answer.substr(2));
-  }
-  if (answer.empty() || answer[0] != 'S') throw Error::BadInput(file, "the HDF5 reader's child process gave no answer");
-  return std::make_unique<Hdf5Source>(nlohmann::json::from_cbor(answer.begin() + 1, answer.end()), options);
+  if (!answer.empty() && answer[0] == 'E') ThrowAnswered(answer);
+  if (answer.empty() || answer[0] != 'S') throw Error::BadInput(file, "the HDF5 reader process gave no answer");
+  return std::make_unique<Hdf5Source>(nlohmann::json::from_cbor(answer.begin() + 1, answer.end()), options,
+                                      std::move(reader));
 }
 
 }  // namespace octocosm

@@ -5,9 +5,10 @@
 // (SWIFT, whose h is converted to the radius of the kernel's support).
 // Datasets are read chunk by chunk with hyperslab selections, converted by
 // HDF5 to the chunk's column types, so float and double files read alike.
-// Opening one forks a child process that walks the files' structure with
-// libhdf5 (ReadOptions::isolate_hdf5), so that libhdf5 crashing on a damaged
-// file is an Error naming it (docs/INPUT_FORMATS.md).
+// Opening one starts a reader process that makes every libhdf5 call on the
+// files, walking their structure and then reading the particles the source
+// asks for (ReadOptions::isolate_hdf5), so that libhdf5 crashing on a
+// damaged file is an Error naming it (docs/INPUT_FORMATS.md).
 #pragma once
 
 #include <cstdint>

@@ -110,11 +110,11 @@ struct ReadOptions {
   // Treat the particles as not periodic whatever the header says (box_size
   // 0): ingest then indexes their bounding cube. Not with box_size_override.
   bool ignore_box = false;
-  // HDF5: read each snapshot's structure (and a first and last value of each
-  // dataset) in a child process first, so that libhdf5 crashing, looping or
-  // allocating without end on a damaged file ends the child with an error
-  // naming the file, not this process (docs/INPUT_FORMATS.md). Off only to
-  // fuzz libhdf5 itself in this process, where coverage is measured.
+  // HDF5: have libhdf5 read each snapshot, its structure and its particles,
+  // in a reader process of its own, so that libhdf5 crashing, looping or
+  // allocating without end on a damaged file ends that process with an
+  // error naming the file, not this process (docs/INPUT_FORMATS.md). Off
+  // only to fuzz libhdf5 itself in this process, where coverage is measured.
   bool isolate_hdf5 = true;
 };
 

@@ -33,7 +33,6 @@
 #include <string_view>
 #include <vector>
 
-#include <unistd.h>
 
 #include "tests/fuzz/fuzz_target.h"
 
@@ -62,12 +61,8 @@ std::uint64_t g_seed = 0;
 
 long long g_iterations = 0;
 const char* g_input_file = nullptr;  // set while inputs from files run
-pid_t g_driver_pid = 0;
 
 void ReportFailure() {
-  // A child process the target forked (the HDF5 reader reads libhdf5's side
-  // in one) inherits this report; its death is the target's to handle.
-  if (getpid() != g_driver_pid) return;
   if (g_input_file != nullptr) {
     std::fprintf(stderr, "fuzz driver: failed on %s\n", g_input_file);
   } else if (g_iteration >= g_iterations && g_iterations > 0) {
@@ -224,7 +219,6 @@ int Usage() {
 int main(int argc, char** argv) {
   using namespace octocosm::fuzz;
   g_program = argv[0];
-  g_driver_pid = getpid();
   long long iterations = 1000;
   long long only_iteration = -1;
   bool shared = false;

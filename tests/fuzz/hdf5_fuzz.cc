@@ -4,7 +4,7 @@
 // fuzzer reaches our checks of attributes, shapes and values through it.
 //
 // The reader runs in this process (ReadOptions::isolate_hdf5 off), not in
-// the child process that OpenSnapshot normally reads a file's structure in:
+// the reader process that OpenSnapshot normally has libhdf5 run in:
 // libFuzzer measures coverage in this process only, and a crash inside
 // libhdf5 is then seen with its stack (docs/TESTING.md). With
 // OCTOCOSM_FUZZ_HDF5_ISOLATED=1 the reader isolates as it does for users,

@@ -5,7 +5,9 @@
 
 #include <chrono>
 #include <cmath>
+#include <algorithm>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <numbers>
 
@@ -51,10 +53,11 @@ struct Hdf5Spec {
   // neighbours and eta in /HydroScheme (when hydro_scheme is set).
   bool swift = false;
   bool hydro_scheme = true;
+  bool chunked = false;  // datasets in deflated chunks of two rows
 };
 
 void WriteHdf5(const std::string& path, const Hdf5Spec& spec) {
-  Hdf5Writer w(path);
+  Hdf5Writer w(path, spec.chunked);
   w.Attribute<std::uint32_t>("Header", "NumPart_ThisFile", H5T_NATIVE_UINT32,
                              {static_cast<std::uint32_t>(spec.n0), static_cast<std::uint32_t>(spec.n1)});
   w.Attribute<std::uint64_t>("Header", "NumPart_Total", H5T_NATIVE_UINT64, spec.total);
@@ -351,7 +354,7 @@ void BreakRootLocalHeap(const std::string& path) {
   WriteFile(path, bytes);
 }
 
-// OpenSnapshot reads an HDF5 file's structure in a child process
+// OpenSnapshot has libhdf5 read an HDF5 file in a process of its own
 // (ReadOptions::isolate_hdf5): libhdf5 crashing there is an error naming the
 // file, here the one file of a multi-file snapshot that is damaged.
 TEST(Hdf5Reader, LibHdf5CrashingOnADamagedFileIsAnErrorNamingTheFile) {
@@ -370,7 +373,7 @@ TEST(Hdf5Reader, LibHdf5CrashingOnADamagedFileIsAnErrorNamingTheFile) {
   EXPECT_DEATH(OpenSnapshot(dir.File("snap.1.hdf5"), in_process), "");
   // "was killed by signal 11 (Segmentation fault)"; under AddressSanitizer,
   // whose handler reports the fault and exits, "exited with status 1".
-  ExpectBadInput(dir.File("snap.1.hdf5"), "libhdf5 failed reading this file's metadata: the child process reading it ");
+  ExpectBadInput(dir.File("snap.1.hdf5"), "libhdf5 failed reading this file's metadata: the process reading it ");
   for (const char* name : {"snap", "snap.0.hdf5"}) {
     try {
       OpenSnapshot(dir.File(name), {});
@@ -382,8 +385,8 @@ TEST(Hdf5Reader, LibHdf5CrashingOnADamagedFileIsAnErrorNamingTheFile) {
   }
 }
 
-// The source built from what the child found reads as one that walked the
-// files itself, and a child's Error comes back as it was thrown.
+// The source built from what the reader process found reads as one that
+// walked the files itself, and the reader's Error comes back as it was thrown.
 TEST(Hdf5Reader, IsolatedAndInProcessReadsAgree) {
   ScratchDir dir;
   Hdf5Spec spec;
@@ -567,6 +570,87 @@ void WriteCoordinates(const std::string& path, std::uint64_t rows, hid_t dcpl, s
   H5Dclose(dataset);
   H5Sclose(space);
   H5Fclose(file);
+}
+
+// The files a process has open, by their paths (/proc/self/fd).
+std::vector<std::string> OpenFiles() {
+  std::vector<std::string> paths;
+  for (const auto& entry : std::filesystem::directory_iterator("/proc/self/fd")) {
+    std::error_code error;
+    const std::filesystem::path target = std::filesystem::read_symlink(entry.path(), error);
+    if (!error) paths.push_back(target.string());
+  }
+  return paths;
+}
+
+// Every libhdf5 call on a snapshot happens in its reader process: this
+// process does not open the file, not even while it reads the particles.
+TEST(Hdf5Reader, OnlyTheReaderProcessOpensTheFile) {
+  ScratchDir dir;
+  WriteHdf5(dir.File("snap.hdf5"), {});
+  const std::string path = std::filesystem::canonical(dir.File("snap.hdf5")).string();
+  ReadOptions options;
+  options.chunk_particles = 2;
+  for (bool isolated : {false, true}) {
+    options.isolate_hdf5 = isolated;
+    auto source = OpenSnapshot(path, options);
+    ParticleChunk chunk;
+    ASSERT_TRUE(source->Next(chunk));
+    const std::vector<std::string> open = OpenFiles();
+    // In this process, libhdf5 holds the file open between reads.
+    EXPECT_EQ(std::count(open.begin(), open.end(), path), isolated ? 0 : 1) << "isolated " << isolated;
+  }
+}
+
+// A damaged chunk between a dataset's first and last, which the open does
+// not read, fails when its rows are read: in the reader process, and comes
+// back as the error libhdf5 gave there, naming the file and the rows.
+TEST(Hdf5Reader, ADamagedChunkInTheMiddleIsAnErrorNamingTheFileAndTheRows) {
+  ScratchDir dir;
+  const std::string path = dir.File("snap.hdf5");
+  Hdf5Spec spec;
+  spec.n0 = 0;
+  spec.n1 = 40;
+  spec.total = {0, 40};
+  spec.chunked = true;
+  WriteHdf5(path, spec);
+  haddr_t address = HADDR_UNDEF;
+  hsize_t size = 0;
+  {
+    const hid_t file = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    const hid_t dataset = H5Dopen2(file, "PartType1/Coordinates", H5P_DEFAULT);
+    hsize_t offset[2] = {0, 0};
+    unsigned filters = 0;
+    const hid_t space = H5Dget_space(dataset);
+    // Chunk 10 holds rows 20 and 21.
+    EXPECT_GE(H5Dget_chunk_info(dataset, space, 10, offset, &filters, &address, &size), 0);
+    EXPECT_EQ(offset[0], 20u);
+    H5Sclose(space);
+    H5Dclose(dataset);
+    H5Fclose(file);
+  }
+  ASSERT_NE(address, HADDR_UNDEF);
+  std::string bytes = ReadFileBytes(path);
+  ASSERT_LE(address + size, bytes.size());
+  std::memset(&bytes[address], 0xa5, size);
+  WriteFile(path, bytes);
+
+  for (bool isolated : {false, true}) {
+    ReadOptions options;
+    options.chunk_particles = 8;
+    options.isolate_hdf5 = isolated;
+    auto source = OpenSnapshot(path, options);  // reads rows 0 and 39
+    ParticleChunk chunk;
+    try {
+      while (source->Next(chunk)) {
+      }
+      ADD_FAILURE() << "no error, isolated " << isolated;
+    } catch (const Error& error) {
+      EXPECT_EQ(error.kind(), ErrorKind::kBadInput);
+      const std::string what = error.what();
+      EXPECT_EQ(what.rfind(path + ": cannot read rows 16..24 of dataset /PartType1/Coordinates", 0), 0u) << what;
+    }
+  }
 }
 
 // A small file declaring 2^33 particles is refused at open, before libhdf5
