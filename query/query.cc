@@ -39,31 +39,41 @@ std::vector<IndexEntry> SelectNodes(const Dataset& dataset, const Region& region
   return SelectByScreenError(dataset, options.epoch, region, *options.screen_error, stats);
 }
 
+QueryCursor::QueryCursor(const Dataset& dataset, const Region& region, const QueryOptions& options)
+    : dataset_(dataset),
+      region_(region),
+      epoch_(options.epoch),
+      wanted_((options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition)) {
+  nodes_ = SelectNodes(dataset, region, options, stats_.selection);
+  stats_.nodes_selected = nodes_.size();
+}
+
+bool QueryCursor::Next(QueryBatch& batch) {
+  while (next_node_ < nodes_.size()) {
+    DecodedBlock block = ReadBlockColumns(dataset_, epoch_, nodes_[next_node_++], wanted_, stats_.reads);
+    const std::uint32_t n = block.header.point_count;
+    stats_.points_scanned += n;
+    keep_.clear();
+    for (std::uint32_t i = 0; i < n; ++i) {
+      if (region_.Contains(&block.points.position[3 * std::size_t{i}])) keep_.push_back(i);
+    }
+    if (keep_.empty()) continue;
+    if (keep_.size() != n) KeepPoints(block.points, keep_);
+    stats_.points_returned += keep_.size();
+    batch.node = block.header.key;
+    batch.count = keep_.size();
+    batch.points = std::move(block.points);
+    return true;
+  }
+  return false;
+}
+
 QueryStats RunQuery(const Dataset& dataset, const Region& region, const QueryOptions& options,
                     const QueryCallback& callback) {
-  QueryStats stats;
-  const std::vector<IndexEntry> nodes = SelectNodes(dataset, region, options, stats.selection);
-  stats.nodes_selected = nodes.size();
-  const ColumnSet wanted = (options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition);
+  QueryCursor cursor(dataset, region, options);
   QueryBatch batch;
-  std::vector<std::uint32_t> keep;
-  for (const IndexEntry& entry : nodes) {
-    DecodedBlock block = ReadBlockColumns(dataset, options.epoch, entry, wanted, stats.reads);
-    const std::uint32_t n = block.header.point_count;
-    stats.points_scanned += n;
-    keep.clear();
-    for (std::uint32_t i = 0; i < n; ++i) {
-      if (region.Contains(&block.points.position[3 * std::size_t{i}])) keep.push_back(i);
-    }
-    if (keep.empty()) continue;
-    if (keep.size() != n) KeepPoints(block.points, keep);
-    stats.points_returned += keep.size();
-    batch.node = block.header.key;
-    batch.count = keep.size();
-    batch.points = std::move(block.points);
-    callback(batch);
-  }
-  return stats;
+  while (cursor.Next(batch)) callback(batch);
+  return cursor.stats();
 }
 
 }  // namespace octocosm

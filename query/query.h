@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <vector>
 
 #include "index/block_codec.h"
 #include "index/dataset.h"
@@ -52,7 +53,30 @@ struct QueryBatch {
 
 using QueryCallback = std::function<void(const QueryBatch&)>;
 
-// Runs the query. Throws Error::InvalidArgument for bad options (no or two
+// A query read block by block at the caller's pace: the nodes are selected
+// when it is made, and each Next() reads the next block that has points in
+// the region. Throws as RunQuery. The dataset and region must outlive it.
+class QueryCursor {
+ public:
+  QueryCursor(const Dataset& dataset, const Region& region, const QueryOptions& options);
+  // Fills `batch` with the next block's points in the region; false when
+  // every selected block has been read.
+  bool Next(QueryBatch& batch);
+  // What was selected, and read and returned so far.
+  const QueryStats& stats() const { return stats_; }
+
+ private:
+  const Dataset& dataset_;
+  const Region& region_;
+  std::uint32_t epoch_;
+  ColumnSet wanted_;
+  std::vector<IndexEntry> nodes_;
+  std::size_t next_node_ = 0;
+  std::vector<std::uint32_t> keep_;
+  QueryStats stats_;
+};
+
+// Runs the query (a QueryCursor read to its end). Throws Error::InvalidArgument for bad options (no or two
 // levels of detail, an epoch or level out of range, a bad camera), and
 // Error::Corruption / Error::Io from the store; a callback may throw to stop.
 QueryStats RunQuery(const Dataset& dataset, const Region& region, const QueryOptions& options,

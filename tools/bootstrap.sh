@@ -31,6 +31,8 @@ packages=(
   gnuplot-nox
   # clang, for the test that runs its thread-safety analysis (docs/TESTING.md)
   clang
+  # the Python module (python/), its pytest suite and its example's plot
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
   # Not here: libclang-rt-14-dev, which only the long libFuzzer runs need
   # (docs/TESTING.md); CI runs the fuzz targets under our own driver.
 )

@@ -1,0 +1,418 @@
+// The Python module `octocosm`: a store's points and particle trajectories
+// as numpy arrays (docs/PYTHON.md). A thin layer over query/: every number
+// comes from the same code as `octocosm query` and `octocosm follow`.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "base/error.h"
+#include "index/block_codec.h"
+#include "index/cluster_shape.h"
+#include "index/dataset.h"
+#include "query/particle_lookup.h"
+#include "query/query.h"
+
+namespace py = pybind11;
+
+namespace octocosm {
+namespace {
+
+// A numpy array that owns `values` (moved, not copied), `shape` C-ordered.
+template <typename T>
+py::array_t<T> OwningArray(std::vector<T>&& values, std::vector<py::ssize_t> shape) {
+  auto* owned = new std::vector<T>(std::move(values));
+  py::capsule release(owned, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+  return py::array_t<T>(std::move(shape), owned->data(), release);
+}
+
+// The columns of the names given ("all" for every one); position always.
+ColumnSet ColumnsNamed(const std::vector<std::string>& names) {
+  ColumnSet columns = ColumnBit(ColumnId::kPosition);
+  for (const std::string& name : names) {
+    if (name == "all") {
+      columns |= kAllColumns;
+      continue;
+    }
+    bool known = false;
+    for (const ColumnId id : kColumnIds) {
+      if (name == ColumnName(id)) {
+        columns |= ColumnBit(id);
+        known = true;
+      }
+    }
+    if (!known) throw Error::InvalidArgument("unknown column '" + name + "' (known: " + ColumnNames(kAllColumns) + ", all)");
+  }
+  return columns;
+}
+
+// Collects the batches of a query column by column, a wanted column that a
+// block lacks as zeros (as `octocosm query` writes it), and hands them over
+// as numpy arrays: one copy, from the blocks into the result.
+class ColumnCollector {
+ public:
+  explicit ColumnCollector(ColumnSet columns) : columns_(columns) {}
+
+  void Add(const NodePoints& points, std::size_t count) {
+    Append(position_, points.position, 3 * count);
+    if (Wants(ColumnId::kWeight)) Append(weight_, points.weight, count);
+    if (Wants(ColumnId::kSmoothing)) Append(smoothing_, points.smoothing, count);
+    if (Wants(ColumnId::kId)) Append(id_, points.id, count);
+    if (Wants(ColumnId::kType)) Append(type_, points.type, count);
+    const auto vectors = VectorColumns(points);
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (Wants(kVectorColumnIds[v])) Append(vectors_[v], *vectors[v], 3 * count);
+    }
+    if (Wants(ColumnId::kVelocityDispersion)) Append(dispersion_, points.velocity_dispersion, count);
+    if (Wants(ColumnId::kShape)) {
+      // Decoded as `octocosm query` writes them; a leaf's particles, which
+      // carry none, are round.
+      for (std::size_t i = 0; i < count; ++i) {
+        const SymmetricMatrix shape = 6 * i < points.shape.size() ? DecodeShape(ShapeCodeAt(points.shape, i)) : kRoundShape;
+        for (const double entry : shape) shape_.push_back(static_cast<float>(entry));
+      }
+    }
+    count_ += count;
+  }
+
+  py::dict Take() {
+    const auto n = static_cast<py::ssize_t>(count_);
+    py::dict result;
+    result["position"] = OwningArray(std::move(position_), {n, 3});
+    if (Wants(ColumnId::kWeight)) result["weight"] = OwningArray(std::move(weight_), {n});
+    if (Wants(ColumnId::kSmoothing)) result["smoothing"] = OwningArray(std::move(smoothing_), {n});
+    if (Wants(ColumnId::kId)) result["id"] = OwningArray(std::move(id_), {n});
+    if (Wants(ColumnId::kType)) result["type"] = OwningArray(std::move(type_), {n});
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (Wants(kVectorColumnIds[v])) result[ColumnName(kVectorColumnIds[v])] = OwningArray(std::move(vectors_[v]), {n, 3});
+    }
+    if (Wants(ColumnId::kVelocityDispersion)) result["velocity_dispersion"] = OwningArray(std::move(dispersion_), {n});
+    if (Wants(ColumnId::kShape)) result["shape"] = OwningArray(std::move(shape_), {n, 6});
+    count_ = 0;
+    return result;
+  }
+
+ private:
+  bool Wants(ColumnId id) const { return (columns_ & ColumnBit(id)) != 0; }
+  template <typename T>
+  static void Append(std::vector<T>& out, const std::vector<T>& values, std::size_t size) {
+    if (values.size() == size) {
+      out.insert(out.end(), values.begin(), values.end());
+    } else {
+      out.resize(out.size() + size, T{});
+    }
+  }
+
+  ColumnSet columns_;
+  std::size_t count_ = 0;
+  std::vector<double> position_, weight_, smoothing_;
+  std::vector<std::uint64_t> id_;
+  std::vector<std::uint8_t> type_;
+  std::array<std::vector<float>, kVectorColumnCount> vectors_;
+  std::vector<float> shape_;  // xx, yy, zz, xy, xz, yz of each point's blob shape (trace 3)
+  std::vector<float> dispersion_;
+};
+
+std::array<double, 3> Triple(const py::handle& value, const char* what) {
+  const auto v = value.cast<std::vector<double>>();
+  if (v.size() != 3) throw Error::InvalidArgument(std::string(what) + ": expected 3 numbers");
+  return {v[0], v[1], v[2]};
+}
+
+// A camera from a dict: position and look_at (3 numbers each), optional up,
+// fov_y_degrees, near, far; the aspect from the viewport.
+Camera CameraFrom(const py::dict& spec, double aspect) {
+  Camera camera;
+  for (const auto& [key, value] : spec) {
+    const std::string name = key.cast<std::string>();
+    if (name == "position") {
+      camera.position = Triple(value, "camera position");
+    } else if (name == "look_at") {
+      camera.look_at = Triple(value, "camera look_at");
+    } else if (name == "up") {
+      camera.up = Triple(value, "camera up");
+    } else if (name == "fov_y_degrees") {
+      camera.fov_y_degrees = value.cast<double>();
+    } else if (name == "near") {
+      camera.near = value.cast<double>();
+    } else if (name == "far") {
+      camera.far = value.cast<double>();
+    } else {
+      throw Error::InvalidArgument("camera: unknown key '" + name +
+                                   "' (known: position, look_at, up, fov_y_degrees, near, far)");
+    }
+  }
+  camera.aspect = aspect;
+  camera.Validate();
+  return camera;
+}
+
+// What a query asks, from the keyword arguments of Store.query and
+// Store.blocks.
+struct QuerySpec {
+  QueryOptions options;
+  std::unique_ptr<Region> region;
+};
+
+QuerySpec MakeQuery(const Dataset& dataset, std::uint32_t epoch, const py::object& box, const py::object& sphere,
+                    bool frustum, std::optional<int> level, std::optional<double> error, const py::object& camera,
+                    double width, double height, const std::vector<std::string>& columns) {
+  if (epoch >= dataset.epoch_count()) {
+    throw Error::InvalidArgument("epoch " + std::to_string(epoch) + ": the store has " +
+                                 std::to_string(dataset.epoch_count()) + " epoch(s)");
+  }
+  if (level.has_value() == error.has_value()) throw Error::InvalidArgument("give exactly one of level and error");
+  if (!(width > 0) || !(height > 0)) throw Error::InvalidArgument("width and height must be > 0");
+  const Cube& cube = dataset.cube(epoch);
+  std::optional<Camera> view;
+  if (!camera.is_none()) view = CameraFrom(camera.cast<py::dict>(), width / height);
+  QuerySpec spec;
+  spec.options.epoch = epoch;
+  spec.options.columns = ColumnsNamed(columns);
+  if (level) {
+    if (*level < 0 || *level > kMaxLevel) throw Error::InvalidArgument("level must be in [0, 21]");
+    spec.options.level = *level;
+  } else {
+    if (!view) throw Error::InvalidArgument("error needs a camera");
+    if (!(*error > 0)) throw Error::InvalidArgument("error must be > 0 pixels");
+    spec.options.screen_error = ScreenErrorView{*view, height, *error};
+  }
+  if (!box.is_none() + !sphere.is_none() + frustum > 1) {
+    throw Error::InvalidArgument("give at most one of box, sphere and frustum");
+  }
+  if (!box.is_none()) {
+    const auto v = box.cast<std::vector<double>>();
+    if (v.size() != 6) throw Error::InvalidArgument("box: expected 6 numbers x0, y0, z0, x1, y1, z1");
+    spec.region = MakeBoxRegion({v[0], v[1], v[2]}, {v[3], v[4], v[5]}, cube);
+  } else if (!sphere.is_none()) {
+    const auto v = sphere.cast<std::vector<double>>();
+    if (v.size() != 4) throw Error::InvalidArgument("sphere: expected 4 numbers x, y, z, r");
+    spec.region = MakeSphereRegion({v[0], v[1], v[2]}, v[3], cube);
+  } else if (frustum) {
+    if (!view) throw Error::InvalidArgument("frustum needs a camera");
+    spec.region = MakeFrustumRegion(Frustum::FromCamera(*view));
+  } else {
+    spec.region = MakeEverythingRegion();
+  }
+  return spec;
+}
+
+py::dict StatsDict(const QueryStats& stats) {
+  py::dict d;
+  d["nodes_selected"] = stats.nodes_selected;
+  d["blocks_read"] = stats.reads.blocks;
+  d["bytes_read"] = stats.reads.bytes;
+  d["points_scanned"] = stats.points_scanned;
+  d["points_returned"] = stats.points_returned;
+  return d;
+}
+
+// Store.blocks(): the blocks of a query one at a time, each a dict of its
+// points' columns (moved into numpy, no copy) and its node key.
+class BlockIterator {
+ public:
+  BlockIterator(std::shared_ptr<const Dataset> dataset, QuerySpec spec)
+      : dataset_(std::move(dataset)), spec_(std::move(spec)), cursor_(*dataset_, *spec_.region, spec_.options) {}
+
+  py::dict Next() {
+    QueryBatch batch;
+    bool more = false;
+    {
+      py::gil_scoped_release release;
+      more = cursor_.Next(batch);
+    }
+    if (!more) throw py::stop_iteration();
+    ColumnCollector collector(spec_.options.columns);
+    collector.Add(batch.points, batch.count);
+    py::dict block = collector.Take();
+    block["node"] = batch.node.value();
+    block["level"] = batch.node.level();
+    return block;
+  }
+
+  py::dict Stats() const { return StatsDict(cursor_.stats()); }
+
+ private:
+  std::shared_ptr<const Dataset> dataset_;  // kept alive while the iterator is
+  QuerySpec spec_;
+  QueryCursor cursor_;
+};
+
+class Store {
+ public:
+  explicit Store(const std::string& path) : path_(path) {
+    py::gil_scoped_release release;
+    dataset_ = std::make_shared<const Dataset>(Dataset::Open(path));
+  }
+
+  std::uint32_t epochs() const { return dataset_->epoch_count(); }
+
+  py::dict Info() const {
+    const Dataset& d = *dataset_;
+    py::dict info;
+    info["path"] = path_;
+    info["page_size"] = d.store().page_size();
+    info["capacity"] = d.capacity();
+    info["columns"] = ColumnNames(d.columns());
+    py::list epochs;
+    for (std::uint32_t e = 0; e < d.epoch_count(); ++e) {
+      const EpochInfo& stored = d.store().epochs()[e];
+      const EpochSummary& summary = d.summary(e);
+      const Cube& cube = d.cube(e);
+      py::dict epoch;
+      epoch["epoch"] = e;
+      epoch["time"] = stored.time;
+      epoch["redshift"] = stored.redshift;
+      epoch["points"] = summary.points;
+      epoch["mass"] = summary.mass ? py::cast(*summary.mass) : py::none();
+      epoch["nodes"] = summary.nodes ? py::cast(*summary.nodes) : py::none();
+      epoch["depth"] = summary.depth ? py::cast(*summary.depth) : py::none();
+      epoch["cube_origin"] = py::make_tuple(cube.origin[0], cube.origin[1], cube.origin[2]);
+      epoch["cube_size"] = cube.size;
+      epoch["periodic"] = cube.periodic;
+      epoch["columns"] = ColumnNames(d.columns(e));
+      epochs.append(epoch);
+    }
+    info["epochs"] = epochs;
+    return info;
+  }
+
+  py::dict Query(std::uint32_t epoch, const py::object& box, const py::object& sphere, bool frustum,
+                 std::optional<int> level, std::optional<double> error, const py::object& camera, double width,
+                 double height, const std::vector<std::string>& columns, bool with_stats) const {
+    QuerySpec spec = MakeQuery(*dataset_, epoch, box, sphere, frustum, level, error, camera, width, height, columns);
+    ColumnCollector collector(spec.options.columns);
+    QueryStats stats;
+    {
+      py::gil_scoped_release release;
+      stats = RunQuery(*dataset_, *spec.region, spec.options,
+                       [&](const QueryBatch& batch) { collector.Add(batch.points, batch.count); });
+    }
+    py::dict result = collector.Take();
+    if (with_stats) result["stats"] = StatsDict(stats);
+    return result;
+  }
+
+  BlockIterator Blocks(std::uint32_t epoch, const py::object& box, const py::object& sphere, bool frustum,
+                       std::optional<int> level, std::optional<double> error, const py::object& camera,
+                       double width, double height, const std::vector<std::string>& columns) const {
+    QuerySpec spec = MakeQuery(*dataset_, epoch, box, sphere, frustum, level, error, camera, width, height, columns);
+    py::gil_scoped_release release;
+    return BlockIterator(dataset_, std::move(spec));
+  }
+
+  // Every (id, epoch) pair found, ordered by ID as given, then epoch: what
+  // `octocosm follow` writes, as columns.
+  py::dict Follow(const std::vector<std::uint64_t>& ids) const {
+    const Dataset& d = *dataset_;
+    std::vector<std::vector<std::optional<ParticleState>>> by_epoch;
+    bool velocity = false;
+    {
+      py::gil_scoped_release release;
+      ParticleLocator locator(d);
+      for (std::uint32_t e = 0; e < d.epoch_count(); ++e) {
+        by_epoch.push_back(locator.FindInEpoch(e, ids, true));
+        for (const auto& state : by_epoch.back()) velocity |= state && state->has_velocity;
+      }
+    }
+    std::vector<std::uint64_t> id;
+    std::vector<std::uint32_t> epoch;
+    std::vector<double> time, position;
+    std::vector<float> velocities;
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      for (std::uint32_t e = 0; e < d.epoch_count(); ++e) {
+        const std::optional<ParticleState>& state = by_epoch[e][i];
+        if (!state) continue;
+        id.push_back(ids[i]);
+        epoch.push_back(e);
+        time.push_back(d.store().epochs()[e].time);
+        position.insert(position.end(), state->position.begin(), state->position.end());
+        if (velocity) velocities.insert(velocities.end(), state->velocity.begin(), state->velocity.end());
+      }
+    }
+    const auto n = static_cast<py::ssize_t>(id.size());
+    py::dict result;
+    result["id"] = OwningArray(std::move(id), {n});
+    result["epoch"] = OwningArray(std::move(epoch), {n});
+    result["time"] = OwningArray(std::move(time), {n});
+    result["position"] = OwningArray(std::move(position), {n, 3});
+    if (velocity) result["velocity"] = OwningArray(std::move(velocities), {n, 3});
+    return result;
+  }
+
+ private:
+  std::string path_;
+  std::shared_ptr<const Dataset> dataset_;
+};
+
+}  // namespace
+}  // namespace octocosm
+
+PYBIND11_MODULE(octocosm, m) {
+  using namespace octocosm;
+  m.doc() = "octocosm stores from Python: queries and trajectories as numpy arrays (docs/PYTHON.md)";
+
+  // One family of exceptions, each carrying the kind of octocosm::Error.
+  static py::exception<Error> error(m, "Error");
+  static py::exception<Error> io_error(m, "IoError", error.ptr());
+  static py::exception<Error> corruption(m, "CorruptionError", error.ptr());
+  static py::exception<Error> not_supported(m, "NotSupportedError", error.ptr());
+  static py::exception<Error> invalid_argument(m, "InvalidArgumentError", error.ptr());
+  static py::exception<Error> not_found(m, "NotFoundError", error.ptr());
+  static py::exception<Error> bad_input(m, "BadInputError", error.ptr());
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const Error& e) {
+      py::exception<Error>* type = &error;
+      switch (e.kind()) {
+        case ErrorKind::kIo: type = &io_error; break;
+        case ErrorKind::kCorruption: type = &corruption; break;
+        case ErrorKind::kNotSupported: type = &not_supported; break;
+        case ErrorKind::kInvalidArgument: type = &invalid_argument; break;
+        case ErrorKind::kNotFound: type = &not_found; break;
+        case ErrorKind::kBadInput: type = &bad_input; break;
+      }
+      py::object instance = py::reinterpret_borrow<py::object>(type->ptr())(e.what());
+      instance.attr("kind") = std::string(ErrorKindName(e.kind()));
+      PyErr_SetObject(type->ptr(), instance.ptr());
+    }
+  });
+
+  py::class_<BlockIterator>(m, "BlockIterator")
+      .def("__iter__", [](BlockIterator& it) -> BlockIterator& { return it; })
+      .def("__next__", &BlockIterator::Next)
+      .def_property_readonly("stats", &BlockIterator::Stats, "what was selected, and read and returned so far");
+
+  py::class_<Store>(m, "Store")
+      .def(py::init<const std::string&>(), py::arg("path"), "Opens the store directory at path.")
+      .def_property_readonly("epochs", &Store::epochs, "the number of epochs")
+      .def("info", &Store::Info, "the store's epochs (time, redshift, points, cube, columns) as a dict")
+      .def("query", &Store::Query, py::arg("epoch") = 0, py::arg("box") = py::none(), py::arg("sphere") = py::none(),
+           py::arg("frustum") = false, py::arg("level") = py::none(), py::arg("error") = py::none(),
+           py::arg("camera") = py::none(), py::arg("width") = 1920.0, py::arg("height") = 1080.0,
+           py::arg("columns") = std::vector<std::string>{}, py::arg("stats") = false,
+           "The points of one epoch in a region (box=(x0,y0,z0,x1,y1,z1), sphere=(x,y,z,r), frustum=True\n"
+           "with a camera; default everything) at a level of detail (level=L, or error=PIXELS with a camera\n"
+           "dict: position, look_at[, up, fov_y_degrees, near, far]), as a dict of numpy arrays: position\n"
+           "(n, 3) float64 always, and the columns asked for. stats=True adds what was read.")
+      .def("blocks", &Store::Blocks, py::arg("epoch") = 0, py::arg("box") = py::none(),
+           py::arg("sphere") = py::none(), py::arg("frustum") = false, py::arg("level") = py::none(),
+           py::arg("error") = py::none(), py::arg("camera") = py::none(), py::arg("width") = 1920.0,
+           py::arg("height") = 1080.0, py::arg("columns") = std::vector<std::string>{},
+           "As query, block by block: an iterator of dicts (the block's columns, its node key and level),\n"
+           "for results larger than memory.")
+      .def("follow", &Store::Follow, py::arg("ids"),
+           "Particles followed through every epoch by ID: a dict of numpy arrays id, epoch, time,\n"
+           "position (m, 3) and velocity (m, 3) when stored, one row per (id, epoch) found.");
+
+  m.def("open", [](const std::string& path) { return Store(path); }, py::arg("path"),
+        "Opens the store directory at path (a Store).");
+}

@@ -1,0 +1,172 @@
+"""The Python module against the command-line program on the same store.
+
+Run by ctest (test python_module), which sets PYTHONPATH to the module,
+OCTOCOSM_PROGRAM to the octocosm program and OCTOCOSM_SHARED_DATA to the
+shared snapshots.
+"""
+import csv
+import io
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import octocosm
+
+PROGRAM = os.environ.get("OCTOCOSM_PROGRAM", "octocosm")
+SHARED_DATA = pathlib.Path(os.environ.get("OCTOCOSM_SHARED_DATA", "/nonexistent"))
+
+
+def run(*args):
+    return subprocess.run([PROGRAM, *map(str, args)], check=True, capture_output=True, text=True).stdout
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """A particle-mesh run of 16^3 particles in a box of 100 Mpc/h, three epochs, with IDs and velocities."""
+    work = tmp_path_factory.mktemp("pm")
+    run("synth", "pm", "-o", work / "sim", "-N", 16, "--outputs", 3, "--steps", 6)
+    snapshots = sorted((work / "sim").glob("snap_*"))
+    assert len(snapshots) == 3
+    run("ingest", *snapshots, "-o", work / "store", "--capacity", 300, "--neighbours", 8)
+    return work / "store"
+
+
+def cli_columns(text):
+    """A CSV of `octocosm query` or `follow` as a dict of float64 columns."""
+    rows = list(csv.reader(io.StringIO(text)))
+    header, body = rows[0], rows[1:]
+    return {name: np.array([float(r[i]) for r in body]) for i, name in enumerate(header)}
+
+
+def test_info_describes_every_epoch(store):
+    s = octocosm.open(str(store))
+    info = s.info()
+    assert s.epochs == 3
+    assert len(info["epochs"]) == 3
+    for epoch in info["epochs"]:
+        assert epoch["points"] == 16**3
+        assert epoch["periodic"]
+        assert epoch["cube_size"] == pytest.approx(100_000)  # kpc/h, as GADGET writes
+    times = [e["time"] for e in info["epochs"]]
+    assert times == sorted(times)
+    assert "velocity" in info["columns"] and "id" in info["columns"]
+
+
+def test_a_query_returns_what_the_program_writes(store):
+    s = octocosm.open(str(store))
+    box = (10_000, 20_000, 0, 60_000, 90_000, 50_000)
+    result = s.query(epoch=1, box=box, level=2, columns=["weight", "velocity", "id", "type"], stats=True)
+    text = run("query", store, "--epoch", 1, "--box", ",".join(map(str, box)), "--level", 2,
+               "--columns", "weight,velocity,id,type", "-q")
+    expected = cli_columns(text)
+    n = len(expected["x"])
+    assert n > 0
+    assert result["position"].shape == (n, 3) and result["position"].dtype == np.float64
+    assert result["velocity"].shape == (n, 3) and result["velocity"].dtype == np.float32
+    assert result["id"].dtype == np.uint64 and result["type"].dtype == np.uint8
+    np.testing.assert_array_equal(result["position"][:, 0], expected["x"])
+    np.testing.assert_array_equal(result["position"][:, 2], expected["z"])
+    np.testing.assert_array_equal(result["weight"], expected["weight"])
+    np.testing.assert_array_equal(result["velocity"][:, 1], expected["vy"].astype(np.float32))
+    np.testing.assert_array_equal(result["id"], expected["id"].astype(np.uint64))
+    assert result["stats"]["points_returned"] == n
+    lo, hi = np.array(box[:3]), np.array(box[3:])
+    assert np.all((result["position"] >= lo) & (result["position"] <= hi))
+
+
+def test_mass_is_conserved_at_every_level(store):
+    s = octocosm.open(str(store))
+    full = s.query(level=21, columns=["weight"])
+    assert len(full["weight"]) == 16**3
+    total = full["weight"].sum()
+    for level in range(4):
+        assert s.query(level=level, columns=["weight"])["weight"].sum() == pytest.approx(total, rel=1e-12)
+
+
+def test_blocks_stream_the_same_points_as_one_query(store):
+    s = octocosm.open(str(store))
+    sphere = (50_000, 50_000, 50_000, 30_000)
+    whole = s.query(sphere=sphere, level=3, columns=["id", "smoothing"])
+    blocks = s.blocks(sphere=sphere, level=3, columns=["id", "smoothing"])
+    parts = list(blocks)
+    assert len(parts) > 1
+    assert all(0 <= b["level"] <= 3 for b in parts)
+    np.testing.assert_array_equal(np.concatenate([b["position"] for b in parts]), whole["position"])
+    np.testing.assert_array_equal(np.concatenate([b["id"] for b in parts]), whole["id"])
+    assert blocks.stats["points_returned"] == len(whole["id"])
+
+
+def test_a_camera_selects_by_screen_error(store):
+    s = octocosm.open(str(store))
+    camera = {"position": (50_000, 50_000, 250_000), "look_at": (50_000, 50_000, 50_000), "fov_y_degrees": 45}
+    coarse = s.query(error=32, camera=camera, width=640, height=360, frustum=True)
+    fine = s.query(error=1, camera=camera, width=640, height=360, frustum=True)
+    assert 0 < len(coarse["position"]) < len(fine["position"])
+    text = run("query", store, "--error", 32, "--camera", "50000,50000,250000", "--look-at", "50000,50000,50000", "--fov", 45,
+               "--width", 640, "--height", 360, "--frustum", "-q")
+    np.testing.assert_array_equal(coarse["position"][:, 1], cli_columns(text)["y"])
+
+
+def test_follow_returns_the_programs_trajectories(store, tmp_path):
+    s = octocosm.open(str(store))
+    ids = s.query(level=21, columns=["id"])["id"][::97]
+    tracks = s.follow(ids)
+    assert len(tracks["id"]) == 3 * len(ids)
+    (tmp_path / "ids.txt").write_text("\n".join(map(str, ids)) + "\n")
+    expected = cli_columns(run("follow", store, "--ids", tmp_path / "ids.txt"))
+    np.testing.assert_array_equal(tracks["id"], expected["id"].astype(np.uint64))
+    np.testing.assert_array_equal(tracks["epoch"], expected["epoch"])
+    np.testing.assert_array_equal(tracks["position"][:, 0], expected["x"])
+    np.testing.assert_array_equal(tracks["velocity"][:, 2], expected["vz"].astype(np.float32))
+
+
+def test_errors_are_exceptions_of_their_kind(store, tmp_path):
+    with pytest.raises(octocosm.NotFoundError) as missing:
+        octocosm.open(str(tmp_path / "no-store"))
+    assert isinstance(missing.value, octocosm.Error)
+    assert missing.value.kind == "not found"
+    s = octocosm.open(str(store))
+    with pytest.raises(octocosm.InvalidArgumentError):
+        s.query()  # neither level nor error
+    with pytest.raises(octocosm.InvalidArgumentError, match="unknown column 'mass'"):
+        s.query(level=1, columns=["mass"])
+    with pytest.raises(octocosm.InvalidArgumentError, match="epoch 7"):
+        s.query(epoch=7, level=1)
+    # A damaged block: the query stops with a corruption error naming the file.
+    damaged = tmp_path / "damaged"
+    shutil.copytree(store, damaged)
+    pages = damaged / "epoch-00000.pages"
+    data = bytearray(pages.read_bytes())
+    page_size = octocosm.open(str(damaged)).info()["page_size"]
+    data[page_size + 100] ^= 0xFF  # inside the first block, after the header page
+    pages.write_bytes(bytes(data))
+    with pytest.raises(octocosm.CorruptionError, match="epoch-00000.pages"):
+        octocosm.open(str(damaged)).query(level=21)
+
+
+@pytest.mark.skipif(not SHARED_DATA.is_dir(), reason="no ../shared/data")
+def test_a_gadget4_series_from_the_shared_data(tmp_path):
+    series = sorted((SHARED_DATA / "gadget4_hdf5_galaxy_collision_timeseries").glob("snapshot_00[0-2].hdf5"))
+    run("ingest", *series, "-o", tmp_path / "store", "--neighbours", 0)
+    s = octocosm.open(str(tmp_path / "store"))
+    points = s.query(level=21, columns=["id", "weight"])
+    assert len(points["id"]) == s.info()["epochs"][0]["points"]
+    tracks = s.follow(points["id"][:5])
+    assert len(tracks["id"]) == 15
+    assert np.all(np.diff(tracks["time"].reshape(5, 3), axis=1) > 0)
+
+
+def test_the_documented_example_runs(store, tmp_path):
+    example = pathlib.Path(__file__).parent.parent / "examples" / "density_projection.py"
+    image = tmp_path / "density.png"
+    out = subprocess.run([sys.executable, example, store, "2", image], check=True, capture_output=True, text=True,
+                         env={**os.environ, "MPLCONFIGDIR": str(tmp_path)}).stdout
+    assert image.stat().st_size > 1000
+    # The level-4 points carry all the mass: the two numbers printed agree.
+    mass, total = [float(w) for w in out.split("mass ")[1].split(" of ")]
+    assert mass == pytest.approx(total, rel=1e-5)
