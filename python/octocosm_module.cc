@@ -5,11 +5,15 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -17,8 +21,14 @@
 #include "index/block_codec.h"
 #include "index/cluster_shape.h"
 #include "index/dataset.h"
+#include "ingest/ingest.h"
+#include "ingest/snapshot/isolated_process.h"
+#include "query/camera_defaults.h"
 #include "query/particle_lookup.h"
 #include "query/query.h"
+#include "render/color_maps.h"
+#include "render/offscreen_renderer.h"
+#include "render/tone_map.h"
 
 namespace py = pybind11;
 
@@ -126,29 +136,39 @@ std::array<double, 3> Triple(const py::handle& value, const char* what) {
   return {v[0], v[1], v[2]};
 }
 
-// A camera from a dict: position and look_at (3 numbers each), optional up,
-// fov_y_degrees, near, far; the aspect from the viewport.
-Camera CameraFrom(const py::dict& spec, double aspect) {
+// A camera from a dict (None: all defaults) of position, look_at, up (3
+// numbers each), fov_y_degrees, near and far, with the command-line
+// program's defaults for `cube` (query/camera_defaults.h): the whole cube in
+// view from +z, looking at its centre; the aspect from the viewport.
+Camera CameraFrom(const py::object& spec, const Cube& cube, double aspect) {
   Camera camera;
-  for (const auto& [key, value] : spec) {
-    const std::string name = key.cast<std::string>();
-    if (name == "position") {
-      camera.position = Triple(value, "camera position");
-    } else if (name == "look_at") {
-      camera.look_at = Triple(value, "camera look_at");
-    } else if (name == "up") {
-      camera.up = Triple(value, "camera up");
-    } else if (name == "fov_y_degrees") {
-      camera.fov_y_degrees = value.cast<double>();
-    } else if (name == "near") {
-      camera.near = value.cast<double>();
-    } else if (name == "far") {
-      camera.far = value.cast<double>();
-    } else {
-      throw Error::InvalidArgument("camera: unknown key '" + name +
-                                   "' (known: position, look_at, up, fov_y_degrees, near, far)");
+  std::optional<std::array<double, 3>> position, look_at;
+  std::optional<double> near, far;
+  if (!spec.is_none()) {
+    for (const auto& [key, value] : spec.cast<py::dict>()) {
+      const std::string name = key.cast<std::string>();
+      if (name == "position") {
+        position = Triple(value, "camera position");
+      } else if (name == "look_at") {
+        look_at = Triple(value, "camera look_at");
+      } else if (name == "up") {
+        camera.up = Triple(value, "camera up");
+      } else if (name == "fov_y_degrees") {
+        camera.fov_y_degrees = value.cast<double>();
+      } else if (name == "near") {
+        near = value.cast<double>();
+      } else if (name == "far") {
+        far = value.cast<double>();
+      } else {
+        throw Error::InvalidArgument("camera: unknown key '" + name +
+                                     "' (known: position, look_at, up, fov_y_degrees, near, far)");
+      }
     }
   }
+  camera.position = position.value_or(OverviewPosition(cube, camera.fov_y_degrees));
+  camera.look_at = look_at.value_or(CubeCentre(cube));
+  camera.near = near.value_or(DefaultNear(cube));
+  camera.far = far.value_or(DefaultFar(camera.position, cube));
   camera.aspect = aspect;
   camera.Validate();
   return camera;
@@ -172,7 +192,7 @@ QuerySpec MakeQuery(const Dataset& dataset, std::uint32_t epoch, const py::objec
   if (!(width > 0) || !(height > 0)) throw Error::InvalidArgument("width and height must be > 0");
   const Cube& cube = dataset.cube(epoch);
   std::optional<Camera> view;
-  if (!camera.is_none()) view = CameraFrom(camera.cast<py::dict>(), width / height);
+  if (!camera.is_none()) view = CameraFrom(camera, cube, width / height);
   QuerySpec spec;
   spec.options.epoch = epoch;
   spec.options.columns = ColumnsNamed(columns);
@@ -347,10 +367,121 @@ class Store {
     return result;
   }
 
+  // A picture of the store at fractional epoch `time`, as `octocosm render`
+  // draws it: the mass per pixel and the tone-mapped colours, row 0 at the
+  // top (as in the PNG).
+  py::dict Render(const py::object& camera, double time, int width, int height, double error,
+                  std::uint64_t budget, bool full, double exposure, const std::string& curve,
+                  const std::string& colormap, const std::string& color, const std::string& backend) {
+    const Dataset& d = *dataset_;
+    if (!(time >= 0 && time <= d.epoch_count() - 1.0)) {
+      throw Error::InvalidArgument("time must be in [0, " + std::to_string(d.epoch_count() - 1) + "] (epochs)");
+    }
+    if (!full && !(error > 0)) throw Error::InvalidArgument("error must be > 0 pixels");
+    if (width < 1 || height < 1) throw Error::InvalidArgument("width and height must be >= 1");
+    const Cube& cube = d.cube(static_cast<std::uint32_t>(std::lround(time)));
+    const RenderView view(CameraFrom(camera, cube, static_cast<double>(width) / height), width, height);
+    LodOptions lod;
+    lod.pixel_threshold = full ? 1e-9 : error;
+    lod.point_budget = full ? 0 : budget;
+    const ColorMode mode = ParseColorMode(color);
+    ToneMapSettings tone;
+    tone.curve = ParseToneCurve(curve);
+    tone.exposure = exposure;
+    tone.density_map = ParseColorMap(colormap);
+    tone.color = mode;
+    tone.attribute_map = DefaultAttributeColorMap(mode);
+    tone.Validate();
+    const HeadlessBackend headless = ParseHeadlessBackend(backend);
+    Picture picture;
+    {
+      py::gil_scoped_release release;
+      OffscreenRenderer& renderer = Renderer(headless);
+      renderer.scene().SetLod(lod);
+      renderer.scene().SetColorMode(mode);
+      picture = renderer.Render(view, time, tone, true);
+    }
+    const HdrImage& hdr = *picture.hdr;
+    const auto w = static_cast<std::size_t>(width), h = static_cast<std::size_t>(height);
+    std::vector<double> mass(w * h);
+    std::vector<std::uint8_t> rgb(3 * w * h);
+    for (std::size_t j = 0; j < h; ++j) {  // the images' rows run bottom to top
+      const std::size_t from = (h - 1 - j) * w;
+      for (std::size_t i = 0; i < w; ++i) mass[j * w + i] = hdr.rgba[4 * (from + i)];
+      std::copy_n(picture.rgb.rgb.begin() + static_cast<std::ptrdiff_t>(3 * from), 3 * w,
+                  rgb.begin() + static_cast<std::ptrdiff_t>(3 * j * w));
+    }
+    py::dict result;
+    result["mass"] = OwningArray(std::move(mass), {height, width});
+    result["rgb"] = OwningArray(std::move(rgb), {height, width, 3});
+    result["exposure"] = picture.tone.exposure;
+    result["points_drawn"] = picture.stats.points_drawn;
+    result["nodes_selected"] = picture.stats.nodes_selected;
+    result["seconds"] = picture.seconds;
+    return result;
+  }
+
  private:
+  // The renderer of this store for `backend`, made on first use on this
+  // thread: an OpenGL context is current on the thread that made it.
+  OffscreenRenderer& Renderer(HeadlessBackend backend) {
+    if (!renderer_ || renderer_backend_ != backend || renderer_thread_ != std::this_thread::get_id()) {
+      renderer_.reset();
+      renderer_ = std::make_unique<OffscreenRenderer>(*dataset_, backend, SceneOptions{});
+      renderer_backend_ = backend;
+      renderer_thread_ = std::this_thread::get_id();
+    }
+    return *renderer_;
+  }
+
   std::string path_;
   std::shared_ptr<const Dataset> dataset_;
+  std::unique_ptr<OffscreenRenderer> renderer_;
+  HeadlessBackend renderer_backend_ = HeadlessBackend::kOsMesa;
+  std::thread::id renderer_thread_;
 };
+
+// octocosm.ingest: snapshots into a new store, as `octocosm ingest` with its
+// defaults; progress on stderr unless quiet.
+py::dict RunIngest(const std::vector<std::string>& inputs, const std::string& output, std::size_t capacity,
+                   int neighbours, std::uint64_t memory, unsigned threads, const std::string& coarse, bool quiet) {
+  IngestOptions options;
+  options.inputs = inputs;
+  options.output = output;
+  options.tree.capacity = capacity;
+  options.neighbours = neighbours;
+  options.memory_budget = memory;
+  options.threads = threads;
+  options.quiet = quiet;
+  if (coarse != "clusters" && coarse != "sample") {
+    throw Error::InvalidArgument("coarse: expected clusters or sample, not '" + coarse + "'");
+  }
+  options.tree.coarse = coarse == "sample" ? CoarsePoints::kSample : CoarsePoints::kClusters;
+  IngestReport report;
+  {
+    py::gil_scoped_release release;
+    report = Ingest(options);
+  }
+  py::dict result;
+  result["points"] = report.input_points;
+  result["read_points"] = report.read_points;
+  result["dropped_points"] = report.dropped_points;
+  py::list epochs;
+  for (const EpochReport& e : report.epochs) {
+    py::dict epoch;
+    epoch["points"] = e.points;
+    epoch["nodes"] = e.nodes;
+    epoch["leaves"] = e.leaves;
+    epoch["depth"] = e.depth;
+    epoch["mass"] = e.mass;
+    py::dict phases;
+    for (const EpochReport::Phase& phase : e.phases) phases[phase.name.c_str()] = phase.seconds;
+    epoch["seconds"] = phases;
+    epochs.append(epoch);
+  }
+  result["epochs"] = epochs;
+  return result;
+}
 
 }  // namespace
 }  // namespace octocosm
@@ -411,8 +542,29 @@ PYBIND11_MODULE(octocosm, m) {
            "for results larger than memory.")
       .def("follow", &Store::Follow, py::arg("ids"),
            "Particles followed through every epoch by ID: a dict of numpy arrays id, epoch, time,\n"
-           "position (m, 3) and velocity (m, 3) when stored, one row per (id, epoch) found.");
+           "position (m, 3) and velocity (m, 3) when stored, one row per (id, epoch) found.")
+      .def("render", &Store::Render, py::arg("camera") = py::none(), py::arg("time") = 0.0, py::arg("width") = 640,
+           py::arg("height") = 360, py::arg("error") = 1.0, py::arg("budget") = 0, py::arg("full") = false,
+           py::arg("exposure") = 0.0, py::arg("curve") = "log", py::arg("colormap") = "magma",
+           py::arg("color") = "density", py::arg("backend") = "osmesa",
+           "A picture as octocosm render draws it, at fractional epoch time, through the camera dict\n"
+           "(default: the whole cube from +z): a dict with mass (height, width) float64, the mass per\n"
+           "pixel, and rgb (height, width, 3) uint8, row 0 at the top; exposure, points_drawn,\n"
+           "nodes_selected, seconds. error: the level of detail in pixels; full=True: every particle.");
 
   m.def("open", [](const std::string& path) { return Store(path); }, py::arg("path"),
         "Opens the store directory at path (a Store).");
+  m.def("ingest", &RunIngest, py::arg("inputs"), py::arg("output"), py::arg("capacity") = 16000,
+        py::arg("neighbours") = kDefaultNeighbours, py::arg("memory") = 0, py::arg("threads") = 0,
+        py::arg("coarse") = "clusters", py::arg("quiet") = false,
+        "Builds a store at output from snapshots (one per epoch, in time order), as octocosm ingest:\n"
+        "capacity points per node, smoothing lengths from neighbours nearest neighbours (0: none),\n"
+        "memory budget in bytes (0: the default), threads (0: all cores), coarse 'clusters' or\n"
+        "'sample'. Progress goes to stderr unless quiet. Returns what was built, per epoch.");
+
+  // Snapshot readers run some libraries in processes of their own
+  // (ingest/snapshot/isolated_process.h), started from the octocosm
+  // program, since python3 cannot serve them.
+  const char* program = std::getenv("OCTOCOSM_PROGRAM");
+  SetIsolatedProgram(program != nullptr ? program : OCTOCOSM_PROGRAM_PATH);
 }

@@ -18,6 +18,10 @@ ColorMode ParseColorMode(const std::string& name) {
                                "': expected density, speed, los-velocity, dispersion or type");
 }
 
+ColorMapId DefaultAttributeColorMap(ColorMode mode) {
+  return mode == ColorMode::kLineOfSightVelocity ? ColorMapId::kCoolwarm : ColorMapId::kViridis;
+}
+
 const char* ColorModeName(ColorMode mode) {
   switch (mode) {
     case ColorMode::kDensity: return "density";

@@ -54,6 +54,10 @@ bool ColorModeNeedsVelocity(ColorMode mode);
 // The attribute a of one point (0 for density).
 double PointAttribute(ColorMode mode, const float* velocity, std::uint8_t type, const RenderView& view);
 
+// The attribute colour map when none is given: coolwarm for the
+// line-of-sight velocity (signed, about 0), viridis otherwise.
+ColorMapId DefaultAttributeColorMap(ColorMode mode);
+
 struct ToneMapSettings {
   ToneCurve curve = ToneCurve::kLog;
   double exposure = 0;            // density at full brightness; 0: automatic

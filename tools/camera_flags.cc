@@ -1,12 +1,11 @@
 #include "tools/camera_flags.h"
 
 #include <algorithm>
-#include <cmath>
-#include <numbers>
 
 #include <CLI/CLI.hpp>
 
 #include "base/error.h"
+#include "query/camera_defaults.h"
 #include "tools/cli_util.h"
 
 namespace octocosm {
@@ -16,19 +15,6 @@ std::array<double, 3> Triple(const std::string& text, const std::string& flag) {
   const std::vector<double> v = ParseNumberList(text, flag);
   if (v.size() != 3) throw Error::InvalidArgument(flag + " '" + text + "': expected 3 numbers x,y,z");
   return {v[0], v[1], v[2]};
-}
-
-std::array<double, 3> Centre(const Cube& cube) {
-  return {cube.origin[0] + cube.size / 2, cube.origin[1] + cube.size / 2, cube.origin[2] + cube.size / 2};
-}
-
-double DefaultNear(const Cube& cube) { return cube.size * 1e-6; }
-
-double DefaultFar(const std::array<double, 3>& position, const Cube& cube) {
-  const auto c = Centre(cube);
-  double d2 = 0;
-  for (int a = 0; a < 3; ++a) d2 += (position[a] - c[a]) * (position[a] - c[a]);
-  return std::sqrt(d2) + cube.size;
 }
 
 Camera Build(const CameraFlags& f, const Cube& cube, double aspect,
@@ -51,7 +37,7 @@ Camera Build(const CameraFlags& f, const Cube& cube, double aspect,
   }
   Camera camera;
   camera.position = f.position.empty() ? *fallback_position : Triple(f.position, "--camera");
-  camera.look_at = f.look_at.empty() ? Centre(cube) : Triple(f.look_at, "--look-at");
+  camera.look_at = f.look_at.empty() ? CubeCentre(cube) : Triple(f.look_at, "--look-at");
   camera.up = Triple(f.up, "--up");
   camera.fov_y_degrees = f.fov;
   camera.aspect = aspect;
@@ -88,14 +74,6 @@ Camera CameraFromFlags(const CameraFlags& flags, const Cube& cube, double aspect
 void ApplyDepthRange(const CameraFlags& flags, const Cube& cube, Camera& camera) {
   camera.near = flags.near > 0 ? flags.near : DefaultNear(cube);
   camera.far = flags.far > 0 ? flags.far : DefaultFar(camera.position, cube);
-}
-
-std::array<double, 3> OverviewPosition(const Cube& cube, double fov_y_degrees) {
-  const double radius = cube.size * std::sqrt(3.0) / 2;
-  const double half_fov = std::clamp(fov_y_degrees, 1.0, 179.0) * std::numbers::pi / 360;
-  auto p = Centre(cube);
-  p[2] += radius / std::sin(half_fov) * 1.02;
-  return p;
 }
 
 }  // namespace octocosm

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "index/cube.h"
+#include "query/camera_defaults.h"
 #include "query/frustum.h"
 
 namespace CLI {
@@ -40,10 +41,5 @@ Camera CameraFromFlags(const CameraFlags& flags, const Cube& cube, double aspect
 // cube's centre plus its edge, so that nothing in the cube is clipped from
 // wherever the camera is, inside the cube or out.
 void ApplyDepthRange(const CameraFlags& flags, const Cube& cube, Camera& camera);
-
-// A position from which the whole cube is in view: on the +z side of its
-// centre, far enough that the cube's bounding sphere fits the vertical field
-// of view.
-std::array<double, 3> OverviewPosition(const Cube& cube, double fov_y_degrees);
 
 }  // namespace octocosm

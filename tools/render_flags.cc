@@ -83,10 +83,6 @@ ToneMapSettings ToneSettingsFrom(const SceneFlags& f) {
   return tone;
 }
 
-ColorMapId DefaultAttributeColorMap(ColorMode mode) {
-  return mode == ColorMode::kLineOfSightVelocity ? ColorMapId::kCoolwarm : ColorMapId::kViridis;
-}
-
 SceneOptions SceneOptionsFrom(const SceneFlags& f) {
   SceneOptions options;
   options.lod.pixel_threshold = f.full ? 1e-9 : f.error;

@@ -62,9 +62,6 @@ std::uint32_t NearestEpoch(double time);
 
 // Throws Error::InvalidArgument naming the flag.
 ToneMapSettings ToneSettingsFrom(const SceneFlags& flags);
-// The attribute colour map when none is given: coolwarm for the
-// line-of-sight velocity (signed, about 0), viridis otherwise.
-ColorMapId DefaultAttributeColorMap(ColorMode mode);
 // Level of detail, colour mode and CPU block cache.
 SceneOptions SceneOptionsFrom(const SceneFlags& flags);
 // Throws Error::InvalidArgument when --max-radius exceeds what this OpenGL draws.

@@ -50,6 +50,12 @@ constexpr std::uint64_t kMaxRecordBytes = std::uint64_t{1} << 34;
 int g_service_fd = -1;
 unsigned g_watchdog_seconds = 0;
 
+// The program IsolatedProcess starts (SetIsolatedProgram).
+std::string& IsolatedProgram() {
+  static std::string program = "/proc/self/exe";
+  return program;
+}
+
 // Sends all of `size` bytes, or gives up (the other side is gone). Never
 // raises SIGPIPE.
 bool SendAll(int fd, const char* data, std::size_t size) {
@@ -194,14 +200,14 @@ IsolatedProcess::IsolatedProcess(const char* service, const IsolationLimits& lim
   std::string name = std::string("octocosm ") + service;
   char* arguments[] = {name.data(), nullptr};
 
-  const int error = posix_spawn(&pid_, "/proc/self/exe", &actions, &attributes, arguments, environment.data());
+  const std::string& program = IsolatedProgram();
+  const int error = posix_spawn(&pid_, program.c_str(), &actions, &attributes, arguments, environment.data());
   posix_spawnattr_destroy(&attributes);
   posix_spawn_file_actions_destroy(&actions);
   close(service_end);
   if (error != 0) {
     close(ends[0]);
-    throw Error(ErrorKind::kIo, std::string("cannot start this program again (/proc/self/exe) as its ") + service +
-                                    " process: " + std::strerror(error));
+    throw Error(ErrorKind::kIo, "cannot start " + program + " as the " + service + " process: " + std::strerror(error));
   }
   socket_ = ends[0];
 }
@@ -347,6 +353,8 @@ bool ServeIfStartedAs(const char* service, IsolatedHandler handler) {
   g_service_fd = kServiceFd;
   Serve(handler);
 }
+
+void SetIsolatedProgram(const std::string& program) { IsolatedProgram() = program; }
 
 void NoteIsolatedProgress(std::string_view note) {
   if (g_service_fd < 0) return;

@@ -4,7 +4,8 @@
 // this way (docs/INPUT_FORMATS.md).
 //
 // The process is this program started again (/proc/self/exe, by
-// posix_spawn), not a fork() of this one: it inherits none of this
+// posix_spawn, or the program SetIsolatedProgram names), not a fork() of
+// this one: it inherits none of this
 // process's memory or threads, so starting it costs the same however much
 // this process holds, and it may be started from any thread. Before main()
 // runs, a static initializer of the code that offers the service
@@ -86,6 +87,12 @@ class IsolatedProcess {
   std::string failure_;  // set once the process has failed
   bool send_failed_ = false;
 };
+
+// Makes IsolatedProcess start `program` instead of this program: for a
+// process that embeds the library in a program of someone else's (the
+// Python module), `program` being one of this project's that links the
+// services it will start (the octocosm program). Call before starting any.
+void SetIsolatedProgram(const std::string& program);
 
 // For a static initializer in the file that offers `service`: when this
 // process was started by IsolatedProcess(service), serves its requests with

@@ -149,10 +149,51 @@ def test_errors_are_exceptions_of_their_kind(store, tmp_path):
         octocosm.open(str(damaged)).query(level=21)
 
 
+def test_a_picture_is_what_the_program_draws(store, tmp_path):
+    s = octocosm.open(str(store))
+    camera = {"position": (20_000, 30_000, 260_000), "look_at": (50_000, 50_000, 50_000)}
+    picture = s.render(camera=camera, time=1.5, width=96, height=64, error=2)
+    assert picture["mass"].shape == (64, 96) and picture["mass"].dtype == np.float64
+    assert picture["rgb"].shape == (64, 96, 3) and picture["rgb"].dtype == np.uint8
+    assert picture["points_drawn"] > 0 and picture["exposure"] > 0
+    run("render", store, "--camera", "20000,30000,260000", "--look-at", "50000,50000,50000", "--time", 1.5,
+        "--width", 96, "--height", 64, "--error", 2, "-o", tmp_path / "frame.png")
+    import matplotlib.image
+    png = np.round(matplotlib.image.imread(tmp_path / "frame.png")[:, :, :3] * 255).astype(np.uint8)
+    np.testing.assert_array_equal(picture["rgb"], png)
+    # Every particle drawn: the mass in the picture is the mass in view, the same at any level of detail.
+    full = s.render(camera=camera, time=1, width=96, height=64, full=True)
+    coarse = s.render(camera=camera, time=1, width=96, height=64, error=16)
+    assert coarse["points_drawn"] < full["points_drawn"]
+    assert coarse["mass"].sum() == pytest.approx(full["mass"].sum(), rel=1e-3)
+
+
+def test_ingest_builds_the_programs_store(store, tmp_path):
+    snapshots = sorted((store.parent / "sim").glob("snap_*"))
+    report = octocosm.ingest([str(p) for p in snapshots], str(tmp_path / "store"), capacity=300, neighbours=8,
+                             quiet=True)
+    assert [e["points"] for e in report["epochs"]] == [16**3] * 3
+    # The same blocks, node by node (the page files may place them in another
+    # order: builds finish in the order their threads do).
+    ours, theirs = octocosm.open(str(tmp_path / "store")), octocosm.open(str(store))
+    for epoch in range(3):
+        a = {b["node"]: b for b in ours.blocks(epoch=epoch, level=21, columns=["all"])}
+        b = {b["node"]: b for b in theirs.blocks(epoch=epoch, level=21, columns=["all"])}
+        assert a.keys() == b.keys()
+        for node in a:
+            for name in a[node]:
+                np.testing.assert_array_equal(a[node][name], b[node][name], err_msg=f"{node} {name}")
+    with pytest.raises(octocosm.InvalidArgumentError):
+        octocosm.ingest([str(snapshots[0])], str(tmp_path / "other"), coarse="median")
+    with pytest.raises(octocosm.NotFoundError):
+        octocosm.ingest([str(tmp_path / "none")], str(tmp_path / "other"))
+
+
 @pytest.mark.skipif(not SHARED_DATA.is_dir(), reason="no ../shared/data")
 def test_a_gadget4_series_from_the_shared_data(tmp_path):
+    # HDF5, read by the reader process that the octocosm program serves.
     series = sorted((SHARED_DATA / "gadget4_hdf5_galaxy_collision_timeseries").glob("snapshot_00[0-2].hdf5"))
-    run("ingest", *series, "-o", tmp_path / "store", "--neighbours", 0)
+    octocosm.ingest([str(p) for p in series], str(tmp_path / "store"), neighbours=0, quiet=True)
     s = octocosm.open(str(tmp_path / "store"))
     points = s.query(level=21, columns=["id", "weight"])
     assert len(points["id"]) == s.info()["epochs"][0]["points"]

@@ -18,6 +18,8 @@
 #include <thread>
 #include <vector>
 
+#include "base/error.h"
+
 namespace octocosm {
 namespace {
 
@@ -194,6 +196,22 @@ TEST(IsolatedProcess, TheServiceEndsWithItsOwner) {
   }
   // Reaped: no such process, not even a zombie.
   EXPECT_EQ(kill(pid, 0), -1);
+}
+
+TEST(IsolatedProcess, AProgramThatCannotStartIsAnIoErrorNamingIt) {
+  SetIsolatedProgram("/nonexistent/octocosm");
+  try {
+    IsolatedProcess service("isolated-process-test");
+    ADD_FAILURE() << "started";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kIo);
+    EXPECT_NE(std::string(e.what()).find("cannot start /nonexistent/octocosm as the isolated-process-test process"),
+              std::string::npos)
+        << e.what();
+  }
+  SetIsolatedProgram("/proc/self/exe");
+  IsolatedProcess service("isolated-process-test");
+  EXPECT_TRUE(service.Call("calls").returned);
 }
 
 TEST(IsolatedProcess, NotesOutsideAServiceDoNothing) {
