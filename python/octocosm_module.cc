@@ -1,15 +1,20 @@
-// The Python module `octocosm`: a store's points and particle trajectories
-// as numpy arrays (docs/PYTHON.md). A thin layer over query/: every number
-// comes from the same code as `octocosm query` and `octocosm follow`.
+// The Python module `octocosm`: stores built from snapshots, and a store's
+// points, particle trajectories and pictures as numpy arrays
+// (docs/PYTHON.md). A thin layer over query/, render/ and ingest/: every
+// number comes from the same code as `octocosm ingest`, `query`, `follow`
+// and `render`.
+#include <dlfcn.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <optional>
 #include <string>
@@ -483,6 +488,20 @@ py::dict RunIngest(const std::vector<std::string>& inputs, const std::string& ou
   return result;
 }
 
+// The octocosm program: OCTOCOSM_PROGRAM; else the one installed beside
+// this module (PREFIX/bin for a module in PREFIX/lib/pythonX.Y/dist-packages,
+// python/CMakeLists.txt); else the one of the build this module comes from.
+std::string ServiceProgram() {
+  if (const char* program = std::getenv("OCTOCOSM_PROGRAM")) return program;
+  Dl_info module{};
+  if (dladdr(reinterpret_cast<void*>(&ServiceProgram), &module) != 0 && module.dli_fname != nullptr) {
+    const std::filesystem::path installed =
+        (std::filesystem::path(module.dli_fname).parent_path() / "../../../bin/octocosm").lexically_normal();
+    if (access(installed.c_str(), X_OK) == 0) return installed.string();
+  }
+  return OCTOCOSM_PROGRAM_PATH;
+}
+
 }  // namespace
 }  // namespace octocosm
 
@@ -565,6 +584,5 @@ PYBIND11_MODULE(octocosm, m) {
   // Snapshot readers run some libraries in processes of their own
   // (ingest/snapshot/isolated_process.h), started from the octocosm
   // program, since python3 cannot serve them.
-  const char* program = std::getenv("OCTOCOSM_PROGRAM");
-  SetIsolatedProgram(program != nullptr ? program : OCTOCOSM_PROGRAM_PATH);
+  SetIsolatedProgram(ServiceProgram());
 }
