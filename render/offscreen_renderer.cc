@@ -20,6 +20,9 @@ OffscreenRenderer::~OffscreenRenderer() {
 Picture OffscreenRenderer::Render(const RenderView& view, double time, const ToneMapSettings& tone, bool read_hdr,
                                   ExposureSmoother* smoother, double elapsed) {
   const auto start = std::chrono::steady_clock::now();
+  // Another renderer on this thread (a second store, from Python) may have
+  // made its own context current since.
+  context_->MakeCurrent();
   Picture picture;
   scene_->SetColorMode(tone.color);
   picture.stats = scene_->Complete(view, time);

@@ -168,6 +168,19 @@ def test_a_picture_is_what_the_program_draws(store, tmp_path):
     assert coarse["mass"].sum() == pytest.approx(full["mass"].sum(), rel=1e-3)
 
 
+def test_two_stores_draw_in_turn_on_one_thread(store, tmp_path):
+    # Each store's renderer has its own OpenGL context: drawing with one must
+    # not leave the other drawing into the wrong one.
+    other = tmp_path / "other"
+    shutil.copytree(store, other)
+    a, b = octocosm.open(str(store)), octocosm.open(str(other))
+    first = a.render(time=0, width=48, height=32)["rgb"]
+    late = b.render(time=2, width=48, height=32)["rgb"]
+    assert not np.array_equal(first, late)
+    np.testing.assert_array_equal(a.render(time=0, width=48, height=32)["rgb"], first)
+    np.testing.assert_array_equal(b.render(time=2, width=48, height=32)["rgb"], late)
+
+
 def test_ingest_builds_the_programs_store(store, tmp_path):
     snapshots = sorted((store.parent / "sim").glob("snap_*"))
     report = octocosm.ingest([str(p) for p in snapshots], str(tmp_path / "store"), capacity=300, neighbours=8,
