@@ -75,6 +75,21 @@ class ColumnCollector {
  public:
   explicit ColumnCollector(ColumnSet columns) : columns_(columns) {}
 
+  // Room for `points` in every wanted column, so that adding never moves
+  // what was added (address space only: untouched pages cost no memory).
+  void Reserve(std::size_t points) {
+    position_.reserve(3 * points);
+    if (Wants(ColumnId::kWeight)) weight_.reserve(points);
+    if (Wants(ColumnId::kSmoothing)) smoothing_.reserve(points);
+    if (Wants(ColumnId::kId)) id_.reserve(points);
+    if (Wants(ColumnId::kType)) type_.reserve(points);
+    for (std::size_t v = 0; v < kVectorColumnCount; ++v) {
+      if (Wants(kVectorColumnIds[v])) vectors_[v].reserve(3 * points);
+    }
+    if (Wants(ColumnId::kVelocityDispersion)) dispersion_.reserve(points);
+    if (Wants(ColumnId::kShape)) shape_.reserve(6 * points);
+  }
+
   void Add(const NodePoints& points, std::size_t count) {
     Append(position_, points.position, 3 * count);
     if (Wants(ColumnId::kWeight)) Append(weight_, points.weight, count);
@@ -232,6 +247,7 @@ QuerySpec MakeQuery(const Dataset& dataset, std::uint32_t epoch, const py::objec
 py::dict StatsDict(const QueryStats& stats) {
   py::dict d;
   d["nodes_selected"] = stats.nodes_selected;
+  d["points_selected"] = stats.points_selected;
   d["blocks_read"] = stats.reads.blocks;
   d["bytes_read"] = stats.reads.bytes;
   d["points_scanned"] = stats.points_scanned;
@@ -317,8 +333,11 @@ class Store {
     QueryStats stats;
     {
       py::gil_scoped_release release;
-      stats = RunQuery(*dataset_, *spec.region, spec.options,
-                       [&](const QueryBatch& batch) { collector.Add(batch.points, batch.count); });
+      QueryCursor cursor(*dataset_, *spec.region, spec.options);
+      collector.Reserve(cursor.stats().points_selected);
+      QueryBatch batch;
+      while (cursor.Next(batch)) collector.Add(batch.points, batch.count);
+      stats = cursor.stats();
     }
     py::dict result = collector.Take();
     if (with_stats) result["stats"] = StatsDict(stats);

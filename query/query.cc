@@ -46,6 +46,7 @@ QueryCursor::QueryCursor(const Dataset& dataset, const Region& region, const Que
       wanted_((options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition)) {
   nodes_ = SelectNodes(dataset, region, options, stats_.selection);
   stats_.nodes_selected = nodes_.size();
+  for (const IndexEntry& entry : nodes_) stats_.points_selected += entry.point_count;
 }
 
 bool QueryCursor::Next(QueryBatch& batch) {

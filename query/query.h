@@ -36,6 +36,7 @@ struct QueryOptions {
 struct QueryStats {
   SelectionStats selection;
   std::uint64_t nodes_selected = 0;
+  std::uint64_t points_selected = 0;  // in the selected nodes: the most a query can return
   ReadCounters reads;  // blocks touched, positioned reads, bytes read
   std::uint64_t points_scanned = 0;   // points decoded
   std::uint64_t points_returned = 0;  // of those, the ones in the region
