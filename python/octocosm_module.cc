@@ -391,13 +391,21 @@ class Store {
     return result;
   }
 
-  // A picture of the store at fractional epoch `time`, as `octocosm render`
-  // draws it: the mass per pixel and the tone-mapped colours, row 0 at the
-  // top (as in the PNG).
-  py::dict Render(const py::object& camera, double time, int width, int height, double error,
-                  std::uint64_t budget, bool full, double exposure, const std::string& curve,
-                  const std::string& colormap, const std::string& color, const std::string& backend) {
+  // A picture of the store at fractional epoch `time` (or at a redshift or
+  // scale factor), as `octocosm render` draws it: the mass per pixel, the
+  // selected particles' share of it and the tone-mapped colours, row 0 at
+  // the top (as in the PNG).
+  py::dict Render(const py::object& camera, std::optional<double> epoch_time, std::optional<double> redshift,
+                  std::optional<double> scale_factor, int width, int height, double error, std::uint64_t budget,
+                  bool full, double exposure, const std::string& curve, const std::string& colormap,
+                  const std::string& color, const std::vector<std::uint64_t>& select, const std::string& backend) {
     const Dataset& d = *dataset_;
+    if (epoch_time.has_value() + redshift.has_value() + scale_factor.has_value() > 1) {
+      throw Error::InvalidArgument("give at most one of time, redshift and scale_factor");
+    }
+    double time = epoch_time.value_or(0);
+    if (redshift) time = d.FractionalEpochAt({PhysicalTime::Scale::kRedshift, *redshift});
+    if (scale_factor) time = d.FractionalEpochAt({PhysicalTime::Scale::kScaleFactor, *scale_factor});
     if (!(time >= 0 && time <= d.epoch_count() - 1.0)) {
       throw Error::InvalidArgument("time must be in [0, " + std::to_string(d.epoch_count() - 1) + "] (epochs)");
     }
@@ -423,21 +431,27 @@ class Store {
       OffscreenRenderer& renderer = Renderer(headless);
       renderer.scene().SetLod(lod);
       renderer.scene().SetColorMode(mode);
+      renderer.scene().SetSelection(select);
       picture = renderer.Render(view, time, tone, true);
     }
     const HdrImage& hdr = *picture.hdr;
     const auto w = static_cast<std::size_t>(width), h = static_cast<std::size_t>(height);
-    std::vector<double> mass(w * h);
+    std::vector<double> mass(w * h), selected(w * h);
     std::vector<std::uint8_t> rgb(3 * w * h);
     for (std::size_t j = 0; j < h; ++j) {  // the images' rows run bottom to top
       const std::size_t from = (h - 1 - j) * w;
-      for (std::size_t i = 0; i < w; ++i) mass[j * w + i] = hdr.rgba[4 * (from + i)];
+      for (std::size_t i = 0; i < w; ++i) {
+        mass[j * w + i] = hdr.rgba[4 * (from + i)];
+        selected[j * w + i] = hdr.rgba[4 * (from + i) + 3];
+      }
       std::copy_n(picture.rgb.rgb.begin() + static_cast<std::ptrdiff_t>(3 * from), 3 * w,
                   rgb.begin() + static_cast<std::ptrdiff_t>(3 * j * w));
     }
     py::dict result;
     result["mass"] = OwningArray(std::move(mass), {height, width});
+    result["selected_mass"] = OwningArray(std::move(selected), {height, width});
     result["rgb"] = OwningArray(std::move(rgb), {height, width, 3});
+    result["time"] = time;
     result["exposure"] = picture.tone.exposure;
     result["points_drawn"] = picture.stats.points_drawn;
     result["nodes_selected"] = picture.stats.nodes_selected;
@@ -581,14 +595,18 @@ PYBIND11_MODULE(octocosm, m) {
       .def("follow", &Store::Follow, py::arg("ids"),
            "Particles followed through every epoch by ID: a dict of numpy arrays id, epoch, time,\n"
            "position (m, 3) and velocity (m, 3) when stored, one row per (id, epoch) found.")
-      .def("render", &Store::Render, py::arg("camera") = py::none(), py::arg("time") = 0.0, py::arg("width") = 640,
+      .def("render", &Store::Render, py::arg("camera") = py::none(), py::arg("time") = py::none(),
+           py::arg("redshift") = py::none(), py::arg("scale_factor") = py::none(), py::arg("width") = 640,
            py::arg("height") = 360, py::arg("error") = 1.0, py::arg("budget") = 0, py::arg("full") = false,
            py::arg("exposure") = 0.0, py::arg("curve") = "log", py::arg("colormap") = "magma",
-           py::arg("color") = "density", py::arg("backend") = "osmesa",
-           "A picture as octocosm render draws it, at fractional epoch time, through the camera dict\n"
-           "(default: the whole cube from +z): a dict with mass (height, width) float64, the mass per\n"
-           "pixel, and rgb (height, width, 3) uint8, row 0 at the top; exposure, points_drawn,\n"
-           "nodes_selected, seconds. error: the level of detail in pixels; full=True: every particle.");
+           py::arg("color") = "density", py::arg("select") = std::vector<std::uint64_t>{},
+           py::arg("backend") = "osmesa",
+           "A picture as octocosm render draws it, at fractional epoch time (default 0) or at a redshift\n"
+           "or scale factor, through the camera dict (default: the whole cube from +z): a dict with mass\n"
+           "(height, width) float64, the mass per pixel; selected_mass, the part of it of the particles\n"
+           "whose IDs select lists (highlighted, drawn at full detail); rgb (height, width, 3) uint8, row 0\n"
+           "at the top; time (the fractional epoch), exposure, points_drawn, nodes_selected, seconds.\n"
+           "error: the level of detail in pixels; full=True: every particle.");
 
   m.def("open", [](const std::string& path) { return Store(path); }, py::arg("path"),
         "Opens the store directory at path (a Store).");

@@ -168,6 +168,23 @@ def test_a_picture_is_what_the_program_draws(store, tmp_path):
     assert coarse["mass"].sum() == pytest.approx(full["mass"].sum(), rel=1e-3)
 
 
+def test_a_picture_at_a_redshift_with_particles_highlighted(store):
+    s = octocosm.open(str(store))
+    epochs = s.info()["epochs"]
+    at_redshift = s.render(redshift=epochs[1]["redshift"], width=48, height=32)
+    assert at_redshift["time"] == 1
+    np.testing.assert_array_equal(at_redshift["rgb"], s.render(time=1, width=48, height=32)["rgb"])
+    assert not at_redshift["selected_mass"].any()
+    between = s.render(scale_factor=(epochs[1]["time"] + epochs[2]["time"]) / 2, width=48, height=32)
+    assert between["time"] == pytest.approx(1.5)
+    ids = s.query(epoch=1, level=21, columns=["id"], sphere=(50_000, 50_000, 50_000, 25_000))["id"]
+    lit = s.render(time=1, width=48, height=32, select=ids)
+    assert 0 < lit["selected_mass"].sum() < lit["mass"].sum()
+    assert not np.array_equal(lit["rgb"], at_redshift["rgb"])
+    with pytest.raises(octocosm.InvalidArgumentError, match="at most one of"):
+        s.render(time=1, redshift=0)
+
+
 def test_two_stores_draw_in_turn_on_one_thread(store, tmp_path):
     # Each store's renderer has its own OpenGL context: drawing with one must
     # not leave the other drawing into the wrong one.
