@@ -37,30 +37,49 @@ class UniqueFd {
   int fd_ = -1;
 };
 
-// A read-only file read with pread: no shared file offset, so one object may
-// serve any number of threads at once.
-class RandomAccessFile {
+// A read-only file read at offsets, by any number of threads at once: a local
+// file (RandomAccessFile) or one on an HTTP server (HttpFile, storage/http_file.h).
+class ReadableFile {
+ public:
+  virtual ~ReadableFile() = default;
+  // Reads up to out.size() bytes at `offset`; fewer only where the file ends.
+  // Returns the number of bytes read.
+  virtual std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const = 0;
+  virtual std::uint64_t Size() const = 0;
+  // The path or URL, for messages.
+  virtual const std::string& path() const = 0;
+  // Caching hints; files without an OS page cache ignore them.
+  virtual void DropFromPageCache() const {}
+  virtual void AdviseSequential() const {}
+  virtual void AdviseRandom() const {}
+};
+
+// A local read-only file read with pread: no shared file offset, so one
+// object may serve any number of threads at once.
+class RandomAccessFile final : public ReadableFile {
  public:
   // Throws kNotFound if the file does not exist, kIo on other failures.
   static RandomAccessFile Open(const std::string& path);
 
-  // Reads up to out.size() bytes at `offset`; fewer only where the file ends.
-  // Returns the number of bytes read. Retries interrupted and partial reads.
-  std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const;
+  RandomAccessFile(RandomAccessFile&&) noexcept = default;
+  RandomAccessFile& operator=(RandomAccessFile&&) noexcept = default;
+
+  // Retries interrupted and partial reads.
+  std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const override;
 
   // The current size of the file (fstat).
-  std::uint64_t Size() const;
+  std::uint64_t Size() const override;
 
   // Asks the kernel to drop this file's cached pages (POSIX_FADV_DONTNEED),
   // so the next reads are cold. Only clean pages can be dropped, which is all
   // of them for a file this process only reads.
-  void DropFromPageCache() const;
+  void DropFromPageCache() const override;
   // Hints that the file will be read front to back (larger read-ahead).
-  void AdviseSequential() const;
+  void AdviseSequential() const override;
   // Hints that reads are scattered (no read-ahead): the default for a store.
-  void AdviseRandom() const;
+  void AdviseRandom() const override;
 
-  const std::string& path() const { return path_; }
+  const std::string& path() const override { return path_; }
 
  private:
   RandomAccessFile(std::string path, UniqueFd fd) : path_(std::move(path)), fd_(std::move(fd)) {}

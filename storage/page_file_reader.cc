@@ -4,6 +4,7 @@
 
 #include "base/error.h"
 #include "storage/checksum.h"
+#include "storage/http_file.h"
 
 namespace octocosm {
 
@@ -17,11 +18,11 @@ ReaderStats& ReaderStats::operator+=(const ReaderStats& other) {
 }
 
 std::unique_ptr<PageFileReader> PageFileReader::Open(const std::string& path, Options options) {
-  RandomAccessFile file = RandomAccessFile::Open(path);
+  std::unique_ptr<ReadableFile> file = OpenReadableFile(path);
   std::array<std::uint8_t, kPageFileHeaderSize> bytes{};
-  std::size_t got = file.ReadAt(0, bytes);
+  std::size_t got = file->ReadAt(0, bytes);
   PageFileHeader header = PageFileHeader::Decode(std::span<const std::uint8_t>(bytes.data(), got), path);
-  const std::uint64_t actual = file.Size();
+  const std::uint64_t actual = file->Size();
   if (actual != header.file_size()) {
     throw Error::Corruption(path, std::string(actual < header.file_size() ? "truncated" : "trailing bytes") +
                                       ": the file is " + std::to_string(actual) + " bytes, the header says " +
@@ -31,22 +32,22 @@ std::unique_ptr<PageFileReader> PageFileReader::Open(const std::string& path, Op
   }
   // Blocks are found through the index and read one by one: disable
   // read-ahead, which would only pull in neighbours nobody asked for.
-  file.AdviseRandom();
+  file->AdviseRandom();
   std::unique_ptr<PageFileReader> reader(new PageFileReader(std::move(file), header, options));
   reader->bytes_read_ = got;
   return reader;
 }
 
-PageFileReader::PageFileReader(RandomAccessFile file, const PageFileHeader& header, Options options)
+PageFileReader::PageFileReader(std::unique_ptr<ReadableFile> file, const PageFileHeader& header, Options options)
     : file_(std::move(file)),
       header_(header),
-      index_(file_.path(), header.epoch, header.page_size, header.index,
+      index_(file_->path(), header.epoch, header.page_size, header.index,
              [this](std::uint64_t page_number, std::span<std::uint8_t> out) { ReadIndexPage(page_number, out); },
              BlockIndexReader::Options{options.index_cache_pages}) {}
 
 void PageFileReader::ReadIndexPage(std::uint64_t page_number, std::span<std::uint8_t> out) const {
   const std::uint64_t offset = page_number * header_.page_size;
-  std::size_t got = file_.ReadAt(offset, out);
+  std::size_t got = file_->ReadAt(offset, out);
   bytes_read_.fetch_add(got, std::memory_order_relaxed);
   if (got != out.size()) {
     throw Error::Corruption(path(), "truncated: index page " + std::to_string(page_number) + " (epoch " +
@@ -78,7 +79,7 @@ void PageFileReader::ReadBlockInto(const IndexEntry& entry, std::span<std::uint8
     // One positioned read of exactly the block: what an HTTP reader would
     // ask for as one range request.
     const std::uint64_t offset = entry.first_page * header_.page_size;
-    std::size_t got = file_.ReadAt(offset, bytes);
+    std::size_t got = file_->ReadAt(offset, bytes);
     block_reads_.fetch_add(1, std::memory_order_relaxed);
     bytes_read_.fetch_add(got, std::memory_order_relaxed);
     if (got != bytes.size()) {
@@ -102,7 +103,7 @@ void PageFileReader::ReadBlockRange(const IndexEntry& entry, std::uint64_t offse
   }
   if (out.empty()) return;
   const std::uint64_t at = entry.first_page * header_.page_size + offset;
-  const std::size_t got = file_.ReadAt(at, out);
+  const std::size_t got = file_->ReadAt(at, out);
   block_reads_.fetch_add(1, std::memory_order_relaxed);
   bytes_read_.fetch_add(got, std::memory_order_relaxed);
   if (got != out.size()) {
@@ -125,7 +126,7 @@ Bytes PageFileReader::ReadBlock(std::uint64_t key) const {
 }
 
 void PageFileReader::DropCaches() const {
-  file_.DropFromPageCache();
+  file_->DropFromPageCache();
   index_.ClearCache();
 }
 

@@ -2,8 +2,9 @@
 // finds blocks through the B+-tree index, and reads each block with a single
 // positioned read, verified against its checksum before it is returned.
 //
-// Thread-safe: reads use pread on a shared descriptor (no file offset), and
-// the index cache has its own lock. Open reads only the 128-byte header.
+// The file is local or on an HTTP server (storage/http_file.h).
+// Thread-safe: reads are positioned (no file offset), and the index cache
+// has its own lock. Open reads only the 128-byte header.
 #pragma once
 
 #include <atomic>
@@ -38,8 +39,9 @@ class PageFileReader {
     std::size_t index_cache_pages = 64;
   };
 
-  // Opens `path` and checks its header and size. kNotFound if the file does
-  // not exist; kCorruption / kNotSupported for a bad file; kIo if the OS fails.
+  // Opens `path` (a path or an http(s) URL) and checks its header and size.
+  // kNotFound if the file does not exist; kCorruption / kNotSupported for a
+  // bad file; kIo if the OS or the server fails.
   static std::unique_ptr<PageFileReader> Open(const std::string& path, Options options);
   static std::unique_ptr<PageFileReader> Open(const std::string& path) { return Open(path, Options{}); }
 
@@ -47,7 +49,7 @@ class PageFileReader {
   PageFileReader& operator=(const PageFileReader&) = delete;
 
   const PageFileHeader& header() const { return header_; }
-  const std::string& path() const { return file_.path(); }
+  const std::string& path() const { return file_->path(); }
   std::uint32_t epoch() const { return header_.epoch; }
   std::uint64_t block_count() const { return header_.block_count; }
   std::uint32_t page_size() const { return header_.page_size; }
@@ -77,17 +79,17 @@ class PageFileReader {
   // forgets cached index pages but the root.
   void DropCaches() const;
   // Hints a front-to-back read of the file (e.g. a full scan).
-  void AdviseSequential() const { file_.AdviseSequential(); }
+  void AdviseSequential() const { file_->AdviseSequential(); }
 
   ReaderStats stats() const;
   std::uint32_t index_height() const { return header_.index.height; }
 
  private:
-  PageFileReader(RandomAccessFile file, const PageFileHeader& header, Options options);
+  PageFileReader(std::unique_ptr<ReadableFile> file, const PageFileHeader& header, Options options);
   void ReadIndexPage(std::uint64_t page_number, std::span<std::uint8_t> out) const;
   std::string BlockLabel(std::uint64_t key) const;
 
-  RandomAccessFile file_;
+  std::unique_ptr<ReadableFile> file_;
   const PageFileHeader header_;
   BlockIndexReader index_;
   mutable std::atomic<std::uint64_t> bytes_read_{0};

@@ -4,6 +4,7 @@
 #include "base/error.h"
 #include "storage/checksum.h"
 #include "storage/file.h"
+#include "storage/http_file.h"
 
 namespace octocosm {
 namespace {
@@ -39,11 +40,23 @@ void CheckStoreDirectory(const std::string& directory) {
 }
 
 std::string ReadWholeFile(const std::string& path) {
-  RandomAccessFile file = RandomAccessFile::Open(path);
-  std::string text(static_cast<std::size_t>(file.Size()), '\0');
-  std::size_t got = file.ReadAt(0, std::span<std::uint8_t>(reinterpret_cast<std::uint8_t*>(text.data()), text.size()));
+  std::unique_ptr<ReadableFile> file = OpenReadableFile(path);
+  std::string text(static_cast<std::size_t>(file->Size()), '\0');
+  std::size_t got = file->ReadAt(0, std::span<std::uint8_t>(reinterpret_cast<std::uint8_t*>(text.data()), text.size()));
   text.resize(got);
   return text;
+}
+
+// A store on an HTTP server cannot be listed: its manifest is what makes it a
+// store (written last, so an unfinished store has none).
+std::string ReadRemoteManifest(const std::string& manifest_url, const std::string& store_url) {
+  try {
+    return ReadWholeFile(manifest_url);
+  } catch (const Error& e) {
+    if (e.kind() != ErrorKind::kNotFound) throw;
+    throw Error::NotFound(store_url + ": the server has no " + kManifestFileName +
+                          " there: not an octocosm store, or not served at that URL");
+  }
 }
 
 void CheckAgainstManifest(const PageFileReader& file, const EpochInfo& info, const Manifest& manifest,
@@ -74,23 +87,31 @@ void CheckAgainstManifest(const PageFileReader& file, const EpochInfo& info, con
 }  // namespace
 
 StoreReader StoreReader::Open(const std::string& directory, StoreReaderOptions options) {
-  CheckStoreDirectory(directory);
+  const bool remote = IsHttpUrl(directory);
+  if (!remote) CheckStoreDirectory(directory);
   const std::string manifest_path = JoinPath(directory, kManifestFileName);
-  std::string text = ReadWholeFile(manifest_path);
+  std::string text = remote ? ReadRemoteManifest(manifest_path, directory) : ReadWholeFile(manifest_path);
   Manifest manifest = Manifest::Parse(text, manifest_path);
   nlohmann::json manifest_json = nlohmann::json::parse(text);  // valid: Parse succeeded
 
   std::vector<std::unique_ptr<PageFileReader>> page_files;
   for (const EpochInfo& info : manifest.epochs) {
     const std::string path = JoinPath(directory, info.file);
-    if (!PathExists(path)) {
-      throw Error::Corruption(path, "missing page file: " + manifest_path + " lists it for epoch " +
-                                        std::to_string(info.epoch));
-    }
+    const auto missing = [&] {
+      return Error::Corruption(path, "missing page file: " + manifest_path + " lists it for epoch " +
+                                         std::to_string(info.epoch));
+    };
+    if (!remote && !PathExists(path)) throw missing();
     // The page file checks its own size against its header; the manifest's
     // file_size is then checked against the header, so any truncation or
     // growth is reported with the file it concerns.
-    auto reader = PageFileReader::Open(path, PageFileReader::Options{options.index_cache_pages_per_epoch});
+    std::unique_ptr<PageFileReader> reader;
+    try {
+      reader = PageFileReader::Open(path, PageFileReader::Options{options.index_cache_pages_per_epoch});
+    } catch (const Error& e) {
+      if (remote && e.kind() == ErrorKind::kNotFound) throw missing();
+      throw;
+    }
     CheckAgainstManifest(*reader, info, manifest, manifest_path);
     page_files.push_back(std::move(reader));
   }

@@ -33,6 +33,8 @@ packages=(
   clang
   # the Python module (python/), its pytest suite and its example's plot
   pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
+  # stores read over HTTP(S) with range requests; the tests serve them with nginx
+  libcurl4-openssl-dev nginx-light
   # Not here: libclang-rt-14-dev, which only the long libFuzzer runs need
   # (docs/TESTING.md); CI runs the fuzz targets under our own driver.
 )

@@ -30,6 +30,7 @@
 #include "ingest/ingest.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
+#include "tests/support/program_run.h"
 #include "tests/support/temp_dir.h"
 #include "tests/tools/virtual_display.h"
 #include "tools/image_io.h"
@@ -39,6 +40,8 @@ namespace octocosm {
 namespace {
 
 namespace fs = std::filesystem;
+using testing_support::ProgramRun;
+using testing_support::ReadText;
 using testing_support::VirtualDisplay;
 
 constexpr int kWidth = 320, kHeight = 180;
@@ -56,39 +59,9 @@ struct Stores {
 
 Stores* stores = nullptr;
 
-struct ProgramRun {
-  int status = -1;     // exit status, or -1 when the shell did not exit normally
-  std::string output;  // stdout and stderr
-  int seconds = 0;     // its limit
-
-  // For failure messages.
-  std::string Describe() const {
-    const std::string what = status == 124 ? "timed out after " + std::to_string(seconds) + " s"
-                                           : "exit status " + std::to_string(status);
-    return what + "; output:\n" + output;
-  }
-};
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
-// Runs `shell_command` (sh syntax; no single quotes in it) with `environment`
-// (NAME=value ...) under timeout(1): at `seconds` its whole process group is
-// sent SIGTERM, 10 s later SIGKILL, and the status is 124.
+// Runs `shell_command` under timeout(1) (tests/support/program_run.h).
 ProgramRun RunCommand(const std::string& shell_command, int seconds, const std::string& environment = "") {
-  const fs::path log = stores->dir.path() / "command.log";
-  const std::string line = environment + " timeout -k 10 " + std::to_string(seconds) + " sh -c '" + shell_command +
-                           "' > " + log.string() + " 2>&1 < /dev/null";
-  const int raw = std::system(line.c_str());
-  ProgramRun run;
-  run.status = raw != -1 && WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  run.output = ReadText(log);
-  run.seconds = seconds;
-  return run;
+  return testing_support::RunCommand(shell_command, seconds, stores->dir.path() / "command.log", environment);
 }
 
 ProgramRun RunOctocosm(const std::string& args) {

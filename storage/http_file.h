@@ -1,0 +1,110 @@
+// A file on an HTTP(S) server read with range requests (libcurl), so that a
+// store directory served by any static server (nginx, Apache, an object
+// store) reads like a local one. docs/REMOTE.md says how to serve one.
+//
+// Every read is checked: a 206 answer whose Content-Range is the range asked
+// for, whose body is exactly that long, from a file whose size and validator
+// (ETag, else Last-Modified) are those seen at open. A file replaced on the
+// server while it is read is kCorruption, never a mix of two versions; a
+// server that ignores ranges is kIo saying so. Failures that may pass (no
+// connection, a stalled or cut transfer, 5xx, 429) are retried a bounded
+// number of times, then kIo naming the URL and the last failure.
+//
+// Thread-safe: each read borrows one of a pool of libcurl handles, so reads
+// on several threads are several requests in flight, each keeping its
+// connection alive for the next.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "storage/file.h"
+
+namespace octocosm {
+
+struct HttpOptions {
+  double connect_timeout_s = 10;
+  // A transfer that moves no byte for this long fails (and is retried).
+  double stall_timeout_s = 20;
+  // Further attempts after the first, for failures that may pass.
+  int retries = 3;
+  // Wait before the first retry; doubled before each next one.
+  double first_backoff_s = 0.25;
+};
+
+// Counters of one file's requests; a snapshot.
+struct HttpStats {
+  std::uint64_t requests = 0;  // requests sent, retries included
+  std::uint64_t retries = 0;
+  std::uint64_t bytes_fetched = 0;  // body bytes received
+};
+
+// True for "http://..." and "https://...".
+bool IsHttpUrl(const std::string& location);
+
+class HttpFile final : public ReadableFile {
+ public:
+  // Fetches the first bytes of the file (one request: its size, validator and
+  // header come back together). Throws kNotFound for 404/410, kIo for a server
+  // that cannot be reached, refuses access or ignores range requests.
+  static std::unique_ptr<HttpFile> Open(const std::string& url, HttpOptions options = {});
+
+  ~HttpFile() override;
+  HttpFile(const HttpFile&) = delete;
+  HttpFile& operator=(const HttpFile&) = delete;
+
+  std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const override;
+  std::uint64_t Size() const override { return size_; }
+  const std::string& path() const override { return url_; }
+
+  HttpStats stats() const;
+
+ private:
+  struct Handle;
+  struct Response;
+  // What the first request tells about the file.
+  struct Opened {
+    std::uint64_t size = 0;
+    std::size_t head_bytes = 0;
+    std::string etag;
+    std::string last_modified;
+  };
+
+  HttpFile(std::string url, HttpOptions options);
+  // One range request with retries; fills `out` with exactly bytes
+  // [offset, offset + out.size()) of the file, or throws. At open
+  // (`opened` not null) the file's size is not known yet: the answer may be
+  // shorter than `out` and tells the size and validators.
+  void FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const;
+  // One attempt. Returns false for a failure worth retrying (described in
+  // `failure`); throws for one that is not.
+  bool TryFetchRange(Handle& handle, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
+                     std::string& failure) const;
+  std::unique_ptr<Handle> AcquireHandle() const;
+  void ReleaseHandle(std::unique_ptr<Handle> handle) const;
+
+  std::string url_;
+  HttpOptions options_;
+  std::uint64_t size_ = 0;
+  std::string etag_;
+  std::string last_modified_;
+  // The first bytes of the file, fetched at open: the header of a page file,
+  // or all of a small file such as a manifest.
+  std::vector<std::uint8_t> head_;
+
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<std::unique_ptr<Handle>> idle_handles_;
+  mutable std::atomic<std::uint64_t> requests_{0};
+  mutable std::atomic<std::uint64_t> retries_{0};
+  mutable std::atomic<std::uint64_t> bytes_fetched_{0};
+};
+
+// A path or an http(s) URL opened as a ReadableFile.
+std::unique_ptr<ReadableFile> OpenReadableFile(const std::string& location, const HttpOptions& http = {});
+
+}  // namespace octocosm
