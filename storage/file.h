@@ -52,6 +52,11 @@ class ReadableFile {
   virtual void DropFromPageCache() const {}
   virtual void AdviseSequential() const {}
   virtual void AdviseRandom() const {}
+  // Declares a range that will be read often in small pieces (a page file's
+  // index). A remote file fetches it whole at the first read inside it and
+  // keeps it; a local one leaves it to the OS page cache. Called once, before
+  // reads from several threads begin.
+  virtual void KeepResident(std::uint64_t /*offset*/, std::uint64_t /*length*/) {}
 };
 
 // A local read-only file read with pread: no shared file offset, so one

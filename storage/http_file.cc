@@ -85,23 +85,52 @@ ContentRange ParseContentRange(const std::string& header) {
   return range;
 }
 
+// One libcurl easy handle: it keeps its connection open between requests.
+struct CurlHandle {
+  CURL* curl = nullptr;
+  char error[CURL_ERROR_SIZE] = {};
+  CurlHandle() : curl(curl_easy_init()) {
+    if (curl == nullptr) throw Error::Io("libcurl", "curl_easy_init failed");
+  }
+  ~CurlHandle() { curl_easy_cleanup(curl); }
+  CurlHandle(const CurlHandle&) = delete;
+  CurlHandle& operator=(const CurlHandle&) = delete;
+};
+
+// Idle handles of every HttpFile of the process: as many connections stay
+// open as requests were ever in flight at once, whatever the number of files.
+class CurlHandlePool {
+ public:
+  static CurlHandlePool& Shared() {
+    static CurlHandlePool* pool = new CurlHandlePool;  // never destroyed: files may outlive statics
+    return *pool;
+  }
+  std::unique_ptr<CurlHandle> Acquire() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!idle_.empty()) {
+        std::unique_ptr<CurlHandle> handle = std::move(idle_.back());
+        idle_.pop_back();
+        return handle;
+      }
+    }
+    return std::make_unique<CurlHandle>();
+  }
+  void Release(std::unique_ptr<CurlHandle> handle) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    idle_.push_back(std::move(handle));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<CurlHandle>> idle_;
+};
+
 }  // namespace
 
 bool IsHttpUrl(const std::string& location) {
   return StartsWith(location, "http://") || StartsWith(location, "https://");
 }
-
-// One libcurl easy handle: it keeps its connection open between requests.
-struct HttpFile::Handle {
-  CURL* curl = nullptr;
-  char error[CURL_ERROR_SIZE] = {};
-  Handle() : curl(curl_easy_init()) {
-    if (curl == nullptr) throw Error::Io("libcurl", "curl_easy_init failed");
-  }
-  ~Handle() { curl_easy_cleanup(curl); }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-};
 
 // What one request brought back.
 struct HttpFile::Response {
@@ -169,23 +198,6 @@ HttpStats HttpFile::stats() const {
   return HttpStats{requests_.load(), retries_.load(), bytes_fetched_.load()};
 }
 
-std::unique_ptr<HttpFile::Handle> HttpFile::AcquireHandle() const {
-  {
-    std::lock_guard<std::mutex> lock(pool_mutex_);
-    if (!idle_handles_.empty()) {
-      std::unique_ptr<Handle> handle = std::move(idle_handles_.back());
-      idle_handles_.pop_back();
-      return handle;
-    }
-  }
-  return std::make_unique<Handle>();
-}
-
-void HttpFile::ReleaseHandle(std::unique_ptr<Handle> handle) const {
-  std::lock_guard<std::mutex> lock(pool_mutex_);
-  idle_handles_.push_back(std::move(handle));
-}
-
 std::size_t HttpFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const {
   if (offset >= size_ || out.empty()) return 0;
   const std::size_t length = static_cast<std::size_t>(std::min<std::uint64_t>(out.size(), size_ - offset));
@@ -194,16 +206,32 @@ std::size_t HttpFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) 
     std::memcpy(out.data(), head_.data() + offset, length);
     return length;
   }
+  if (offset >= resident_offset_ && offset + length <= resident_offset_ + resident_length_) {
+    // A failed fetch throws out of call_once, so the next read tries again.
+    std::call_once(resident_fetched_, [this] {
+      std::vector<std::uint8_t> bytes(static_cast<std::size_t>(resident_length_));
+      FetchRange(resident_offset_, bytes, nullptr);
+      resident_ = std::move(bytes);
+    });
+    std::memcpy(out.data(), resident_.data() + (offset - resident_offset_), length);
+    return length;
+  }
   FetchRange(offset, out, nullptr);
   return length;
 }
 
+void HttpFile::KeepResident(std::uint64_t offset, std::uint64_t length) {
+  if (offset >= size_ || length == 0 || length > kMaxResidentBytes) return;
+  resident_offset_ = offset;
+  resident_length_ = std::min(length, size_ - offset);
+}
+
 void HttpFile::FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const {
-  std::unique_ptr<Handle> handle = AcquireHandle();
+  std::unique_ptr<CurlHandle> handle = CurlHandlePool::Shared().Acquire();
   std::string failure;
   double backoff_s = options_.first_backoff_s;
   for (int attempt = 0;; ++attempt) {
-    if (TryFetchRange(*handle, offset, out, opened, failure)) break;
+    if (TryFetchRange(handle->curl, handle->error, offset, out, opened, failure)) break;
     if (attempt >= options_.retries) {
       throw Error::Io(url_, failure + " (gave up after " + std::to_string(attempt + 1) + " attempts)");
     }
@@ -211,25 +239,25 @@ void HttpFile::FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Ope
     std::this_thread::sleep_for(std::chrono::duration<double>(backoff_s));
     backoff_s *= 2;
   }
-  ReleaseHandle(std::move(handle));
+  CurlHandlePool::Shared().Release(std::move(handle));
 }
 
-bool HttpFile::TryFetchRange(Handle& handle, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
+bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
                              std::string& failure) const {
   const std::uint64_t last = offset + out.size() - 1;
   const std::string range = std::to_string(offset) + "-" + std::to_string(last);
   Response response;
   response.out = out;
 
-  CURL* curl = handle.curl;
-  handle.error[0] = '\0';
+  CURL* curl = static_cast<CURL*>(curl_handle);
+  error_buffer[0] = '\0';
   curl_easy_setopt(curl, CURLOPT_URL, url_.c_str());
   curl_easy_setopt(curl, CURLOPT_HTTPGET, 1L);
   curl_easy_setopt(curl, CURLOPT_RANGE, range.c_str());
   curl_easy_setopt(curl, CURLOPT_FOLLOWLOCATION, 1L);
   curl_easy_setopt(curl, CURLOPT_MAXREDIRS, 5L);
   curl_easy_setopt(curl, CURLOPT_NOSIGNAL, 1L);
-  curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, handle.error);
+  curl_easy_setopt(curl, CURLOPT_ERRORBUFFER, error_buffer);
   curl_easy_setopt(curl, CURLOPT_CONNECTTIMEOUT_MS, static_cast<long>(options_.connect_timeout_s * 1000));
   // Below 1 byte/s for the stall time: the server or the link is stuck.
   curl_easy_setopt(curl, CURLOPT_LOW_SPEED_LIMIT, 1L);
@@ -248,7 +276,7 @@ bool HttpFile::TryFetchRange(Handle& handle, std::uint64_t offset, std::span<std
 
   const std::string what = "bytes " + range;
   if (response.code != CURLE_OK && !(response.code == CURLE_WRITE_ERROR && response.overflow)) {
-    failure = what + ": " + (handle.error[0] != '\0' ? std::string(handle.error) : curl_easy_strerror(response.code));
+    failure = what + ": " + (error_buffer[0] != '\0' ? std::string(error_buffer) : curl_easy_strerror(response.code));
     return false;  // no connection, a timeout, a cut transfer: may pass
   }
 

@@ -10,9 +10,9 @@
 // connection, a stalled or cut transfer, 5xx, 429) are retried a bounded
 // number of times, then kIo naming the URL and the last failure.
 //
-// Thread-safe: each read borrows one of a pool of libcurl handles, so reads
-// on several threads are several requests in flight, each keeping its
-// connection alive for the next.
+// Thread-safe: each read borrows a libcurl handle from a pool the process's
+// files share, so reads on several threads are several requests in flight,
+// and a handle keeps its connection alive for the next request to that server.
 #pragma once
 
 #include <atomic>
@@ -36,6 +36,9 @@ struct HttpOptions {
   // Wait before the first retry; doubled before each next one.
   double first_backoff_s = 0.25;
 };
+
+// A resident range longer than this is read piece by piece like the rest.
+inline constexpr std::uint64_t kMaxResidentBytes = 64 << 20;
 
 // Counters of one file's requests; a snapshot.
 struct HttpStats {
@@ -61,11 +64,11 @@ class HttpFile final : public ReadableFile {
   std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const override;
   std::uint64_t Size() const override { return size_; }
   const std::string& path() const override { return url_; }
+  void KeepResident(std::uint64_t offset, std::uint64_t length) override;
 
   HttpStats stats() const;
 
  private:
-  struct Handle;
   struct Response;
   // What the first request tells about the file.
   struct Opened {
@@ -83,10 +86,8 @@ class HttpFile final : public ReadableFile {
   void FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const;
   // One attempt. Returns false for a failure worth retrying (described in
   // `failure`); throws for one that is not.
-  bool TryFetchRange(Handle& handle, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
+  bool TryFetchRange(void* curl, char* error_buffer, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
                      std::string& failure) const;
-  std::unique_ptr<Handle> AcquireHandle() const;
-  void ReleaseHandle(std::unique_ptr<Handle> handle) const;
 
   std::string url_;
   HttpOptions options_;
@@ -96,9 +97,12 @@ class HttpFile final : public ReadableFile {
   // The first bytes of the file, fetched at open: the header of a page file,
   // or all of a small file such as a manifest.
   std::vector<std::uint8_t> head_;
+  // The range declared by KeepResident, fetched whole at its first read.
+  std::uint64_t resident_offset_ = 0;
+  std::uint64_t resident_length_ = 0;
+  mutable std::once_flag resident_fetched_;
+  mutable std::vector<std::uint8_t> resident_;
 
-  mutable std::mutex pool_mutex_;
-  mutable std::vector<std::unique_ptr<Handle>> idle_handles_;
   mutable std::atomic<std::uint64_t> requests_{0};
   mutable std::atomic<std::uint64_t> retries_{0};
   mutable std::atomic<std::uint64_t> bytes_fetched_{0};

@@ -33,6 +33,9 @@ std::unique_ptr<PageFileReader> PageFileReader::Open(const std::string& path, Op
   // Blocks are found through the index and read one by one: disable
   // read-ahead, which would only pull in neighbours nobody asked for.
   file->AdviseRandom();
+  // Lookups read the index a page at a time; over a network each page would
+  // cost a round trip.
+  file->KeepResident(header.index.first_page * header.page_size, header.index.page_count * header.page_size);
   std::unique_ptr<PageFileReader> reader(new PageFileReader(std::move(file), header, options));
   reader->bytes_read_ = got;
   return reader;

@@ -1,5 +1,9 @@
 #include "storage/store_reader.h"
 
+#include <algorithm>
+#include <exception>
+#include <future>
+
 
 #include "base/error.h"
 #include "storage/checksum.h"
@@ -38,6 +42,9 @@ void CheckStoreDirectory(const std::string& directory) {
     throw Error::NotFound(directory + ": no manifest.json: not an octocosm store");
   }
 }
+
+// Page files opened at once for a store on an HTTP server.
+constexpr std::size_t kRemoteOpensInFlight = 16;
 
 std::string ReadWholeFile(const std::string& path) {
   std::unique_ptr<ReadableFile> file = OpenReadableFile(path);
@@ -84,6 +91,30 @@ void CheckAgainstManifest(const PageFileReader& file, const EpochInfo& info, con
   }
 }
 
+// Opens one epoch's page file and checks it against the manifest.
+std::unique_ptr<PageFileReader> OpenPageFile(const std::string& directory, const EpochInfo& info,
+                                           const Manifest& manifest, const std::string& manifest_path, bool remote,
+                                           const StoreReaderOptions& options) {
+  const std::string path = JoinPath(directory, info.file);
+  const auto missing = [&] {
+    return Error::Corruption(path, "missing page file: " + manifest_path + " lists it for epoch " +
+                                       std::to_string(info.epoch));
+  };
+  if (!remote && !PathExists(path)) throw missing();
+  // The page file checks its own size against its header; the manifest's
+  // file_size is then checked against the header, so any truncation or
+  // growth is reported with the file it concerns.
+  std::unique_ptr<PageFileReader> reader;
+  try {
+    reader = PageFileReader::Open(path, PageFileReader::Options{options.index_cache_pages_per_epoch});
+  } catch (const Error& e) {
+    if (remote && e.kind() == ErrorKind::kNotFound) throw missing();
+    throw;
+  }
+  CheckAgainstManifest(*reader, info, manifest, manifest_path);
+  return reader;
+}
+
 }  // namespace
 
 StoreReader StoreReader::Open(const std::string& directory, StoreReaderOptions options) {
@@ -94,29 +125,32 @@ StoreReader StoreReader::Open(const std::string& directory, StoreReaderOptions o
   Manifest manifest = Manifest::Parse(text, manifest_path);
   nlohmann::json manifest_json = nlohmann::json::parse(text);  // valid: Parse succeeded
 
-  std::vector<std::unique_ptr<PageFileReader>> page_files;
-  for (const EpochInfo& info : manifest.epochs) {
-    const std::string path = JoinPath(directory, info.file);
-    const auto missing = [&] {
-      return Error::Corruption(path, "missing page file: " + manifest_path + " lists it for epoch " +
-                                         std::to_string(info.epoch));
-    };
-    if (!remote && !PathExists(path)) throw missing();
-    // The page file checks its own size against its header; the manifest's
-    // file_size is then checked against the header, so any truncation or
-    // growth is reported with the file it concerns.
-    std::unique_ptr<PageFileReader> reader;
-    try {
-      reader = PageFileReader::Open(path, PageFileReader::Options{options.index_cache_pages_per_epoch});
-    } catch (const Error& e) {
-      if (remote && e.kind() == ErrorKind::kNotFound) throw missing();
-      throw;
+  // Over a network each open costs a round trip: open the epochs' files
+  // side by side there.
+  const std::size_t parallel = remote ? kRemoteOpensInFlight : 1;
+  std::vector<std::unique_ptr<PageFileReader>> page_files(manifest.epochs.size());
+  for (std::size_t first = 0; first < manifest.epochs.size(); first += parallel) {
+    const std::size_t end = std::min(manifest.epochs.size(), first + parallel);
+    std::vector<std::future<std::unique_ptr<PageFileReader>>> opening;
+    for (std::size_t e = first; e < end; ++e) {
+      opening.push_back(std::async(parallel > 1 ? std::launch::async : std::launch::deferred,
+                                   [&, e] { return OpenPageFile(directory, manifest.epochs[e], manifest,
+                                                                manifest_path, remote, options); }));
     }
-    CheckAgainstManifest(*reader, info, manifest, manifest_path);
-    page_files.push_back(std::move(reader));
+    // get() on each, so every thread is joined before an error propagates.
+    std::exception_ptr failure;
+    for (std::size_t e = first; e < end; ++e) {
+      try {
+        page_files[e] = opening[e - first].get();
+      } catch (...) {
+        if (!failure) failure = std::current_exception();
+      }
+    }
+    if (failure) std::rethrow_exception(failure);
   }
   return StoreReader(directory, std::move(manifest_json), std::move(manifest), std::move(page_files));
 }
+
 
 StoreReader::StoreReader(std::string directory, nlohmann::json manifest_json, Manifest manifest,
                          std::vector<std::unique_ptr<PageFileReader>> page_files)

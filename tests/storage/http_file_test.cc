@@ -72,6 +72,20 @@ TEST(HttpFile, ReadsRangesAsALocalFileWould) {
   EXPECT_EQ(server.connections(), 1);
 }
 
+TEST(HttpFile, AResidentRangeIsFetchedOnceAndServesItsPieces) {
+  FakeHttpServer server;
+  const std::string contents = RandomBytes(1 << 20, 10);
+  server.Put("/f", contents);
+  auto file = HttpFile::Open(server.Url("/f"), QuickOptions());
+  file->KeepResident(700000, 200000);
+  for (std::uint64_t offset = 700000; offset + 4096 <= 900000; offset += 4096) {
+    ASSERT_EQ(Read(*file, offset, 4096), contents.substr(offset, 4096));
+  }
+  EXPECT_EQ(file->stats().requests, 2u);  // the open and the range
+  EXPECT_EQ(Read(*file, 650000, 4096), contents.substr(650000, 4096));  // outside it: a request of its own
+  EXPECT_EQ(file->stats().requests, 3u);
+}
+
 TEST(HttpFile, ASmallFileComesWholeWithTheFirstRequest) {
   FakeHttpServer server;
   server.Put("/manifest.json", "{\"x\": 1}");
