@@ -21,8 +21,10 @@ BlockHeader FetchColumns(const Dataset& dataset, std::uint32_t epoch, const Inde
   ++counters.blocks;
 
   // The directory has at most kBlockMaxColumns entries, so this prefix holds
-  // the whole header of any block.
-  Bytes prefix(static_cast<std::size_t>(std::min<std::uint64_t>(entry.byte_length, kBlockMaxHeaderSize)));
+  // the whole header of any block. From a server the whole block comes in
+  // the same request: a second round trip costs more than the columns skipped.
+  const std::uint64_t prefix_bytes = file.remote() ? entry.byte_length : kBlockMaxHeaderSize;
+  Bytes prefix(static_cast<std::size_t>(std::min<std::uint64_t>(entry.byte_length, prefix_bytes)));
   file.ReadBlockRange(entry, 0, prefix);
   ++counters.reads;
   counters.bytes += prefix.size();

@@ -48,6 +48,9 @@ class ReadableFile {
   virtual std::uint64_t Size() const = 0;
   // The path or URL, for messages.
   virtual const std::string& path() const = 0;
+  // True where each read is a round trip to a server: one read of a whole
+  // block then costs less than two of its parts.
+  virtual bool remote() const { return false; }
   // Caching hints; files without an OS page cache ignore them.
   virtual void DropFromPageCache() const {}
   virtual void AdviseSequential() const {}

@@ -187,6 +187,10 @@ std::unique_ptr<HttpFile> HttpFile::Open(const std::string& url, HttpOptions opt
   file->size_ = opened.size;
   file->etag_ = std::move(opened.etag);
   file->last_modified_ = std::move(opened.last_modified);
+  if (file->options_.cache && !(file->etag_.empty() && file->last_modified_.empty())) {
+    file->cache_key_ = file->url_ + "\n" + std::to_string(file->size_) + "\n" + file->etag_ + "\n" +
+                       file->last_modified_;
+  }
   return file;
 }
 
@@ -210,14 +214,20 @@ std::size_t HttpFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) 
     // A failed fetch throws out of call_once, so the next read tries again.
     std::call_once(resident_fetched_, [this] {
       std::vector<std::uint8_t> bytes(static_cast<std::size_t>(resident_length_));
-      FetchRange(resident_offset_, bytes, nullptr);
+      ReadRange(resident_offset_, bytes);
       resident_ = std::move(bytes);
     });
     std::memcpy(out.data(), resident_.data() + (offset - resident_offset_), length);
     return length;
   }
-  FetchRange(offset, out, nullptr);
+  ReadRange(offset, out);
   return length;
+}
+
+void HttpFile::ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) const {
+  if (!cache_key_.empty() && options_.cache->Get(cache_key_, offset, out)) return;
+  FetchRange(offset, out, nullptr);
+  if (!cache_key_.empty()) options_.cache->Put(cache_key_, offset, out);
 }
 
 void HttpFile::KeepResident(std::uint64_t offset, std::uint64_t length) {
@@ -353,8 +363,23 @@ bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_
   return true;
 }
 
-std::unique_ptr<ReadableFile> OpenReadableFile(const std::string& location, const HttpOptions& http) {
-  if (IsHttpUrl(location)) return HttpFile::Open(location, http);
+namespace {
+std::mutex default_options_mutex;
+HttpOptions default_options;
+}  // namespace
+
+void SetDefaultHttpOptions(HttpOptions options) {
+  std::lock_guard<std::mutex> lock(default_options_mutex);
+  default_options = std::move(options);
+}
+
+HttpOptions DefaultHttpOptions() {
+  std::lock_guard<std::mutex> lock(default_options_mutex);
+  return default_options;
+}
+
+std::unique_ptr<ReadableFile> OpenReadableFile(const std::string& location) {
+  if (IsHttpUrl(location)) return HttpFile::Open(location, DefaultHttpOptions());
   return std::make_unique<RandomAccessFile>(RandomAccessFile::Open(location));
 }
 

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "storage/file.h"
+#include "storage/range_cache.h"
 
 namespace octocosm {
 
@@ -35,7 +36,15 @@ struct HttpOptions {
   int retries = 3;
   // Wait before the first retry; doubled before each next one.
   double first_backoff_s = 0.25;
+  // Where fetched ranges are kept between runs (none: fetched every run).
+  // Only files with a validator (ETag or Last-Modified) are cached.
+  std::shared_ptr<RangeCache> cache;
 };
+
+// The options OpenReadableFile gives HTTP files: the program sets them once
+// from its flags (--cache-dir), before it opens a store.
+void SetDefaultHttpOptions(HttpOptions options);
+HttpOptions DefaultHttpOptions();
 
 // A resident range longer than this is read piece by piece like the rest.
 inline constexpr std::uint64_t kMaxResidentBytes = 64 << 20;
@@ -64,6 +73,7 @@ class HttpFile final : public ReadableFile {
   std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const override;
   std::uint64_t Size() const override { return size_; }
   const std::string& path() const override { return url_; }
+  bool remote() const override { return true; }
   void KeepResident(std::uint64_t offset, std::uint64_t length) override;
 
   HttpStats stats() const;
@@ -79,6 +89,8 @@ class HttpFile final : public ReadableFile {
   };
 
   HttpFile(std::string url, HttpOptions options);
+  // A range from the cache, else fetched (and then cached).
+  void ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) const;
   // One range request with retries; fills `out` with exactly bytes
   // [offset, offset + out.size()) of the file, or throws. At open
   // (`opened` not null) the file's size is not known yet: the answer may be
@@ -94,6 +106,8 @@ class HttpFile final : public ReadableFile {
   std::uint64_t size_ = 0;
   std::string etag_;
   std::string last_modified_;
+  // The file's name in options_.cache; empty when it is not cached.
+  std::string cache_key_;
   // The first bytes of the file, fetched at open: the header of a page file,
   // or all of a small file such as a manifest.
   std::vector<std::uint8_t> head_;
@@ -108,7 +122,7 @@ class HttpFile final : public ReadableFile {
   mutable std::atomic<std::uint64_t> bytes_fetched_{0};
 };
 
-// A path or an http(s) URL opened as a ReadableFile.
-std::unique_ptr<ReadableFile> OpenReadableFile(const std::string& location, const HttpOptions& http = {});
+// A path, or an http(s) URL opened with DefaultHttpOptions().
+std::unique_ptr<ReadableFile> OpenReadableFile(const std::string& location);
 
 }  // namespace octocosm

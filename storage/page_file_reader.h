@@ -53,6 +53,8 @@ class PageFileReader {
   std::uint32_t epoch() const { return header_.epoch; }
   std::uint64_t block_count() const { return header_.block_count; }
   std::uint32_t page_size() const { return header_.page_size; }
+  // The file is on a server (ReadableFile::remote).
+  bool remote() const { return file_->remote(); }
 
   std::optional<IndexEntry> Lookup(std::uint64_t key) const;
   // Visits the entries with keys in [lo, hi] in key order until `visit`

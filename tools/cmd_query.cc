@@ -20,6 +20,7 @@
 #include "tools/commands.h"
 #include "tools/output_file.h"
 #include "tools/query_output.h"
+#include "tools/store_flags.h"
 
 namespace octocosm {
 namespace {
@@ -203,7 +204,7 @@ void AddQueryCommand(CLI::App& app) {
       "Points of one epoch in a region (a box, a sphere, a camera frustum or six planes; default: everything)\n"
       "at a level of detail (--level L, or --error PIXELS for a camera). Positions always; other columns on\n"
       "request. Statistics (blocks and bytes read) go to stderr. Formats: docs/QUERIES.md.");
-  cmd->add_option("store", f->store, "store directory")->required();
+  AddStoreArgument(*cmd, f->store);
   cmd->add_option("--epoch", f->epoch, "epoch to query")->default_val(0);
   cmd->add_option("--box", f->box, "box x0,y0,z0,x1,y1,z1 (periodic in a periodic store)");
   cmd->add_option("--sphere", f->sphere, "sphere x,y,z,r (periodic in a periodic store)");
@@ -232,7 +233,7 @@ void AddFollowCommand(CLI::App& app) {
       "follow",
       "Follow particles through every epoch by ID: CSV rows id,epoch,time,x,y,z (+vx,vy,vz when stored).\n"
       "IDs missing from an epoch are noted on stderr and skipped.");
-  cmd->add_option("store", f->store, "store directory")->required();
+  AddStoreArgument(*cmd, f->store);
   cmd->add_option("--ids", f->ids, "file of particle IDs, one per line ('#' comments and blank lines allowed)")->required();
   cmd->add_option("-o,--output", f->output, "output CSV (default: stdout)");
   cmd->callback([f] {

@@ -21,6 +21,7 @@
 #include "tools/read_flags.h"
 #include "tools/reference_render.h"
 #include "tools/render_flags.h"
+#include "tools/store_flags.h"
 
 namespace octocosm {
 namespace {
@@ -143,7 +144,7 @@ void AddRenderCommand(CLI::App& app) {
       "a float buffer (mass per pixel) and tone mapped. --time between two epochs interpolates the particles'\n"
       "motion; --redshift or --scale-factor give the time as a cosmological store records it. --reference\n"
       "draws every particle of the original snapshot on the CPU instead: the ground truth. See docs/RENDERING.md.");
-  cmd->add_option("store", f.store, "store directory")->required();
+  AddStoreArgument(*cmd, f.store);
   cmd->add_option("-o,--output", f.output, "PNG to write")->default_val("octocosm.png");
   cmd->add_option("--width", f.width, "image width, pixels")->default_val(1280)->check(CLI::Range(1, 16384));
   cmd->add_option("--height", f.height, "image height, pixels")->default_val(720)->check(CLI::Range(1, 16384));

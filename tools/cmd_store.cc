@@ -11,6 +11,7 @@
 #include "index/dataset.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
+#include "tools/store_flags.h"
 #include "index/store_verify.h"
 
 namespace octocosm {
@@ -72,7 +73,7 @@ void PrintInfo(const std::string& directory) {
 void AddInfoCommand(CLI::App& app) {
   auto directory = std::make_shared<std::string>();
   CLI::App* cmd = app.add_subcommand("info", "Epochs, depth, nodes and points per level, bytes, bytes per point.");
-  cmd->add_option("store", *directory, "store directory")->required();
+  AddStoreArgument(*cmd, *directory);
   cmd->callback([directory] { PrintInfo(*directory); });
 }
 
@@ -84,7 +85,7 @@ void AddVerifyCommand(CLI::App& app) {
       "capacities, weight sums of every node against its children, the manifest's checksum and its points,\n"
       "mass, nodes, leaves and depth of every epoch, ID index). Exit status 3 and a list of faults when\n"
       "anything is wrong.");
-  cmd->add_option("store", *directory, "store directory")->required();
+  AddStoreArgument(*cmd, *directory);
   cmd->callback([directory] {
     const VerifyReport report = VerifyStore(*directory, [](const std::string& fault) {
       std::printf("FAULT: %s\n", fault.c_str());

@@ -40,6 +40,7 @@
 #include "tools/viewer/viewer_input.h"
 #include "tools/viewer/viewer_script.h"
 #include "tools/viewer/viewer_window.h"
+#include "tools/store_flags.h"
 
 namespace octocosm {
 namespace {
@@ -368,7 +369,7 @@ void AddViewCommand(CLI::App& app) {
       "colour and selection flags are those of 'octocosm render'. For scripts and tests: --path plays a camera\n"
       "path, --screenshot writes its last view once every block of it is loaded, --exit-after-path quits then.\n"
       "Controls: docs/VIEWER.md, or the overlay's 'controls' section.");
-  cmd->add_option("store", f.store, "store directory")->required();
+  AddStoreArgument(*cmd, f.store);
   cmd->add_option("--width", f.width, "window width")->default_val(1280)->check(CLI::Range(64, 16384));
   cmd->add_option("--height", f.height, "window height")->default_val(720)->check(CLI::Range(64, 16384));
   AddSceneFlags(*cmd, f.scene);
