@@ -34,6 +34,8 @@
 #include "render/color_maps.h"
 #include "render/offscreen_renderer.h"
 #include "render/tone_map.h"
+#include "storage/http_file.h"
+#include "storage/range_cache.h"
 
 namespace py = pybind11;
 
@@ -608,8 +610,20 @@ PYBIND11_MODULE(octocosm, m) {
            "at the top; time (the fractional epoch), exposure, points_drawn, nodes_selected, seconds.\n"
            "error: the level of detail in pixels; full=True: every particle.");
 
-  m.def("open", [](const std::string& path) { return Store(path); }, py::arg("path"),
-        "Opens the store directory at path (a Store).");
+  m.def(
+      "open",
+      [](const std::string& path, std::optional<std::string> cache_dir, std::uint64_t cache_size) {
+        if (cache_dir) {
+          HttpOptions options = DefaultHttpOptions();
+          options.cache = RangeCache::Open(*cache_dir, cache_size);
+          SetDefaultHttpOptions(options);
+        }
+        return Store(path);
+      },
+      py::arg("path"), py::arg("cache_dir") = py::none(), py::arg("cache_size") = std::uint64_t{4} << 30,
+      "Opens the store at path: a directory, or the URL of one on an HTTP(S) server (http://host/path).\n"
+      "cache_dir keeps the pages fetched from servers between runs, within cache_size bytes; it holds\n"
+      "for this and every later store opened over HTTP in this process.");
   m.def("ingest", &RunIngest, py::arg("inputs"), py::arg("output"), py::arg("capacity") = 16000,
         py::arg("neighbours") = kDefaultNeighbours, py::arg("memory") = 0, py::arg("threads") = 0,
         py::arg("coarse") = "clusters", py::arg("quiet") = false,

@@ -24,11 +24,17 @@ double Milliseconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since).count();
 }
 
+constexpr std::size_t kLocalIoThreads = 2;
+constexpr std::size_t kRemoteIoThreads = 16;
+
 }  // namespace
 
 SceneRenderer::SceneRenderer(const Dataset& dataset, SplatRenderer& splat, const SceneOptions& options)
     : dataset_(dataset), splat_(splat), options_(options) {
-  if (options.io_threads == 0) throw Error::InvalidArgument("the renderer needs at least one I/O thread");
+  if (options_.io_threads == 0) {
+    const bool remote = dataset.epoch_count() > 0 && dataset.store().page_file(0).remote();
+    options_.io_threads = remote ? kRemoteIoThreads : kLocalIoThreads;
+  }
   hierarchies_.resize(dataset.epoch_count());
   gpu_.resize(dataset.epoch_count());
   double mass = 0;

@@ -198,6 +198,52 @@ def test_two_stores_draw_in_turn_on_one_thread(store, tmp_path):
     np.testing.assert_array_equal(b.render(time=2, width=48, height=32)["rgb"], late)
 
 
+NGINX = next((p for p in ("/usr/sbin/nginx", "/usr/local/sbin/nginx") if os.access(p, os.X_OK)), None)
+
+
+@pytest.fixture(scope="module")
+def served(store, tmp_path_factory):
+    """The store served by nginx on 127.0.0.1, as docs/REMOTE.md serves one; its URL."""
+    import socket
+    import time
+    if NGINX is None:
+        pytest.skip("nginx is not installed (tools/bootstrap.sh installs nginx-light)")
+    work = tmp_path_factory.mktemp("nginx")
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    temp_paths = "".join(f"  {kind}_temp_path {work}/{kind};\n" for kind in
+                         ("client_body", "proxy", "fastcgi", "uwsgi", "scgi"))
+    (work / "nginx.conf").write_text(
+        ("user root;\n" if os.geteuid() == 0 else "") +
+        f"pid {work}/nginx.pid;\nerror_log {work}/error.log;\nevents {{ worker_connections 64; }}\n"
+        f"http {{\n  access_log {work}/access.log;\n{temp_paths}"
+        f"  server {{ listen 127.0.0.1:{port}; root {store.parent}; }}\n}}\n")
+    subprocess.run([NGINX, "-p", work, "-c", work / "nginx.conf", "-e", work / "error.log"], check=True)
+    for _ in range(500):
+        with socket.socket() as probe:
+            if probe.connect_ex(("127.0.0.1", port)) == 0:
+                break
+        time.sleep(0.01)
+    yield f"http://127.0.0.1:{port}/{store.name}"
+    os.kill(int((work / "nginx.pid").read_text()), 15)
+
+
+def test_a_store_over_http_reads_as_the_directory(store, served, tmp_path):
+    local, remote = octocosm.open(str(store)), octocosm.open(served, cache_dir=str(tmp_path / "cache"))
+    assert remote.info()["epochs"] == local.info()["epochs"]
+    box = (10_000, 20_000, 0, 60_000, 90_000, 50_000)
+    a = local.query(epoch=2, box=box, level=21, columns=["velocity", "id"])
+    b = remote.query(epoch=2, box=box, level=21, columns=["velocity", "id"])
+    for name in ("position", "velocity", "id"):
+        np.testing.assert_array_equal(a[name], b[name])
+    np.testing.assert_array_equal(remote.render(time=1.5, width=48, height=32)["rgb"],
+                                  local.render(time=1.5, width=48, height=32)["rgb"])
+    assert any((tmp_path / "cache").rglob("*-*-*"))  # fetched pages kept for the next run
+    with pytest.raises(octocosm.NotFoundError, match="no manifest.json there"):
+        octocosm.open(served + "-elsewhere")
+
+
 def test_ingest_builds_the_programs_store(store, tmp_path):
     snapshots = sorted((store.parent / "sim").glob("snap_*"))
     report = octocosm.ingest([str(p) for p in snapshots], str(tmp_path / "store"), capacity=300, neighbours=8,

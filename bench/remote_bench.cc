@@ -1,0 +1,262 @@
+// octocosm-bench-remote: a store rendered along camera paths from its
+// directory and from nginx through a throttled link (bench/throttled_proxy.h:
+// a round trip and a bandwidth per client, a trunk shared by all), as a user
+// on a desktop reads a store from a central server (docs/REMOTE.md).
+//
+//   single client   the same path from the directory and from the URL, each
+//                   twice: a first pass that fetches as the camera moves, and
+//                   a second once the caches are warm; frames per second,
+//                   bytes fetched per frame, the time to open the store and
+//                   draw its first frame, and to draw a new view.
+//   many clients    --clients processes, each its own path and link, all at
+//                   once against one nginx; each one's rate against one
+//                   client's alone (measured the same way just before), and
+//                   nginx's CPU time per client.
+//
+// nginx (Debian's nginx-light) must be installed; the bench starts and stops
+// its own on a free port.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "base/error.h"
+#include "bench/throttled_proxy.h"
+#include "index/dataset.h"
+#include "render/gl_context.h"
+#include "render/offscreen_renderer.h"
+#include "tests/support/nginx_server.h"
+#include "tools/cli_util.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using testing_support::NginxServer;
+
+double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+
+struct Flags {
+  std::string store;
+  int frames = 40;
+  double rtt_ms = 20;
+  std::string rate = "100M";
+  std::string shared_rate = "800M";
+  int clients = 8;
+  int width = 640, height = 360;
+  double error = 2;
+  std::string backend = "osmesa";
+  // Client mode (the bench starts itself so): render this URL's path `variant`.
+  std::string client_url;
+  int variant = 0;
+};
+
+// Path `variant` of `frames` frames: the camera circles the cube's centre
+// inside the box, each variant starting at another angle.
+Camera PathCamera(const Cube& cube, int variant, int frame, int frames, double aspect) {
+  const double s = cube.size;
+  const std::array<double, 3> centre = {cube.origin[0] + s / 2, cube.origin[1] + s / 2, cube.origin[2] + s / 2};
+  const double angle = variant * std::numbers::pi / 4 + 0.6 * frame / std::max(1, frames - 1);
+  Camera camera;
+  camera.position = {centre[0] + 0.45 * s * std::cos(angle), centre[1] + 0.1 * s * std::sin(3 * angle),
+                     centre[2] + 0.45 * s * std::sin(angle)};
+  camera.look_at = centre;
+  camera.aspect = aspect;
+  camera.near = s * 1e-4;
+  camera.far = 4 * s;
+  return camera;
+}
+
+struct PathRun {
+  double open_and_first_s = 0;  // opening the store and drawing the first frame
+  double first_pass_fps = 0;    // the other frames, fetching as the camera moves
+  double warm_fps = 0;          // the path again
+  double new_view_s = 0;        // a frame of another path's view, after the two passes
+  int frames = 0;
+};
+
+PathRun RenderPath(const std::string& store, const Flags& f, int variant) {
+  PathRun run;
+  run.frames = f.frames;
+  const auto start = Clock::now();
+  const Dataset dataset = Dataset::Open(store);
+  SceneOptions options;
+  options.lod.pixel_threshold = f.error;
+  OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
+  const Cube& cube = dataset.cube(0);
+  const double aspect = static_cast<double>(f.width) / f.height;
+  const ToneMapSettings tone;
+  const auto frame = [&](int variant_k, int k) {
+    renderer.Render(RenderView(PathCamera(cube, variant_k, k, f.frames, aspect), f.width, f.height), 0, tone, false);
+  };
+  frame(variant, 0);
+  run.open_and_first_s = Seconds(start);
+  for (int pass = 0; pass < 2; ++pass) {
+    const auto pass_start = Clock::now();
+    for (int k = 1; k < f.frames; ++k) frame(variant, k);
+    const double fps = (f.frames - 1) / std::max(1e-9, Seconds(pass_start));
+    (pass == 0 ? run.first_pass_fps : run.warm_fps) = fps;
+  }
+  const auto new_view = Clock::now();
+  frame(variant + 4, f.frames / 2);
+  run.new_view_s = Seconds(new_view);
+  return run;
+}
+
+std::string StoreUrl(int port, const Flags& f) {
+  return "http://127.0.0.1:" + std::to_string(port) + "/" + fs::path(f.store).filename().string();
+}
+
+// Clients as processes of this program, all started before any is waited for.
+std::vector<PathRun> RunClients(const Flags& f, int count, NginxServer& nginx, double rate,
+                                const std::shared_ptr<PacedLink>& trunk, std::uint64_t& bytes) {
+  std::vector<std::unique_ptr<ThrottledProxy>> proxies;
+  std::vector<FILE*> pipes;
+  const std::string self = fs::read_symlink("/proc/self/exe").string();
+  for (int c = 0; c < count; ++c) {
+    proxies.push_back(std::make_unique<ThrottledProxy>(nginx.port(), f.rtt_ms / 1e3, rate, trunk));
+    std::ostringstream command;
+    command << self << " --client " << StoreUrl(proxies.back()->port(), f) << " --variant " << c << " --frames "
+            << f.frames << " --width " << f.width << " --height " << f.height << " --error " << f.error
+            << " --backend " << f.backend << " x";
+    pipes.push_back(::popen(command.str().c_str(), "r"));
+  }
+  std::vector<PathRun> runs;
+  for (int c = 0; c < count; ++c) {
+    PathRun run;
+    char line[512] = {};
+    if (pipes[c] == nullptr || std::fgets(line, sizeof line, pipes[c]) == nullptr ||
+        std::sscanf(line, "client %lf %lf %lf %lf", &run.open_and_first_s, &run.first_pass_fps, &run.warm_fps,
+                    &run.new_view_s) != 4) {
+      throw Error::Io("client " + std::to_string(c), "no result (its output: " + std::string(line) + ")");
+    }
+    if (::pclose(pipes[c]) != 0) throw Error::Io("client " + std::to_string(c), "failed");
+    runs.push_back(run);
+  }
+  bytes = 0;
+  for (const auto& proxy : proxies) bytes += proxy->bytes_to_client();
+  return runs;
+}
+
+// CPU seconds of nginx's processes (its master and workers) so far.
+double NginxCpuSeconds(const fs::path& work) {
+  const std::string master = testing_support::ReadText(work / "nginx.pid");
+  const long ticks = ::sysconf(_SC_CLK_TCK);
+  double seconds = 0;
+  for (const auto& entry : fs::directory_iterator("/proc")) {
+    const std::string name = entry.path().filename().string();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;  // not a process
+    std::ifstream stat(entry.path() / "stat");
+    std::string text((std::istreambuf_iterator<char>(stat)), std::istreambuf_iterator<char>());
+    const std::size_t close = text.rfind(')');
+    if (close == std::string::npos) continue;
+    std::istringstream fields(text.substr(close + 2));
+    std::string state, ppid, skip;
+    fields >> state >> ppid;
+    const std::string pid = entry.path().filename().string();
+    if (pid != std::to_string(std::atoi(master.c_str())) && ppid != std::to_string(std::atoi(master.c_str()))) continue;
+    for (int i = 0; i < 9; ++i) fields >> skip;  // to utime (field 14)
+    double utime = 0, stime = 0;
+    fields >> utime >> stime;
+    seconds += (utime + stime) / static_cast<double>(ticks);
+  }
+  return seconds;
+}
+
+void PrintRun(const char* what, const PathRun& r, double bytes_per_frame) {
+  std::printf("%-28s %10.2f %10.2f %10.2f %10.3f %14.0f\n", what, r.open_and_first_s, r.first_pass_fps, r.warm_fps,
+              r.new_view_s, bytes_per_frame);
+}
+
+void Coordinate(const Flags& f) {
+  const double rate = static_cast<double>(ParseByteSize(f.rate, "--rate"));
+  const double shared_rate = static_cast<double>(ParseByteSize(f.shared_rate, "--shared-rate"));
+  const fs::path work = fs::temp_directory_path() / ("octocosm-bench-remote-" + std::to_string(::getpid()));
+  NginxServer nginx(fs::absolute(f.store).parent_path(), work / "nginx");
+  if (!nginx.started()) throw Error::Io("nginx", nginx.error());
+  std::printf("store %s, %d frames a path at %dx%d, threshold %g px; link: %.0f ms round trip, %s/s a client, "
+              "%s/s shared\n",
+              f.store.c_str(), f.frames, f.width, f.height, f.error, f.rtt_ms, f.rate.c_str(), f.shared_rate.c_str());
+  std::printf("%-28s %10s %10s %10s %10s %14s\n", "", "open+1st s", "pass 1 f/s", "warm f/s", "new view s",
+              "bytes/frame");
+
+  const PathRun local = RenderPath(f.store, f, 0);
+  PrintRun("local directory", local, 0);
+  std::fflush(stdout);
+  {
+    auto trunk = std::make_shared<PacedLink>(shared_rate);
+    ThrottledProxy proxy(nginx.port(), f.rtt_ms / 1e3, rate, trunk);
+    const PathRun remote = RenderPath(StoreUrl(proxy.port(), f), f, 0);
+    const double frames = 2.0 * f.frames + 1;
+    PrintRun("remote, this process", remote, static_cast<double>(proxy.bytes_to_client()) / frames);
+    std::printf("remote / local: pass 1 %.2f, warm %.2f\n", remote.first_pass_fps / local.first_pass_fps,
+                remote.warm_fps / local.warm_fps);
+  }
+  std::fflush(stdout);
+
+  if (f.clients < 1) return;
+  auto trunk = std::make_shared<PacedLink>(shared_rate);
+  std::uint64_t bytes = 0;
+  const std::vector<PathRun> alone = RunClients(f, 1, nginx, rate, trunk, bytes);
+  PrintRun("one client process", alone[0], static_cast<double>(bytes) / (2.0 * f.frames + 1));
+  const double cpu_before = NginxCpuSeconds(work / "nginx");
+  const auto start = Clock::now();
+  const std::vector<PathRun> many = RunClients(f, f.clients, nginx, rate, trunk, bytes);
+  const double wall = Seconds(start);
+  const double cpu = NginxCpuSeconds(work / "nginx") - cpu_before;
+  double worst = 1e300;
+  for (std::size_t c = 0; c < many.size(); ++c) {
+    PrintRun(("client " + std::to_string(c) + " of " + std::to_string(f.clients)).c_str(), many[c],
+             static_cast<double>(bytes) / static_cast<double>(many.size()) / (2.0 * f.frames + 1));
+    worst = std::min(worst, many[c].first_pass_fps / alone[0].first_pass_fps);
+  }
+  std::printf("%d clients: the slowest at %.2f of one client's pass-1 rate; nginx CPU %.3f s a client over %.1f s "
+              "(%.1f %% of a core a client); %.1f MB fetched in all\n",
+              f.clients, worst, cpu / f.clients, wall, 100 * cpu / f.clients / wall, static_cast<double>(bytes) / 1e6);
+}
+
+}  // namespace
+}  // namespace octocosm
+
+int main(int argc, char** argv) {
+  CLI::App app{"octocosm-bench-remote: a store rendered from its directory and from nginx through a throttled link"};
+  octocosm::Flags f;
+  app.add_option("store", f.store, "store directory (nginx serves its parent directory)")->required();
+  app.add_option("--frames", f.frames, "frames of each camera path")->default_val(40)->check(CLI::Range(2, 100000));
+  app.add_option("--rtt-ms", f.rtt_ms, "round trip of the link, ms")->default_val(20);
+  app.add_option("--rate", f.rate, "bandwidth of each client's link, bytes/s (e.g. 100M)")->default_val("100M");
+  app.add_option("--shared-rate", f.shared_rate, "bandwidth the clients share, bytes/s")->default_val("800M");
+  app.add_option("--clients", f.clients, "clients at once (0: one client only)")->default_val(8);
+  app.add_option("--width", f.width, "image width")->default_val(640);
+  app.add_option("--height", f.height, "image height")->default_val(360);
+  app.add_option("--error", f.error, "screen-space error threshold, pixels")->default_val(2);
+  app.add_option("--backend", f.backend, "osmesa or egl (a GPU)")->default_val("osmesa");
+  app.add_option("--client", f.client_url, "(used by the bench itself) render this store URL's path and print figures");
+  app.add_option("--variant", f.variant, "(with --client) which camera path")->default_val(0);
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (!f.client_url.empty()) {
+      const octocosm::PathRun run = octocosm::RenderPath(f.client_url, f, f.variant);
+      std::printf("client %.4f %.4f %.4f %.4f\n", run.open_and_first_s, run.first_pass_fps, run.warm_fps,
+                  run.new_view_s);
+      return 0;
+    }
+    octocosm::Coordinate(f);
+  } catch (const octocosm::Error& e) {
+    std::fprintf(stderr, "octocosm-bench-remote: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

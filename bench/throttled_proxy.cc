@@ -1,0 +1,158 @@
+#include "bench/throttled_proxy.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <condition_variable>
+#include <deque>
+#include <string>
+
+#include "base/error.h"
+
+namespace octocosm {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+sockaddr_in Loopback(int port) {
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  address.sin_port = htons(static_cast<std::uint16_t>(port));
+  return address;
+}
+
+bool SendAll(int fd, const std::vector<char>& bytes) {
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t sent = ::send(fd, bytes.data() + done, bytes.size() - done, MSG_NOSIGNAL);
+    if (sent <= 0) return false;
+    done += static_cast<std::size_t>(sent);
+  }
+  return true;
+}
+
+// Chunks in flight on one direction of a connection, each with the time it arrives.
+struct DelayLine {
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::deque<std::pair<Clock::time_point, std::vector<char>>> chunks;
+  bool closed = false;
+};
+
+}  // namespace
+
+ThrottledProxy::ThrottledProxy(int server_port, double round_trip_s, double client_bytes_per_second,
+                               std::shared_ptr<PacedLink> trunk)
+    : server_port_(server_port),
+      one_way_delay_s_(round_trip_s / 2),
+      client_link_(client_bytes_per_second),
+      trunk_(std::move(trunk)) {
+  listener_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in address = Loopback(0);
+  if (listener_ < 0 || ::bind(listener_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0 ||
+      ::listen(listener_, 128) != 0) {
+    throw Error::Io("throttled proxy", "cannot listen on 127.0.0.1");
+  }
+  socklen_t length = sizeof address;
+  ::getsockname(listener_, reinterpret_cast<sockaddr*>(&address), &length);
+  port_ = ntohs(address.sin_port);
+  acceptor_ = std::thread([this] { AcceptLoop(); });
+}
+
+ThrottledProxy::~ThrottledProxy() {
+  stopping_ = true;
+  ::shutdown(listener_, SHUT_RDWR);
+  acceptor_.join();
+  std::vector<std::thread> threads;
+  {
+    std::lock_guard<std::mutex> lock(threads_mutex_);
+    for (int fd : sockets_) ::shutdown(fd, SHUT_RDWR);
+    threads.swap(threads_);
+  }
+  for (std::thread& t : threads) t.join();
+  for (int fd : sockets_) ::close(fd);
+  ::close(listener_);
+}
+
+void ThrottledProxy::AcceptLoop() {
+  while (!stopping_) {
+    const int client = ::accept4(listener_, nullptr, nullptr, SOCK_CLOEXEC);
+    if (client < 0) {
+      if (stopping_) return;
+      continue;
+    }
+    const int server = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in address = Loopback(server_port_);
+    if (::connect(server, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+      ::close(server);
+      ::close(client);
+      continue;
+    }
+    const int yes = 1;
+    ::setsockopt(client, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    ::setsockopt(server, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+    std::lock_guard<std::mutex> lock(threads_mutex_);
+    sockets_.push_back(client);
+    sockets_.push_back(server);
+    threads_.emplace_back([this, client, server] { Pump(client, server, false); });
+    threads_.emplace_back([this, client, server] { Pump(server, client, true); });
+  }
+}
+
+Clock::time_point ThrottledProxy::Pace(std::size_t bytes) {
+  const auto occupy = [bytes](PacedLink& link, Clock::time_point start) {
+    if (link.bytes_per_second_ <= 0) return start;
+    return start + std::chrono::duration_cast<Clock::duration>(
+                       std::chrono::duration<double>(static_cast<double>(bytes) / link.bytes_per_second_));
+  };
+  std::scoped_lock lock(client_link_.mutex_, trunk_->mutex_);
+  const Clock::time_point start = std::max({Clock::now(), client_link_.free_at_, trunk_->free_at_});
+  client_link_.free_at_ = occupy(client_link_, start);
+  trunk_->free_at_ = std::max(trunk_->free_at_, occupy(*trunk_, start));
+  return client_link_.free_at_;
+}
+
+// Reads from `from` and delivers to `to` through a delay line: a reader
+// stamps each chunk with its arrival time, a writer sends it then.
+void ThrottledProxy::Pump(int from, int to, bool to_client) {
+  DelayLine line;
+  const auto delay = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(one_way_delay_s_));
+  std::thread writer([&] {
+    std::unique_lock<std::mutex> lock(line.mutex);
+    for (;;) {
+      line.changed.wait(lock, [&] { return line.closed || !line.chunks.empty(); });
+      if (line.chunks.empty()) break;
+      auto [arrival, bytes] = std::move(line.chunks.front());
+      line.chunks.pop_front();
+      lock.unlock();
+      std::this_thread::sleep_until(arrival);
+      const bool sent = SendAll(to, bytes);
+      if (sent && to_client) bytes_to_client_.fetch_add(bytes.size());
+      lock.lock();
+      if (!sent) break;
+    }
+    ::shutdown(to, SHUT_WR);
+  });
+  std::vector<char> buffer(64 * 1024);
+  for (;;) {
+    const ssize_t got = ::recv(from, buffer.data(), buffer.size(), 0);
+    if (got <= 0) break;
+    const Clock::time_point left = to_client ? Pace(static_cast<std::size_t>(got)) : Clock::now();
+    std::lock_guard<std::mutex> lock(line.mutex);
+    line.chunks.emplace_back(left + delay, std::vector<char>(buffer.begin(), buffer.begin() + got));
+    line.changed.notify_one();
+  }
+  {
+    std::lock_guard<std::mutex> lock(line.mutex);
+    line.closed = true;
+    line.changed.notify_one();
+  }
+  writer.join();
+}
+
+}  // namespace octocosm
