@@ -33,6 +33,8 @@ packages=(
   clang
   # the Python module (python/), its pytest suite and its example's plot
   pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
+  # pip install of the source path into a virtual environment
+  python3-venv python3-pip python3-wheel
   # stores read over HTTP(S) with range requests; the tests serve them with nginx
   libcurl4-openssl-dev nginx-light
   # Not here: libclang-rt-14-dev, which only the long libFuzzer runs need

@@ -1,0 +1,26 @@
+# pip install of the source path, as docs/PYTHON.md gives it: a virtual
+# environment at PREFIX (seeing Debian's numpy and setuptools), pip install
+# ./python into it with this build (OCTOCOSM_BUILD_DIR), then the
+# environment's python3 runs installed_smoke.py.
+#   cmake -DSOURCE=... -DBUILD=... -DPREFIX=... -DPYTHON=... -DSHARED_DATA=... -P pip_check.cmake
+file(REMOVE_RECURSE "${PREFIX}")
+execute_process(COMMAND ${PYTHON} -m venv --system-site-packages "${PREFIX}" RESULT_VARIABLE status)
+if(NOT status EQUAL 0)
+  message(FATAL_ERROR "python3 -m venv failed: ${status} (Debian: python3-venv)")
+endif()
+execute_process(COMMAND ${CMAKE_COMMAND} -E env "OCTOCOSM_BUILD_DIR=${BUILD}"
+                        "${PREFIX}/bin/pip" install --no-build-isolation --no-index --no-deps "${SOURCE}/python"
+                OUTPUT_QUIET RESULT_VARIABLE status)
+if(NOT status EQUAL 0)
+  message(FATAL_ERROR "pip install ${SOURCE}/python failed: ${status}")
+endif()
+set(snapshot "${SHARED_DATA}/gadget4_hdf5_galaxy_collision_timeseries/snapshot_000.hdf5")
+if(NOT EXISTS "${snapshot}")
+  set(snapshot "")
+endif()
+execute_process(COMMAND ${CMAKE_COMMAND} -E env --unset=OCTOCOSM_PROGRAM --unset=PYTHONPATH
+                        "${PREFIX}/bin/python3" ${CMAKE_CURRENT_LIST_DIR}/installed_smoke.py "${PREFIX}" "${snapshot}"
+                WORKING_DIRECTORY "${PREFIX}" RESULT_VARIABLE status)
+if(NOT status EQUAL 0)
+  message(FATAL_ERROR "the module pip installed failed: ${status}")
+endif()
