@@ -1,5 +1,7 @@
 #include "base/progress.h"
 
+#include "base/cancellation.h"
+
 #include <unistd.h>
 
 #include <atomic>
@@ -53,6 +55,7 @@ Progress::Progress(std::string phase, std::uint64_t total, std::string unit, std
 Progress::~Progress() { Finish(); }
 
 void Progress::Add(std::uint64_t done) {
+  ThrowIfCancelled();
   MutexLock lock(mutex_);
   done_ += done;
   const auto now = Clock::now();

@@ -23,6 +23,7 @@ class Progress {
   Progress& operator=(const Progress&) = delete;
 
   // Thread-safe; cheap when called often (redraws at most ~10 times a second).
+  // Throws "interrupted" once cancellation is requested (base/cancellation.h).
   void Add(std::uint64_t done) EXCLUDES(mutex_);
   void Finish() EXCLUDES(mutex_);
   // Counts from zero again, for a phase that starts over another way.

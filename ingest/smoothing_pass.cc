@@ -13,6 +13,7 @@
 #include <limits>
 #include <vector>
 
+#include "base/cancellation.h"
 #include "base/error.h"
 #include "base/mutex.h"
 #include "base/parallel_for.h"
@@ -374,6 +375,7 @@ class SmoothingPass {
         }
       }
       if (progress_) progress_->Add(end - begin - local.size());
+      ThrowIfCancelled();  // also when quiet, without a progress line
       if (local.empty()) return;
       MutexLock lock(mutex);
       unresolved.insert(unresolved.end(), local.begin(), local.end());

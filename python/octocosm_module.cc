@@ -11,9 +11,12 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -22,6 +25,7 @@
 #include <utility>
 #include <vector>
 
+#include "base/cancellation.h"
 #include "base/error.h"
 #include "index/block_codec.h"
 #include "index/cluster_shape.h"
@@ -497,11 +501,36 @@ py::dict RunIngest(const std::vector<std::string>& inputs, const std::string& ou
     throw Error::InvalidArgument("coarse: expected clusters or sample, not '" + coarse + "'");
   }
   options.tree.coarse = coarse == "sample" ? CoarsePoints::kSample : CoarsePoints::kClusters;
+  // The ingest runs on a thread of its own while this one, the
+  // interpreter's, looks for Ctrl-C: Python's handler only sets a flag,
+  // which nothing would read before a long ingest ends.
   IngestReport report;
-  {
-    py::gil_scoped_release release;
-    report = Ingest(options);
+  std::exception_ptr failure;
+  std::atomic<bool> done{false};
+  ClearCancellation();
+  std::thread worker([&] {
+    try {
+      report = Ingest(options);
+    } catch (...) {
+      failure = std::current_exception();
+    }
+    done = true;
+  });
+  bool interrupted = false;
+  while (!done) {
+    {
+      py::gil_scoped_release release;
+      for (int i = 0; i < 10 && !done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    if (!interrupted && PyErr_CheckSignals() != 0) {
+      interrupted = true;  // KeyboardInterrupt is set; the ingest unwinds, removing what it wrote
+      RequestCancellation();
+    }
   }
+  worker.join();
+  ClearCancellation();
+  if (interrupted) throw py::error_already_set();
+  if (failure) std::rethrow_exception(failure);
   py::dict result;
   result["points"] = report.input_points;
   result["read_points"] = report.read_points;

@@ -265,6 +265,32 @@ def test_ingest_builds_the_programs_store(store, tmp_path):
         octocosm.ingest([str(tmp_path / "none")], str(tmp_path / "other"))
 
 
+def test_ctrl_c_stops_an_ingest_and_leaves_nothing(tmp_path):
+    import signal
+    import time
+    run("synth", "scale", "-o", tmp_path / "snap", "-n", 2_000_000, "--quiet")
+    script = ("import sys, octocosm\n"
+              "try:\n"
+              "    octocosm.ingest([sys.argv[1]], sys.argv[2], quiet=True)\n"
+              "    print('finished')\n"
+              "except KeyboardInterrupt:\n"
+              "    print('interrupted')\n")
+    child = subprocess.Popen([sys.executable, "-c", script, tmp_path / "snap" / "snap", tmp_path / "store"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # The ingest takes seconds; its output directory appears as it starts.
+    for _ in range(500):
+        if (tmp_path / "store").exists():
+            break
+        time.sleep(0.01)
+    time.sleep(0.2)
+    sent = time.monotonic()
+    child.send_signal(signal.SIGINT)
+    out, err = child.communicate(timeout=60)
+    assert out.strip() == "interrupted", (out, err)
+    assert time.monotonic() - sent < 5
+    assert not (tmp_path / "store").exists()
+
+
 @pytest.mark.skipif(not SHARED_DATA.is_dir(), reason="no ../shared/data")
 def test_a_gadget4_series_from_the_shared_data(tmp_path):
     # HDF5, read by the reader process that the octocosm program serves.
