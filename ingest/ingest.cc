@@ -39,6 +39,7 @@
 #include "ingest/outliers.h"
 #include "ingest/resident_epoch.h"
 #include "ingest/smoothing_pass.h"
+#include "storage/http_file.h"
 #include "storage/store_writer.h"
 
 namespace octocosm {
@@ -519,6 +520,11 @@ class IngestRun {
 IngestReport StartReport(const IngestOptions& options) {
   if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
   if (options.output.empty()) throw Error::InvalidArgument("ingest: no output store given (-o)");
+  if (IsHttpUrl(options.output)) {
+    throw Error::InvalidArgument("ingest: -o " + options.output +
+                                 ": a store is written to a local directory; serve that directory over HTTP "
+                                 "(docs/REMOTE.md)");
+  }
   if (options.cube) options.cube->Validate();
   if (options.clip_box) options.clip_box->Validate("--clip-box");
   Progress::SetQuiet(options.quiet);

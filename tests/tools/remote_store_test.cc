@@ -192,5 +192,13 @@ TEST_F(RemoteStoreTest, ADamagedBlockOnTheServerIsCorruptionNamingTheUrl) {
   EXPECT_TRUE(std::regex_search(run.output, std::regex("checksum|corrupt")));
 }
 
+TEST_F(RemoteStoreTest, IngestWritesOnlyLocalDirectories) {
+  const ProgramRun run = RunOctocosm("ingest " + (served->dir.path() / "sim" / "snap_000").string() + " -o " +
+                                     Url("/new-store") + " --quiet");
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find("a store is written to a local directory"), std::string::npos) << run.output;
+  EXPECT_FALSE(fs::exists("http:"));
+}
+
 }  // namespace
 }  // namespace octocosm
