@@ -121,6 +121,10 @@ std::uint64_t DirectoryBytes(const fs::path& dir) {
   return total;
 }
 
+// What an ingest holds besides its budget whatever its size: the program,
+// its libraries, thread stacks, the writer's queue (docs/INGEST.md).
+constexpr double kFixedOverheadBytes = 96.0 * 1024 * 1024;
+
 }  // namespace
 }  // namespace octocosm
 
@@ -161,6 +165,7 @@ int main(int argc, char** argv) {
                 cold ? "input read from wherever it is (--cold)"
                      : "input dropped from the page cache and read once before each run");
     std::fflush(stdout);  // before the children write theirs
+    int over_budget = 0;  // cases with a budget whose peak RSS exceeded it plus the fixed overhead
     std::printf("%12s %10s %9s %10s %9s %11s %8s %7s %11s %10s %10s\n", "points", "input MB", "budget", "neighbours",
                 "wall s", "M points/s", "CPU s", "CPU use", "peak RSS", "RSS/budget", "vs 2.4M/s");
     for (const Case& c : cases) {
@@ -190,6 +195,7 @@ int main(int argc, char** argv) {
           return 1;
         }
         const double budget = c.memory.empty() ? 0.0 : static_cast<double>(ParseByteSize(c.memory, "--case"));
+        if (budget > 0 && u.peak_rss_bytes > budget + kFixedOverheadBytes) ++over_budget;
         const double rate = static_cast<double>(c.points) / u.wall / 1e6;
         rates.push_back(rate);
         std::printf("%12llu %10.0f %9s %10d %9.2f %11.2f %8.2f %6.0f%% %11s %10s %9.2fx\n",
@@ -232,6 +238,12 @@ int main(int argc, char** argv) {
       if (!keep) fs::remove_all(snapshots);
     }
     if (!keep) fs::remove_all(dir);
+    std::printf("memory: %s\n", over_budget == 0
+                                    ? "every case with a budget peaked within it plus the fixed overhead (96 MiB)"
+                                    : (std::to_string(over_budget) +
+                                       " case(s) with a budget peaked above it plus the fixed overhead (96 MiB): FAILED")
+                                          .c_str());
+    if (over_budget > 0) return 1;
   } catch (const Error& e) {
     std::fprintf(stderr, "octocosm-bench-ingest: %s\n", e.what());
     return 1;

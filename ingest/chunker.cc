@@ -27,6 +27,10 @@ constexpr std::size_t kPointsPerThread = 16384;
 // pieces of this many (ParallelForDynamic): small enough that a thread held
 // up costs the others little, large enough that taking one costs nothing.
 constexpr std::size_t kPointsPerPiece = std::size_t{1} << 16;
+// A buffered chunk that is split again is fed to the split in batches of
+// this many points.
+constexpr std::size_t kResplitBatchPoints = std::size_t{1} << 16;
+
 // Points listed by index lie scattered across a resident epoch's columns, so
 // each read of one is a cache miss; fetching this many points ahead lets the
 // misses overlap instead of queueing one behind another.
@@ -238,8 +242,10 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
   const int threads = std::max(options_.threads, 1);
   std::vector<Chunk> chunks(cells);
   std::vector<std::optional<ParticleFileWriter>> writers(cells);  // opened on a chunk's first spill
-  const std::size_t bytes_per_point = options_.columns.BytesPerPoint();
-  const std::size_t max_buffered = std::max<std::size_t>(options_.memory_bytes / bytes_per_point, 1);
+  // What the buffers of earlier splits hold is not free for this one's
+  // (SplitAt spills them down to half the budget, so at least that is).
+  const std::size_t budget = BufferedPointBudget();
+  const std::size_t max_buffered = std::max<std::size_t>(budget - std::min<std::size_t>(held_points_, budget / 2), 1);
   std::size_t buffered_points = 0;
 
   // Appends the buffers of chunks `spilling` to their files, on all threads
@@ -272,6 +278,7 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
       chunks[c].point_count += picks.size();
     });
     buffered_points += batch.size();
+    peak_buffered_points_ = std::max<std::uint64_t>(peak_buffered_points_, held_points_ + buffered_points);
     if (buffered_points > max_buffered) {
       // Spill the fullest buffers first: the most memory back per write call.
       std::vector<std::size_t> order(cells);
@@ -302,9 +309,33 @@ std::vector<Chunk> Chunker::Distribute(NodeKey root, int levels, const PointPass
     if (chunks[c].point_count == 0) continue;
     if (writers[c]) writers[c]->Close();
     chunks[c].key = NodeKey::FromValue(first + c);
+    held_points_ += chunks[c].points.size();
     result.push_back(std::move(chunks[c]));
   }
   return result;
+}
+
+std::size_t Chunker::BufferedPointBudget() const {
+  return std::max<std::size_t>(options_.memory_bytes / options_.columns.BytesPerPoint(), 1);
+}
+
+void Chunker::SpillHeld(std::vector<Chunk>& chunks, std::uint64_t target) {
+  std::vector<Chunk*> buffered;
+  for (Chunk& chunk : chunks) {
+    if (chunk.points.size() > 0) buffered.push_back(&chunk);
+  }
+  std::sort(buffered.begin(), buffered.end(),
+            [](const Chunk* a, const Chunk* b) { return a->points.size() > b->points.size(); });
+  for (Chunk* chunk : buffered) {
+    if (held_points_ <= target) break;
+    chunk->path = NewChunkPath();
+    ParticleFileWriter writer(chunk->path, options_.columns);
+    writer.Append(chunk->points);
+    writer.Close();
+    spilled_points_ += chunk->points.size();
+    held_points_ -= chunk->points.size();
+    chunk->points = ParticleChunk();  // give the memory back
+  }
 }
 
 int Chunker::ResplitLevels(std::uint64_t points) const {
@@ -469,6 +500,8 @@ std::vector<Chunk> Chunker::SplitTail(std::vector<Chunk> chunks, const ResidentE
 }
 
 std::vector<Chunk> Chunker::Split(NodeKey root, const PointPass& pass) {
+  held_points_ = 0;
+  peak_buffered_points_ = 0;
   std::vector<Chunk> chunks = SplitAt(root, options_.split_levels, pass);
   if (options_.leaf_capacity == 0) return chunks;
   return MergeLeafSubtrees(root, std::move(chunks));
@@ -549,20 +582,39 @@ std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> c
 std::vector<Chunk> Chunker::SplitAt(NodeKey root, int levels, const PointPass& pass) {
   levels = std::min(levels, options_.max_level - root.level());
   std::vector<Chunk> result;
-  for (Chunk& chunk : Distribute(root, std::max(levels, 0), pass)) {
+  std::vector<Chunk> distributed = Distribute(root, std::max(levels, 0), pass);
+  // Chunks kept in memory stay there until the ingest builds them: spill
+  // enough that the splits still to come have room within the budget.
+  if (held_points_ > BufferedPointBudget() / 2) SpillHeld(distributed, BufferedPointBudget() / 2);
+  for (Chunk& chunk : distributed) {
     if (!Oversized(chunk)) {
       result.push_back(std::move(chunk));
       continue;
     }
     // Split the oversized chunk again, streaming its own file (or buffer).
     PointPass own_pass = [&chunk](const std::function<void(const ParticleChunk&)>& consume) {
-      if (chunk.path.empty()) return consume(chunk.points);
+      if (chunk.path.empty()) {
+        // In slices, as a file is read: the split copies a batch into its
+        // buffers before it spills.
+        std::vector<std::uint32_t> slice;
+        for (std::size_t begin = 0; begin < chunk.points.size(); begin += kResplitBatchPoints) {
+          const std::size_t end = std::min(chunk.points.size(), begin + kResplitBatchPoints);
+          slice.resize(end - begin);
+          std::iota(slice.begin(), slice.end(), static_cast<std::uint32_t>(begin));
+          ParticleChunk batch;
+          AppendPoints(chunk.points, slice, batch);
+          consume(batch);
+        }
+        return;
+      }
       ParticleFileReader reader(chunk.path);
       ParticleChunk batch;
       while (reader.Next(batch)) consume(batch);
     };
     std::vector<Chunk> parts = SplitAt(chunk.key, ResplitLevels(chunk.point_count), own_pass);
     if (!chunk.path.empty()) std::remove(chunk.path.c_str());
+    held_points_ -= chunk.points.size();
+    chunk.points = ParticleChunk();  // its parts hold its points now
     for (Chunk& part : parts) result.push_back(std::move(part));
   }
   return result;

@@ -113,6 +113,9 @@ class Chunker {
   static constexpr std::size_t kResidentScratchBytesPerPoint = 4 + 4 + 4;
 
   std::uint64_t spilled_points() const { return spilled_points_; }
+  // The most points chunk buffers held at once during Split: within
+  // memory_bytes' worth plus one batch of the pass.
+  std::uint64_t peak_buffered_points() const { return peak_buffered_points_; }
 
  private:
   // Whether a chunk must be split again, and by how many levels.
@@ -126,11 +129,21 @@ class Chunker {
   std::vector<Chunk> Distribute(NodeKey root, int levels, const PointPass& pass);
   std::vector<Chunk> MergeLeafSubtrees(NodeKey root, std::vector<Chunk> chunks);
   std::string NewChunkPath();
+  // Points memory_bytes holds in chunk buffers.
+  std::size_t BufferedPointBudget() const;
+  // Writes the buffered points of `chunks` (the largest first) to files of
+  // their own until held_points_ is at most `target`.
+  void SpillHeld(std::vector<Chunk>& chunks, std::uint64_t target);
 
   Cube cube_;
   ChunkerOptions options_;
   std::uint64_t next_file_ = 0;
   std::uint64_t spilled_points_ = 0;
+  // Points in the buffers of chunks Distribute returned, while Split runs:
+  // the chunks that later splits of oversized ones must leave room for, so
+  // that all buffers together stay within memory_bytes.
+  std::uint64_t held_points_ = 0;
+  std::uint64_t peak_buffered_points_ = 0;
 };
 
 // The number of levels to bucket `points` by so that chunks come out near

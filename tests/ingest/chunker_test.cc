@@ -138,6 +138,47 @@ TEST(Chunker, SpillingChangesNothingButWhereThePointsWait) {
   EXPECT_TRUE(fs::is_empty(spilling)) << "no chunk file left once every chunk was taken";
 }
 
+// Many clumps, each a chunk that must be split again: the buffers that the
+// first split and each re-split leave in memory add up, and spilling them
+// keeps every buffer together within the budget (plus one batch of the pass),
+// however many re-splits there are.
+TEST(Chunker, BuffersOfAllSplitsTogetherStayWithinTheBudget) {
+  testing_support::TempDir dir("chunker-test");
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> anywhere(0, 100);
+  ParticleChunk points;
+  for (int clump = 0; clump < 48; ++clump) {
+    const double centre[3] = {anywhere(rng), anywhere(rng), anywhere(rng)};
+    std::normal_distribution<double> spread(0, 0.2);
+    for (int i = 0; i < 5000; ++i) {
+      for (double c : centre) points.position.push_back(std::clamp(c + spread(rng), 0.0, 99.999));
+    }
+  }
+  for (std::size_t i = 0; i < points.position.size() / 3; ++i) {
+    points.mass.push_back(1);
+    points.type.push_back(0);
+    points.id.push_back(i + 1);
+  }
+  ChunkerOptions options;
+  options.max_chunk_points = 3000;
+  options.split_levels = 2;
+  options.columns.id = true;
+  constexpr std::size_t kBudgetPoints = 30000, kBatch = 1000;
+  options.memory_bytes = kBudgetPoints * options.columns.BytesPerPoint();
+  options.temp_dir = dir.path().string();
+  Chunker chunker(kCube, options);
+  std::vector<Chunk> chunks = chunker.Split(NodeKey::Root(), PassOver(points, kBatch));
+  EXPECT_LE(chunker.peak_buffered_points(), kBudgetPoints + kBatch);
+  EXPECT_GT(chunker.spilled_points(), 0u);
+  std::uint64_t total = 0, in_memory = 0;
+  for (Chunk& chunk : chunks) {
+    in_memory += chunk.points.size();
+    total += chunk.TakePoints().size();
+  }
+  EXPECT_EQ(total, points.size());
+  EXPECT_LE(in_memory, kBudgetPoints);
+}
+
 // Smoothing lengths, when the points carry them, come back with their points
 // from buffers and from spilled files alike.
 TEST(Chunker, SmoothingLengthsTravelWithTheirPointsThroughSpilledFiles) {
