@@ -8,13 +8,6 @@ execute_process(COMMAND ${CMAKE_COMMAND} --install "${BUILD}" --prefix "${PREFIX
 if(NOT status EQUAL 0)
   message(FATAL_ERROR "cmake --install failed: ${status}")
 endif()
-set(snapshot "${SHARED_DATA}/gadget4_hdf5_galaxy_collision_timeseries/snapshot_000.hdf5")
-if(NOT EXISTS "${snapshot}")
-  set(snapshot "")
-endif()
-execute_process(COMMAND ${CMAKE_COMMAND} -E env --unset=OCTOCOSM_PROGRAM "PYTHONPATH=${PREFIX}/${MODULE_DIR}"
-                        ${PYTHON} ${CMAKE_CURRENT_LIST_DIR}/installed_smoke.py "${PREFIX}" "${snapshot}"
-                WORKING_DIRECTORY "${PREFIX}" RESULT_VARIABLE status)
-if(NOT status EQUAL 0)
-  message(FATAL_ERROR "the installed module failed: ${status}")
-endif()
+include(${CMAKE_CURRENT_LIST_DIR}/installed_smoke.cmake)
+run_installed_smoke(${PYTHON} "${PREFIX}" "${SHARED_DATA}" "the installed module"
+                    --unset=OCTOCOSM_PROGRAM "PYTHONPATH=${PREFIX}/${MODULE_DIR}")

@@ -14,13 +14,6 @@ execute_process(COMMAND ${CMAKE_COMMAND} -E env "OCTOCOSM_BUILD_DIR=${BUILD}"
 if(NOT status EQUAL 0)
   message(FATAL_ERROR "pip install ${SOURCE}/python failed: ${status}")
 endif()
-set(snapshot "${SHARED_DATA}/gadget4_hdf5_galaxy_collision_timeseries/snapshot_000.hdf5")
-if(NOT EXISTS "${snapshot}")
-  set(snapshot "")
-endif()
-execute_process(COMMAND ${CMAKE_COMMAND} -E env --unset=OCTOCOSM_PROGRAM --unset=PYTHONPATH
-                        "${PREFIX}/bin/python3" ${CMAKE_CURRENT_LIST_DIR}/installed_smoke.py "${PREFIX}" "${snapshot}"
-                WORKING_DIRECTORY "${PREFIX}" RESULT_VARIABLE status)
-if(NOT status EQUAL 0)
-  message(FATAL_ERROR "the module pip installed failed: ${status}")
-endif()
+include(${CMAKE_CURRENT_LIST_DIR}/installed_smoke.cmake)
+run_installed_smoke("${PREFIX}/bin/python3" "${PREFIX}" "${SHARED_DATA}" "the module pip installed"
+                    --unset=OCTOCOSM_PROGRAM --unset=PYTHONPATH)
