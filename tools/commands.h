@@ -17,5 +17,6 @@ void AddQueryCommand(CLI::App& app);
 void AddFollowCommand(CLI::App& app);
 void AddRenderCommand(CLI::App& app);
 void AddViewCommand(CLI::App& app);
+void AddServeCommand(CLI::App& app);
 
 }  // namespace octocosm

@@ -50,6 +50,7 @@ int main(int argc, char** argv) {
   octocosm::AddFollowCommand(app);
   octocosm::AddRenderCommand(app);
   octocosm::AddViewCommand(app);
+  octocosm::AddServeCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

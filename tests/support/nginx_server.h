@@ -1,12 +1,15 @@
 // An nginx (Debian's nginx-light) on 127.0.0.1 serving a directory, as a user
 // serves a store (docs/REMOTE.md): started on a free port from a temporary
-// configuration, stopped when the object dies. Under the served root,
-// /norange/ ignores range requests (max_ranges 0) and /forbidden/ answers
-// 403, for the tests of those faults.
+// configuration, in the foreground as a child process that the kernel stops
+// if this process dies first (PR_SET_PDEATHSIG), stopped when the object
+// dies. Under the served root, /norange/ ignores range requests (max_ranges
+// 0) and /forbidden/ answers 403, for the tests of those faults.
 #pragma once
 
 #include <netinet/in.h>
 #include <signal.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -17,7 +20,7 @@
 #include <string>
 #include <thread>
 
-#include "tests/support/program_run.h"
+#include "tests/support/program_run.h"  // ReadText
 
 namespace octocosm::testing_support {
 
@@ -43,42 +46,21 @@ class NginxServer {
     for (int attempt = 0; attempt < 5 && !started_; ++attempt) {
       port_ = FreePort();
       WriteConfiguration(root);
-      const ProgramRun run = RunCommand(program + " -p " + work_.string() + " -c " + Config().string() + " -e " +
-                                            (work_ / "error.log").string(),
-                                        30, work_ / "start.log");
-      if (run.status != 0) {
-        error_ = "nginx did not start: " + run.Describe() + ReadText(work_ / "error.log");
-        continue;
+      pid_ = Start(program);
+      started_ = pid_ > 0 && WaitUntilListening(port_);
+      if (!started_) {
+        Stop();
+        error_ = "nginx did not start on port " + std::to_string(port_) + ": " + ReadText(work_ / "error.log");
       }
-      started_ = WaitUntilListening();
-      if (!started_) error_ = "nginx did not listen on port " + std::to_string(port_);
     }
   }
 
-  ~NginxServer() {
-    const std::string pid_text = ReadText(work_ / "nginx.pid");
-    if (!pid_text.empty()) {
-      const pid_t pid = static_cast<pid_t>(std::atoi(pid_text.c_str()));
-      if (pid > 0 && ::kill(pid, SIGTERM) == 0) {
-        // Wait for the master to go, so the port and files are free.
-        for (int i = 0; i < 200 && ::kill(pid, 0) == 0; ++i) {
-          std::this_thread::sleep_for(std::chrono::milliseconds(10));
-        }
-      }
-    }
-  }
+  ~NginxServer() { Stop(); }
 
   NginxServer(const NginxServer&) = delete;
   NginxServer& operator=(const NginxServer&) = delete;
 
-  bool started() const { return started_; }
-  const std::string& error() const { return error_; }
-  int port() const { return port_; }
-  std::string Url(const std::string& path) const { return "http://127.0.0.1:" + std::to_string(port_) + path; }
-
- private:
-  std::filesystem::path Config() const { return work_ / "nginx.conf"; }
-
+  // A port on 127.0.0.1 that was free a moment ago.
   static int FreePort() {
     const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
     sockaddr_in address{};
@@ -91,13 +73,14 @@ class NginxServer {
     return ntohs(address.sin_port);
   }
 
-  bool WaitUntilListening() const {
+  // Whether something listens on 127.0.0.1:`port` within about 5 s.
+  static bool WaitUntilListening(int port) {
     for (int i = 0; i < 500; ++i) {
       const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
       sockaddr_in address{};
       address.sin_family = AF_INET;
       address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-      address.sin_port = htons(static_cast<std::uint16_t>(port_));
+      address.sin_port = htons(static_cast<std::uint16_t>(port));
       const bool connected = ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0;
       ::close(fd);
       if (connected) return true;
@@ -106,13 +89,44 @@ class NginxServer {
     return false;
   }
 
+  bool started() const { return started_; }
+  const std::string& error() const { return error_; }
+  int port() const { return port_; }
+  std::string Url(const std::string& path) const { return "http://127.0.0.1:" + std::to_string(port_) + path; }
+
+ private:
+  std::filesystem::path Config() const { return work_ / "nginx.conf"; }
+
+  // nginx in the foreground (daemon off), as a child of this process.
+  pid_t Start(const std::string& program) const {
+    const std::string prefix = work_.string(), config = Config().string(), log = (work_ / "error.log").string();
+    const pid_t parent = ::getpid();
+    const pid_t pid = ::fork();
+    if (pid != 0) return pid;
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (::getppid() != parent) ::_exit(1);  // the parent died before prctl
+    ::execl(program.c_str(), program.c_str(), "-p", prefix.c_str(), "-c", config.c_str(), "-e", log.c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+
+  // Stops nginx and waits for it, so that its port and files are free.
+  void Stop() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGTERM);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+
   void WriteConfiguration(const std::filesystem::path& root) const {
     const std::string w = work_.string();
     std::ofstream out(Config());
     // Run as root, nginx's workers would switch to a user that may not read
     // the test's files; they stay the user who starts it.
     if (::geteuid() == 0) out << "user root;\n";
-    out << "worker_processes 2;\n"
+    out << "daemon off;\n"
+        << "worker_processes 2;\n"
         << "pid " << w << "/nginx.pid;\n"
         << "error_log " << w << "/error.log;\n"
         << "events { worker_connections 256; }\n"
@@ -133,6 +147,7 @@ class NginxServer {
   }
 
   std::filesystem::path work_;
+  pid_t pid_ = -1;
   int port_ = 0;
   bool started_ = false;
   std::string error_;

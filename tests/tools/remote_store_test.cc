@@ -4,12 +4,16 @@
 // refused access, ranges ignored, no server, a damaged copy) is an error
 // that names the URL and says what is wrong.
 #include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <regex>
 #include <string>
+#include <thread>
 
 #include "tests/support/nginx_server.h"
 #include "tests/support/program_run.h"
@@ -190,6 +194,36 @@ TEST_F(RemoteStoreTest, ADamagedBlockOnTheServerIsCorruptionNamingTheUrl) {
   EXPECT_NE(run.status, 0);
   EXPECT_NE(run.output.find(Url("/damaged/store/epoch-00000.pages")), std::string::npos) << run.output;
   EXPECT_TRUE(std::regex_search(run.output, std::regex("checksum|corrupt")));
+}
+
+// `octocosm serve` runs nginx on a directory until a signal ends it.
+TEST_F(RemoteStoreTest, ServeRunsNginxOnADirectoryUntilStopped) {
+  const int port = NginxServer::FreePort();
+  const std::string log = (served->dir.path() / "serve.log").string();
+  const pid_t serve = ::fork();
+  if (serve == 0) {
+    ::freopen(log.c_str(), "w", stdout);
+    ::execl(OCTOCOSM_BINARY, OCTOCOSM_BINARY, "serve", served->root.c_str(), "--port", std::to_string(port).c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ASSERT_TRUE(NginxServer::WaitUntilListening(port)) << ReadText(log);
+  const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/store";
+  const ProgramRun local = RunOctocosm("query " + served->local_store.string() + " --epoch 1 --level 1 -q");
+  const ProgramRun remote = RunOctocosm("query " + url + " --epoch 1 --level 1 -q");
+  EXPECT_EQ(remote.status, 0) << remote.Describe();
+  EXPECT_EQ(remote.output, local.output);
+  ::kill(serve, SIGTERM);
+  int status = 0;
+  ::waitpid(serve, &status, 0);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << status;
+  const std::string listing = ReadText(log);
+  EXPECT_NE(listing.find("store: " + url + "\n"), std::string::npos) << listing;
+  EXPECT_EQ(listing.find("/store/ids"), std::string::npos) << "a store's ID index is not listed:\n" << listing;
+  // nginx went with it: nothing listens any more.
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  const ProgramRun after = RunOctocosm("info " + url);
+  EXPECT_NE(after.status, 0);
 }
 
 TEST_F(RemoteStoreTest, IngestWritesOnlyLocalDirectories) {
