@@ -5,6 +5,9 @@
 namespace octocosm {
 namespace {
 
+// Block reads a cursor keeps in flight against a store on a server.
+constexpr std::size_t kReadsAhead = 16;
+
 template <typename T>
 void KeepColumn(std::vector<T>& column, std::size_t stride, const std::vector<std::uint32_t>& keep) {
   if (column.empty()) return;
@@ -47,11 +50,37 @@ QueryCursor::QueryCursor(const Dataset& dataset, const Region& region, const Que
   nodes_ = SelectNodes(dataset, region, options, stats_.selection);
   stats_.nodes_selected = nodes_.size();
   for (const IndexEntry& entry : nodes_) stats_.points_selected += entry.point_count;
+  read_ahead_ = dataset.store().page_file(epoch_).remote();
+}
+
+std::optional<QueryCursor::Fetched> QueryCursor::NextBlock() {
+  const auto read = [&dataset = dataset_, epoch = epoch_, wanted = wanted_](const IndexEntry& entry) {
+    Fetched fetched;
+    fetched.block = ReadBlockColumns(dataset, epoch, entry, wanted, fetched.counters);
+    return fetched;
+  };
+  if (!read_ahead_) {
+    if (next_node_ == nodes_.size()) return std::nullopt;
+    return read(nodes_[next_node_++]);
+  }
+  // Each read from a server waits a round trip: keep several in flight,
+  // handed out in selection order. The reads capture no part of the cursor,
+  // which may move while they run.
+  while (ahead_.size() < kReadsAhead && next_node_ < nodes_.size()) {
+    ahead_.push_back(std::async(std::launch::async, read, nodes_[next_node_++]));
+  }
+  if (ahead_.empty()) return std::nullopt;
+  Fetched fetched = ahead_.front().get();
+  ahead_.pop_front();
+  return fetched;
 }
 
 bool QueryCursor::Next(QueryBatch& batch) {
-  while (next_node_ < nodes_.size()) {
-    DecodedBlock block = ReadBlockColumns(dataset_, epoch_, nodes_[next_node_++], wanted_, stats_.reads);
+  while (std::optional<Fetched> fetched = NextBlock()) {
+    stats_.reads.blocks += fetched->counters.blocks;
+    stats_.reads.reads += fetched->counters.reads;
+    stats_.reads.bytes += fetched->counters.bytes;
+    DecodedBlock& block = fetched->block;
     const std::uint32_t n = block.header.point_count;
     stats_.points_scanned += n;
     keep_.clear();

@@ -12,7 +12,9 @@
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <functional>
+#include <future>
 #include <optional>
 #include <vector>
 
@@ -67,12 +69,23 @@ class QueryCursor {
   const QueryStats& stats() const { return stats_; }
 
  private:
+  // A block read, with what reading it cost.
+  struct Fetched {
+    DecodedBlock block;
+    ReadCounters counters;
+  };
+  // The next selected block: read now from a local store; from a server,
+  // the oldest of the reads kept in flight ahead of the caller.
+  std::optional<Fetched> NextBlock();
+
   const Dataset& dataset_;
   const Region& region_;
   std::uint32_t epoch_;
   ColumnSet wanted_;
   std::vector<IndexEntry> nodes_;
   std::size_t next_node_ = 0;
+  bool read_ahead_ = false;  // the store is on a server
+  std::deque<std::future<Fetched>> ahead_;
   std::vector<std::uint32_t> keep_;
   QueryStats stats_;
 };
