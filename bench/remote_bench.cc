@@ -8,6 +8,10 @@
 //                   a second once the caches are warm; frames per second,
 //                   bytes fetched per frame, the time to open the store and
 //                   draw its first frame, and to draw a new view.
+//   follow          --follow IDs (taken from a sphere at the first epoch's
+//                   centre) through every epoch, as `octocosm follow` finds
+//                   them, from the directory and from the URL, each store
+//                   opened afresh.
 //   many clients    --clients processes, each its own path and link, all at
 //                   once against one nginx; each one's rate against one
 //                   client's alone (measured the same way just before), and
@@ -25,6 +29,7 @@
 #include <fstream>
 #include <memory>
 #include <numbers>
+#include <numeric>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -34,6 +39,8 @@
 #include "base/error.h"
 #include "bench/throttled_proxy.h"
 #include "index/dataset.h"
+#include "query/particle_lookup.h"
+#include "query/region.h"
 #include "render/gl_context.h"
 #include "render/offscreen_renderer.h"
 #include "tests/support/nginx_server.h"
@@ -58,6 +65,7 @@ struct Flags {
   int width = 640, height = 360;
   double error = 2;
   std::string backend = "osmesa";
+  int follow = 100;
   // Client mode (the bench starts itself so): render this URL's path `variant`.
   std::string client_url;
   int variant = 0;
@@ -175,6 +183,36 @@ double NginxCpuSeconds(const fs::path& work) {
   return seconds;
 }
 
+// Up to `count` IDs of particles near the centre of epoch 0's cube.
+std::vector<std::uint64_t> IdsToFollow(const Dataset& dataset, int count) {
+  const Cube& cube = dataset.cube(0);
+  const std::array<double, 3> centre = {cube.origin[0] + cube.size / 2, cube.origin[1] + cube.size / 2,
+                                        cube.origin[2] + cube.size / 2};
+  const std::unique_ptr<Region> sphere = MakeSphereRegion(centre, cube.size / 8, cube);
+  return ParticleIdsInRegion(dataset, 0, *sphere, static_cast<std::size_t>(count)).ids;
+}
+
+struct FollowRun {
+  double seconds = 0;  // opening the store and finding every ID in every epoch
+  std::size_t found = 0;
+  std::uint64_t blocks = 0;
+};
+
+FollowRun Follow(const std::string& store, std::span<const std::uint64_t> ids) {
+  const auto start = Clock::now();
+  const Dataset dataset = Dataset::Open(store);
+  ParticleLocator locator(dataset);
+  std::vector<std::uint32_t> epochs(dataset.epoch_count());
+  std::iota(epochs.begin(), epochs.end(), 0u);
+  FollowRun run;
+  for (const auto& states : locator.FindInEpochs(epochs, ids, true)) {
+    for (const auto& state : states) run.found += state.has_value();
+  }
+  run.seconds = Seconds(start);
+  run.blocks = locator.reads().blocks;
+  return run;
+}
+
 void PrintRun(const char* what, const PathRun& r, double bytes_per_frame) {
   std::printf("%-28s %10.2f %10.2f %10.2f %10.3f %14.0f\n", what, r.open_and_first_s, r.first_pass_fps, r.warm_fps,
               r.new_view_s, bytes_per_frame);
@@ -205,6 +243,21 @@ void Coordinate(const Flags& f) {
                 remote.warm_fps / local.warm_fps);
   }
   std::fflush(stdout);
+
+  const Dataset local_dataset = Dataset::Open(f.store);
+  if (f.follow > 0 && local_dataset.has_id_index()) {
+    const std::vector<std::uint64_t> ids = IdsToFollow(local_dataset, f.follow);
+    const FollowRun local_follow = Follow(f.store, ids);
+    auto trunk = std::make_shared<PacedLink>(shared_rate);
+    ThrottledProxy proxy(nginx.port(), f.rtt_ms / 1e3, rate, trunk);
+    const FollowRun remote_follow = Follow(StoreUrl(proxy.port(), f), ids);
+    std::printf("follow %zu IDs through %u epochs (%zu found, %llu leaves read): local %.3f s, remote %.3f s "
+                "(%.1f round trips), %.1f MB fetched\n",
+                ids.size(), local_dataset.epoch_count(), remote_follow.found,
+                static_cast<unsigned long long>(remote_follow.blocks), local_follow.seconds, remote_follow.seconds,
+                remote_follow.seconds / (f.rtt_ms / 1e3), static_cast<double>(proxy.bytes_to_client()) / 1e6);
+    std::fflush(stdout);
+  }
 
   if (f.clients < 1) return;
   auto trunk = std::make_shared<PacedLink>(shared_rate);
@@ -243,6 +296,7 @@ int main(int argc, char** argv) {
   app.add_option("--height", f.height, "image height")->default_val(360);
   app.add_option("--error", f.error, "screen-space error threshold, pixels")->default_val(2);
   app.add_option("--backend", f.backend, "osmesa or egl (a GPU)")->default_val("osmesa");
+  app.add_option("--follow", f.follow, "IDs to follow through the epochs (0: none; stores with IDs)")->default_val(100);
   app.add_option("--client", f.client_url, "(used by the bench itself) render this store URL's path and print figures");
   app.add_option("--variant", f.variant, "(with --client) which camera path")->default_val(0);
   CLI11_PARSE(app, argc, argv);

@@ -150,10 +150,14 @@ void IdIndexEpochWriter::Finish() {
 
 IdIndexReader::IdIndexReader(const std::string& directory) : store_(StoreReader::Open(directory)) {}
 
+// Directories and leaf tables are read outside the lock, so that look-ups in
+// several epochs of a store on a server wait for their round trips together;
+// two threads that read the same one keep the first.
 IdIndexReader::Directory& IdIndexReader::DirectoryOf(std::uint32_t epoch) const {
-  MutexLock lock(mutex_);
-  auto& slot = directories_[epoch];
-  if (slot) return *slot;
+  {
+    MutexLock lock(mutex_);
+    if (auto it = directories_.find(epoch); it != directories_.end()) return *it->second;
+  }
   const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID directory";
   const Bytes block = store_.ReadBlock({epoch, kIdIndexDirectoryKey});
   if (block.size() < 24 || GetU32(block, 0) != kDirectoryMagic) throw Error::Corruption(where, "wrong magic or short block");
@@ -169,8 +173,8 @@ IdIndexReader::Directory& IdIndexReader::DirectoryOf(std::uint32_t epoch) const 
   if (!std::is_sorted(directory->first_ids.begin(), directory->first_ids.end())) {
     throw Error::Corruption(where, "bucket first IDs are not sorted");
   }
-  slot = std::move(directory);
-  return *slot;
+  MutexLock lock(mutex_);
+  return *directories_.try_emplace(epoch, std::move(directory)).first->second;
 }
 
 std::optional<NodeKey> IdIndexReader::Find(std::uint32_t epoch, std::uint64_t id) const {
@@ -261,9 +265,10 @@ std::optional<NodeKey> IdIndexReader::FindInTable(std::uint32_t epoch, const Byt
 
 const std::vector<std::uint64_t>& IdIndexReader::LeafTableOf(std::uint32_t epoch) const {
   Directory& directory = DirectoryOf(epoch);
-  MutexLock lock(mutex_);
-  std::optional<std::vector<std::uint64_t>>& leaves = directory.leaves;
-  if (leaves) return *leaves;
+  {
+    MutexLock lock(mutex_);
+    if (directory.leaves) return *directory.leaves;
+  }
   const std::string where = store_.directory() + " epoch " + std::to_string(epoch) + " ID leaf table";
   if (!store_.Lookup({epoch, kIdIndexLeafTableKey})) throw Error::Corruption(where, "missing, but a bucket needs it");
   const Bytes block = store_.ReadBlock({epoch, kIdIndexLeafTableKey});
@@ -280,8 +285,9 @@ const std::vector<std::uint64_t>& IdIndexReader::LeafTableOf(std::uint32_t epoch
       throw Error::Corruption(where, "invalid node key " + std::to_string(keys[i]) + " at " + std::to_string(i));
     }
   }
-  leaves = std::move(keys);
-  return *leaves;
+  MutexLock lock(mutex_);
+  if (!directory.leaves) directory.leaves = std::move(keys);
+  return *directory.leaves;
 }
 
 }  // namespace octocosm

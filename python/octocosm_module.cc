@@ -19,6 +19,7 @@
 #include <exception>
 #include <filesystem>
 #include <memory>
+#include <numeric>
 #include <optional>
 #include <string>
 #include <thread>
@@ -367,9 +368,11 @@ class Store {
     {
       py::gil_scoped_release release;
       ParticleLocator locator(d);
-      for (std::uint32_t e = 0; e < d.epoch_count(); ++e) {
-        by_epoch.push_back(locator.FindInEpoch(e, ids, true));
-        for (const auto& state : by_epoch.back()) velocity |= state && state->has_velocity;
+      std::vector<std::uint32_t> epochs(d.epoch_count());
+      std::iota(epochs.begin(), epochs.end(), 0u);
+      by_epoch = locator.FindInEpochs(epochs, ids, true);
+      for (const auto& states : by_epoch) {
+        for (const auto& state : states) velocity |= state && state->has_velocity;
       }
     }
     std::vector<std::uint64_t> id;

@@ -48,6 +48,13 @@ class ParticleLocator {
   // that does not hold the ID.
   std::vector<std::optional<ParticleState>> FindInEpoch(std::uint32_t epoch, std::span<const std::uint64_t> ids,
                                                         bool with_velocity);
+  // FindInEpoch for each of `epochs`, in that order. Against a store on a
+  // server the epochs' look-ups, and then their leaves, are read several at
+  // once: a trajectory through many epochs waits a few round trips, not a few
+  // per epoch.
+  std::vector<std::vector<std::optional<ParticleState>>> FindInEpochs(std::span<const std::uint32_t> epochs,
+                                                                      std::span<const std::uint64_t> ids,
+                                                                      bool with_velocity);
   // The particles of `ids` that `epoch` holds, as stored at full detail:
   // for each leaf that holds some, those rows with the columns in `columns`
   // (position and id always) that the store has; in leaf key order. What a
@@ -61,14 +68,27 @@ class ParticleLocator {
 
  private:
   using Matches = std::vector<std::pair<std::size_t, std::uint32_t>>;  // (position in the IDs asked for, row)
-  using LeafVisitor = std::function<void(NodeKey leaf, const NodePoints& points, const Matches& matches)>;
-  // Reads each leaf of `epoch` holding some of `ids` once (`columns`, with
-  // position and id) and hands it to `visit` with the rows of those IDs.
-  void ForEachLeafHolding(std::uint32_t epoch, std::span<const std::uint64_t> ids, ColumnSet columns,
-                          std::stop_token stop, const LeafVisitor& visit);
+  using LeafVisitor =
+      std::function<void(std::size_t nth_epoch, NodeKey leaf, const NodePoints& points, const Matches& matches)>;
+  // A leaf that holds some of the IDs asked for.
+  struct LeafToRead {
+    std::size_t nth_epoch = 0;  // position in the epochs asked for
+    std::uint32_t epoch = 0;
+    IndexEntry entry;
+    std::vector<std::size_t> wanted;  // positions in the IDs asked for
+  };
+  // The leaves of `epoch` that hold some of `ids`, in key order.
+  std::vector<LeafToRead> LeavesHolding(std::size_t nth_epoch, std::uint32_t epoch,
+                                        std::span<const std::uint64_t> ids) const;
+  // Reads each leaf of `epochs` holding some of `ids` once (`columns`, with
+  // position and id) and hands it to `visit` with the rows of those IDs,
+  // epoch by epoch in the order given, each epoch's leaves in key order.
+  void ForEachLeafHolding(std::span<const std::uint32_t> epochs, std::span<const std::uint64_t> ids,
+                          ColumnSet columns, std::stop_token stop, const LeafVisitor& visit);
 
   const Dataset& dataset_;
   IdIndexReader index_;
+  std::size_t reads_in_flight_ = 1;  // several against a server
   ReadCounters reads_;
 };
 

@@ -5,9 +5,6 @@
 namespace octocosm {
 namespace {
 
-// Block reads a cursor keeps in flight against a store on a server.
-constexpr std::size_t kReadsAhead = 16;
-
 template <typename T>
 void KeepColumn(std::vector<T>& column, std::size_t stride, const std::vector<std::uint32_t>& keep) {
   if (column.empty()) return;
@@ -42,41 +39,38 @@ std::vector<IndexEntry> SelectNodes(const Dataset& dataset, const Region& region
   return SelectByScreenError(dataset, options.epoch, region, *options.screen_error, stats);
 }
 
-QueryCursor::QueryCursor(const Dataset& dataset, const Region& region, const QueryOptions& options)
-    : dataset_(dataset),
-      region_(region),
-      epoch_(options.epoch),
-      wanted_((options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition)) {
-  nodes_ = SelectNodes(dataset, region, options, stats_.selection);
-  stats_.nodes_selected = nodes_.size();
-  for (const IndexEntry& entry : nodes_) stats_.points_selected += entry.point_count;
-  read_ahead_ = dataset.store().page_file(epoch_).remote();
+namespace {
+
+// The nodes a query reads, counted into its statistics.
+std::vector<IndexEntry> SelectAndCount(const Dataset& dataset, const Region& region, const QueryOptions& options,
+                                       QueryStats& stats) {
+  std::vector<IndexEntry> nodes = SelectNodes(dataset, region, options, stats.selection);
+  stats.nodes_selected = nodes.size();
+  for (const IndexEntry& entry : nodes) stats.points_selected += entry.point_count;
+  return nodes;
 }
 
-std::optional<QueryCursor::Fetched> QueryCursor::NextBlock() {
-  const auto read = [&dataset = dataset_, epoch = epoch_, wanted = wanted_](const IndexEntry& entry) {
-    Fetched fetched;
-    fetched.block = ReadBlockColumns(dataset, epoch, entry, wanted, fetched.counters);
-    return fetched;
-  };
-  if (!read_ahead_) {
-    if (next_node_ == nodes_.size()) return std::nullopt;
-    return read(nodes_[next_node_++]);
-  }
-  // Each read from a server waits a round trip: keep several in flight,
-  // handed out in selection order. The reads capture no part of the cursor,
-  // which may move while they run.
-  while (ahead_.size() < kReadsAhead && next_node_ < nodes_.size()) {
-    ahead_.push_back(std::async(std::launch::async, read, nodes_[next_node_++]));
-  }
-  if (ahead_.empty()) return std::nullopt;
-  Fetched fetched = ahead_.front().get();
-  ahead_.pop_front();
-  return fetched;
+// Reads kept in flight: several against a server, one locally. (An epoch out
+// of range is the selection's error.)
+std::size_t ReadsInFlight(const Dataset& dataset, std::uint32_t epoch) {
+  return epoch < dataset.epoch_count() && dataset.store().page_file(epoch).remote() ? kRemoteReadsInFlight : 1;
 }
+
+}  // namespace
+
+QueryCursor::QueryCursor(const Dataset& dataset, const Region& region, const QueryOptions& options)
+    : region_(region),
+      blocks_(SelectAndCount(dataset, region, options, stats_),
+              ReadsInFlight(dataset, options.epoch),
+              [&dataset, epoch = options.epoch,
+               wanted = (options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition)](const IndexEntry& entry) {
+                Fetched fetched;
+                fetched.block = ReadBlockColumns(dataset, epoch, entry, wanted, fetched.counters);
+                return fetched;
+              }) {}
 
 bool QueryCursor::Next(QueryBatch& batch) {
-  while (std::optional<Fetched> fetched = NextBlock()) {
+  while (std::optional<Fetched> fetched = blocks_.Next()) {
     stats_.reads.blocks += fetched->counters.blocks;
     stats_.reads.reads += fetched->counters.reads;
     stats_.reads.bytes += fetched->counters.bytes;

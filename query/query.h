@@ -12,9 +12,7 @@
 #pragma once
 
 #include <cstdint>
-#include <deque>
 #include <functional>
-#include <future>
 #include <optional>
 #include <vector>
 
@@ -22,6 +20,7 @@
 #include "index/dataset.h"
 #include "query/column_reader.h"
 #include "query/node_selection.h"
+#include "query/read_ahead.h"
 #include "query/region.h"
 
 namespace octocosm {
@@ -74,20 +73,12 @@ class QueryCursor {
     DecodedBlock block;
     ReadCounters counters;
   };
-  // The next selected block: read now from a local store; from a server,
-  // the oldest of the reads kept in flight ahead of the caller.
-  std::optional<Fetched> NextBlock();
-
-  const Dataset& dataset_;
   const Region& region_;
-  std::uint32_t epoch_;
-  ColumnSet wanted_;
-  std::vector<IndexEntry> nodes_;
-  std::size_t next_node_ = 0;
-  bool read_ahead_ = false;  // the store is on a server
-  std::deque<std::future<Fetched>> ahead_;
-  std::vector<std::uint32_t> keep_;
   QueryStats stats_;
+  // The selected blocks, read in selection order: now from a local store;
+  // from a server, several in flight ahead of the caller.
+  ReadAhead<IndexEntry, Fetched> blocks_;
+  std::vector<std::uint32_t> keep_;
 };
 
 // Runs the query (a QueryCursor read to its end). Throws Error::InvalidArgument for bad options (no or two

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <numeric>
 #include <optional>
 #include <sstream>
 
@@ -162,11 +163,12 @@ FollowReport WriteTrajectories(const Dataset& dataset, std::span<const std::uint
                                std::ostream& notes) {
   ParticleLocator locator(dataset);
   // Epoch by epoch (each leaf read once per epoch), then written ID by ID.
-  std::vector<std::vector<std::optional<ParticleState>>> by_epoch;
+  std::vector<std::uint32_t> epochs(dataset.epoch_count());
+  std::iota(epochs.begin(), epochs.end(), 0u);
+  const std::vector<std::vector<std::optional<ParticleState>>> by_epoch = locator.FindInEpochs(epochs, ids, true);
   bool velocity = false;
-  for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) {
-    by_epoch.push_back(locator.FindInEpoch(e, ids, true));
-    for (const auto& state : by_epoch.back()) velocity |= state && state->has_velocity;
+  for (const auto& states : by_epoch) {
+    for (const auto& state : states) velocity |= state && state->has_velocity;
   }
   FollowReport report;
   csv << (velocity ? "id,epoch,time,x,y,z,vx,vy,vz\n" : "id,epoch,time,x,y,z\n");

@@ -10,6 +10,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "base/error.h"
@@ -80,6 +81,48 @@ std::vector<std::uint64_t> Leaves(std::size_t count) {
   std::vector<std::uint64_t> leaves(count);
   for (std::size_t i = 0; i < count; ++i) leaves[i] = LeafNumber(static_cast<int>(i % 64)).value();
   return leaves;
+}
+
+// Threads looking up IDs in several epochs at once, each epoch's directory
+// and leaf table read the first time (outside the reader's lock, so that
+// round trips to a server overlap), find what one thread finds.
+TEST(IdIndex, ConcurrentLookUpsInManyEpochsAgreeWithOneThread) {
+  TempDir dir("id-index-threads");
+  constexpr std::uint32_t kEpochs = 6;
+  {
+    StoreWriter store(dir.path().string(), nlohmann::json::object(), nullptr, {.page_size = kSmallPage});
+    for (std::uint32_t e = 0; e < kEpochs; ++e) {
+      store.BeginEpoch(e, 0);
+      IdIndexEpochWriter ids(store, kSmallPage);
+      if (e % 2 == 0) {
+        std::vector<std::uint32_t> slots(3000);
+        for (std::size_t i = 0; i < slots.size(); ++i) slots[i] = static_cast<std::uint32_t>(1 + (i + e) % 64);
+        ids.AddTable(e, slots, Leaves(64));
+      } else {
+        for (std::uint64_t id = e; id < 3000 + e; ++id) ids.Add(id, LeafNumber(static_cast<int>((id + e) % 37)));
+      }
+      ids.Finish();
+      store.EndEpoch();
+    }
+    store.Finish();
+  }
+  std::vector<std::uint64_t> asked;
+  for (std::uint64_t id = 0; id < 3100; id += 7) asked.push_back(id);
+  std::vector<std::vector<std::optional<NodeKey>>> expected;
+  {
+    IdIndexReader one(dir.path().string());
+    for (std::uint32_t e = 0; e < kEpochs; ++e) expected.push_back(one.FindAll(e, asked));
+  }
+  for (int round = 0; round < 4; ++round) {
+    IdIndexReader shared(dir.path().string());
+    std::vector<std::vector<std::optional<NodeKey>>> found(2 * kEpochs);
+    std::vector<std::thread> threads;
+    for (std::uint32_t t = 0; t < 2 * kEpochs; ++t) {
+      threads.emplace_back([&, t] { found[t] = shared.FindAll(t % kEpochs, asked); });
+    }
+    for (std::thread& thread : threads) thread.join();
+    for (std::uint32_t t = 0; t < 2 * kEpochs; ++t) EXPECT_EQ(found[t], expected[t % kEpochs]) << "thread " << t;
+  }
 }
 
 // FindAll answers like Find for IDs in any order, repeated, absent or beyond
