@@ -49,9 +49,39 @@ SceneRenderer::~SceneRenderer() {
 }
 
 const NodeHierarchy& SceneRenderer::hierarchy(std::uint32_t epoch) {
-  auto& h = hierarchies_.at(epoch);
-  if (!h) h = std::make_unique<NodeHierarchy>(NodeHierarchy::Load(dataset_, epoch));
-  return *h;
+  HierarchySlot& slot = hierarchies_.at(epoch);
+  if (!slot.loaded) {
+    // A load started earlier is waited for (and its error thrown here).
+    slot.loaded = std::make_unique<NodeHierarchy>(slot.loading.valid() ? slot.loading.get()
+                                                                         : NodeHierarchy::Load(dataset_, epoch));
+  }
+  return *slot.loaded;
+}
+
+void SceneRenderer::StartLoading(std::uint32_t epoch) {
+  HierarchySlot& slot = hierarchies_.at(epoch);
+  if (slot.loaded || slot.loading.valid()) return;
+  slot.loading = std::async(std::launch::async, [&dataset = dataset_, epoch] { return NodeHierarchy::Load(dataset, epoch); });
+}
+
+const NodeHierarchy* SceneRenderer::HierarchyIfLoaded(std::uint32_t epoch) {
+  StartLoading(epoch);
+  HierarchySlot& slot = hierarchies_[epoch];
+  if (!slot.loaded && slot.loading.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;
+  return &hierarchy(epoch);
+}
+
+void SceneRenderer::StartLoadingNear(const std::vector<Copy>& copies) {
+  if (copies.empty()) return;
+  std::uint32_t first = copies.front().epoch, last = copies.front().epoch;
+  for (const Copy& c : copies) {
+    first = std::min(first, c.epoch);
+    last = std::max(last, c.epoch);
+  }
+  const std::uint32_t final_epoch = dataset_.epoch_count() - 1;
+  const std::uint32_t from = first > 0 ? first - 1 : 0;
+  const std::uint32_t to = final_epoch - last >= 2 ? last + 2 : final_epoch;
+  for (std::uint32_t e = from; e <= to; ++e) StartLoading(e);
 }
 
 Interpolation SceneRenderer::InterpolationAvailable(std::uint32_t epoch) const {
@@ -223,6 +253,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   FrameStats stats;
   auto clock = std::chrono::steady_clock::now();
   std::vector<Copy> copies = PlanCopies(time, stats);
+  if (!complete) StartLoadingNear(copies);
   const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), options_.lod.pixel_threshold};
   SelectFrontiers(error_view, copies, stats);
   UseColumns(ColumnsFor(stats.interpolation, complete));
@@ -288,9 +319,11 @@ std::vector<SceneRenderer::NodeRef> SceneRenderer::RequestBlocks(const ScreenErr
   for (const Copy& c : copies) overlay_epochs.push_back(c.epoch);
   if (look_ahead && !complete) {
     const std::uint32_t ahead = copies.back().epoch + 1;
-    if (ahead < dataset_.epoch_count()) {
+    // Once the next interval's index has arrived: the frame does not wait for it.
+    const NodeHierarchy* next_hierarchy = ahead < dataset_.epoch_count() ? HierarchyIfLoaded(ahead) : nullptr;
+    if (next_hierarchy != nullptr) {
       overlay_epochs.push_back(ahead);
-      const LodFrontier next = SelectLodFrontier(hierarchy(ahead), dataset_.cube(ahead), error_view, options_.lod);
+      const LodFrontier next = SelectLodFrontier(*next_hierarchy, dataset_.cube(ahead), error_view, options_.lod);
       for (std::int32_t node : next.load_order) {
         if (FindResident({ahead, node}) == nullptr) wanted.push_back(IdOf({ahead, node}));
       }

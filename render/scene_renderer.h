@@ -35,6 +35,7 @@
 #pragma once
 
 #include <cstdint>
+#include <future>
 #include <memory>
 #include <optional>
 #include <span>
@@ -125,6 +126,8 @@ class SceneRenderer {
   double mass_unit() const { return mass_unit_; }
   // The best interpolation available between `epoch` and the next.
   Interpolation InterpolationAvailable(std::uint32_t epoch) const;
+  // The epoch's node hierarchy (its index, read once: a round trip from a
+  // server), loaded now if no load has finished.
   const NodeHierarchy& hierarchy(std::uint32_t epoch);
   // Bytes read from the store so far, and the block cache's counters.
   ReadCounters disk_reads() const;
@@ -183,7 +186,23 @@ class SceneRenderer {
   SplatRenderer& splat_;
   SceneOptions options_;
   double mass_unit_ = 1;
-  std::vector<std::unique_ptr<NodeHierarchy>> hierarchies_;
+  // An epoch's hierarchy, loaded on a thread of its own when a frame near
+  // it in time starts it (StartLoadingNear), else by the first frame that
+  // draws the epoch.
+  struct HierarchySlot {
+    std::unique_ptr<NodeHierarchy> loaded;
+    std::future<NodeHierarchy> loading;
+  };
+  // Starts loading the hierarchy on a thread of its own, unless it is loaded
+  // or loading.
+  void StartLoading(std::uint32_t epoch);
+  // The hierarchy if it is loaded (starting its load if none has started).
+  const NodeHierarchy* HierarchyIfLoaded(std::uint32_t epoch);
+  // Starts loading the hierarchies of the epochs next to those drawn (one
+  // before, two after), so that stepping or playing through time does not
+  // wait for their indexes.
+  void StartLoadingNear(const std::vector<Copy>& copies);
+  std::vector<HierarchySlot> hierarchies_;
   std::unique_ptr<SelectionSet> selection_;
   std::shared_ptr<const std::vector<std::uint64_t>> selected_ids_;
   std::vector<std::unique_ptr<SelectionOverlay>> overlays_;

@@ -80,12 +80,6 @@ std::string DescribeFrame(int width, int height, const FrameStats& stats, double
   return text;
 }
 
-// So that playing into an epoch never waits for its index pages: a few
-// hundred kilobytes per 10^8 points (index/node_hierarchy.h).
-void LoadEveryTree(SceneRenderer& scene, const Dataset& dataset) {
-  for (std::uint32_t e = 0; e < dataset.epoch_count(); ++e) scene.hierarchy(e);
-}
-
 ViewerScriptOptions ScriptOptionsFrom(const ViewFlags& f, const Cube& start_cube, const Dataset& dataset) {
   ViewerScriptOptions options;
   options.store = f.store;
@@ -260,12 +254,10 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
   SplatRenderer splat;
   CheckMaxRadius(f.scene, splat.max_blob_radius());
   SceneRenderer scene(dataset, splat, scene_options);
-  const auto trees_start = Clock::now();
-  LoadEveryTree(scene, dataset);
   scene.SetSelection(initial_selection);
   if (!f.quiet) {
-    std::fprintf(stderr, "view: %s; %u epochs, trees loaded in %.2f s; %zu IDs highlighted\n",
-                 window.description().c_str(), dataset.epoch_count(), SecondsSince(trees_start), scene.selection_size());
+    std::fprintf(stderr, "view: %s; %u epochs; %zu IDs highlighted\n", window.description().c_str(),
+                 dataset.epoch_count(), scene.selection_size());
   }
 
   // The user's side of things.

@@ -3,9 +3,11 @@
 // between the epochs. Each test states its tolerance.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <random>
+#include <thread>
 #include <utility>
 
 #include "ingest/ingest.h"
@@ -320,6 +322,31 @@ TEST(GlInterpolation, ComputePathInterpolatesAsTheRasterPath) {
       }
     }
   }
+}
+
+// Playing forward, streamed frames read the next epoch's blocks ahead (its
+// index loaded on a thread of its own, so that no frame waits for it): once
+// the frames at epoch 0 have settled, drawing epoch 1 reads nothing more.
+TEST(GlInterpolation, PlayingReadsTheNextEpochAhead) {
+  testing_support::TempDir dir("gl-interpolation-ahead");
+  const Dataset d = Dataset::Open(RandomPeriodicSeries(dir, 20000, 6));
+  OffscreenRenderer renderer(d, HeadlessBackend::kOsMesa, FullDetail(Interpolation::kLinear));
+  const RenderView view = TopView();
+  std::uint64_t reads = 0;
+  int unchanged = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (unchanged < 50 && std::chrono::steady_clock::now() < deadline) {
+    const FrameStats stats = renderer.scene().Stream(view, 0, /*look_ahead=*/true);
+    const std::uint64_t now = renderer.scene().disk_reads().blocks;
+    unchanged = stats.blocks_missing == 0 && now == reads ? unchanged + 1 : 0;
+    reads = now;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_EQ(unchanged, 50) << "the reads did not settle: " << renderer.scene().last_error();
+  const Picture epoch1 = renderer.Render(view, 1, {}, true);
+  EXPECT_EQ(epoch1.stats.epochs_drawn, 1u);
+  EXPECT_GT(epoch1.stats.nodes_selected, 8u);
+  EXPECT_EQ(renderer.scene().disk_reads().blocks, reads) << "epoch 1's blocks were not read ahead";
 }
 
 }  // namespace
