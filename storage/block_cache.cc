@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "base/error.h"
+#include "storage/read_cancellation.h"
 
 namespace octocosm {
 
@@ -194,12 +195,17 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
       return PinLocked(entry);
     }
     ++stats_.misses;
-    if (auto running = flights_.find(id); running != flights_.end()) {
-      // Someone else is reading this block: wait for their result rather than
-      // read it twice. The reader pins the new entry once for every waiter.
+    // Someone else is reading this block: wait for their result rather than
+    // read it twice. The reader pins the new entry once for every waiter. A
+    // read its reader cancelled leaves the block to the next caller.
+    for (auto running = flights_.find(id); running != flights_.end(); running = flights_.find(id)) {
       std::shared_ptr<Flight> joined = running->second;
       ++joined->waiters;
       while (!joined->done) joined->done_cv.Wait(mutex_);
+      if (joined->cancelled) {
+        if (Entry* entry = FindLocked(id)) return PinLocked(entry);
+        continue;
+      }
       if (joined->error) throw ThreadOwnCopy(*joined->error);
       if (joined->other_error) std::rethrow_exception(joined->other_error);
       return PinnedBlock(this, joined->entry);
@@ -235,7 +241,8 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
   --stats_.reads_in_flight;
   flight->done = true;
   if (thrown) {
-    ++stats_.read_failures;
+    flight->cancelled = ReadCancelled();
+    if (!flight->cancelled) ++stats_.read_failures;
     if (error_for_waiters) {
       flight->error = std::move(error_for_waiters);
     } else {

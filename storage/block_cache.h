@@ -71,7 +71,7 @@ struct CacheStats {
   std::uint64_t hits = 0;
   std::uint64_t misses = 0;
   std::uint64_t source_reads = 0;    // ReadBlock calls started (successful or not)
-  std::uint64_t read_failures = 0;   // ReadBlock calls that threw
+  std::uint64_t read_failures = 0;   // ReadBlock calls that threw (not counting cancelled ones)
   std::uint64_t bytes_read = 0;      // bytes returned by successful ReadBlock calls
   std::uint64_t inserts = 0;         // entries added, by Insert() or by a read
   std::uint64_t evictions = 0;       // entries dropped to stay within budget
@@ -161,6 +161,9 @@ class BlockCache {
     // (e.g. bad_alloc) is kept as thrown.
     std::optional<Error> error;
     std::exception_ptr other_error;
+    // The reader's read was cancelled (storage/read_cancellation.h): its
+    // waiters, who did not cancel, read the block themselves.
+    bool cancelled = false;
     std::size_t waiters = 0;           // Get() calls sleeping on this flight
     Entry* entry = nullptr;             // set once done without error
     CondVar done_cv;

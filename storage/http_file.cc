@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "base/error.h"
+#include "storage/read_cancellation.h"
 
 namespace octocosm {
 namespace {
@@ -156,6 +157,10 @@ struct HttpFile::Response {
     return bytes;
   }
 
+  // Called by libcurl while a transfer runs (often while bytes come, about
+  // once a second while none do): a nonzero answer aborts it.
+  static int OnProgress(void*, curl_off_t, curl_off_t, curl_off_t, curl_off_t) { return ReadCancelled() ? 1 : 0; }
+
   static std::size_t OnHeader(char* data, std::size_t size, std::size_t count, void* self) {
     auto* response = static_cast<Response*>(self);
     const std::size_t bytes = size * count;
@@ -237,11 +242,18 @@ void HttpFile::KeepResident(std::uint64_t offset, std::uint64_t length) {
   resident_length_ = std::min(length, size_ - offset);
 }
 
+void HttpFile::ThrowIfReadCancelled(std::uint64_t offset, std::size_t length) const {
+  if (!ReadCancelled()) return;
+  throw Error::Io(url_, "bytes " + std::to_string(offset) + "-" + std::to_string(offset + length - 1) +
+                            ": read cancelled (no longer wanted)");
+}
+
 void HttpFile::FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const {
   std::unique_ptr<CurlHandle> handle = CurlHandlePool::Shared().Acquire();
   std::string failure;
   double backoff_s = options_.first_backoff_s;
   for (int attempt = 0;; ++attempt) {
+    ThrowIfReadCancelled(offset, out.size());
     if (TryFetchRange(handle->curl, handle->error, offset, out, opened, failure)) break;
     if (attempt >= options_.retries) {
       throw Error::Io(url_, failure + " (gave up after " + std::to_string(attempt + 1) + " attempts)");
@@ -279,6 +291,8 @@ bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_
   curl_easy_setopt(curl, CURLOPT_WRITEDATA, &response);
   curl_easy_setopt(curl, CURLOPT_HEADERFUNCTION, &Response::OnHeader);
   curl_easy_setopt(curl, CURLOPT_HEADERDATA, &response);
+  curl_easy_setopt(curl, CURLOPT_XFERINFOFUNCTION, &Response::OnProgress);
+  curl_easy_setopt(curl, CURLOPT_NOPROGRESS, 0L);
 
   requests_.fetch_add(1, std::memory_order_relaxed);
   response.code = curl_easy_perform(curl);
@@ -286,6 +300,7 @@ bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_
   bytes_fetched_.fetch_add(response.body_bytes, std::memory_order_relaxed);
 
   const std::string what = "bytes " + range;
+  if (response.code == CURLE_ABORTED_BY_CALLBACK) ThrowIfReadCancelled(offset, out.size());
   if (response.code != CURLE_OK && !(response.code == CURLE_WRITE_ERROR && response.overflow)) {
     failure = what + ": " + (error_buffer[0] != '\0' ? std::string(error_buffer) : curl_easy_strerror(response.code));
     return false;  // no connection, a timeout, a cut transfer: may pass

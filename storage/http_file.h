@@ -8,7 +8,8 @@
 // server while it is read is kCorruption, never a mix of two versions; a
 // server that ignores ranges is kIo saying so. Failures that may pass (no
 // connection, a stalled or cut transfer, 5xx, 429) are retried a bounded
-// number of times, then kIo naming the URL and the last failure.
+// number of times, then kIo naming the URL and the last failure. A read
+// whose caller cancels it (storage/read_cancellation.h) stops its transfer.
 //
 // Thread-safe: each read borrows a libcurl handle from a pool the process's
 // files share, so reads on several threads are several requests in flight,
@@ -96,6 +97,9 @@ class HttpFile final : public ReadableFile {
   // (`opened` not null) the file's size is not known yet: the answer may be
   // shorter than `out` and tells the size and validators.
   void FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const;
+  // Throws kIo "read cancelled" when the read on this thread is
+  // (storage/read_cancellation.h).
+  void ThrowIfReadCancelled(std::uint64_t offset, std::size_t length) const;
   // One attempt. Returns false for a failure worth retrying (described in
   // `failure`); throws for one that is not.
   bool TryFetchRange(void* curl, char* error_buffer, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,

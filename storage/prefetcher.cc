@@ -3,6 +3,8 @@
 #include <sstream>
 #include <utility>
 
+#include "storage/read_cancellation.h"
+
 namespace octocosm {
 
 namespace {
@@ -63,6 +65,7 @@ Prefetcher::~Prefetcher() {
     stats_.cancelled += queue_.size();
     queue_.clear();
     pending_.clear();
+    for (auto& [id, cancelled] : in_flight_) cancelled->store(true, std::memory_order_relaxed);
   }
   work_cv_.SignalAll();
   idle_cv_.SignalAll();
@@ -108,6 +111,12 @@ std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
     }
     for (const auto& [key, id] : queue_) pending_.erase(id);
     stats_.cancelled += queue_.size();
+    // Reads no longer wanted stop; a read wanted again goes on if it has not
+    // stopped yet (else the next Submit queues it again).
+    if (!in_flight_.empty()) {
+      const std::unordered_set<BlockId, BlockIdHash> still_wanted(wanted.begin(), wanted.end());
+      for (auto& [id, cancelled] : in_flight_) cancelled->store(!still_wanted.contains(id), std::memory_order_relaxed);
+    }
     queue_ = std::move(next);
     depth = queue_.size();
   }
@@ -119,7 +128,10 @@ std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
 bool Prefetcher::Add(const BlockId& id, Priority priority) {
   {
     MutexLock lock(mutex_);
-    if (in_flight_.contains(id)) return false;
+    if (auto reading = in_flight_.find(id); reading != in_flight_.end()) {
+      reading->second->store(false, std::memory_order_relaxed);  // wanted after all, if not stopped yet
+      return false;
+    }
     if (auto it = pending_.find(id); it != pending_.end()) {
       queue_.erase(it->second);
       QueueLocked(id, priority);
@@ -139,6 +151,9 @@ bool Prefetcher::Add(const BlockId& id, Priority priority) {
 bool Prefetcher::Cancel(const BlockId& id) {
   {
     MutexLock lock(mutex_);
+    if (auto reading = in_flight_.find(id); reading != in_flight_.end()) {
+      reading->second->store(true, std::memory_order_relaxed);
+    }
     auto it = pending_.find(id);
     if (it == pending_.end()) return false;
     queue_.erase(it->second);
@@ -154,6 +169,7 @@ std::size_t Prefetcher::CancelAll() {
   {
     MutexLock lock(mutex_);
     dropped = queue_.size();
+    for (auto& [reading, cancelled] : in_flight_) cancelled->store(true, std::memory_order_relaxed);
     queue_.clear();
     pending_.clear();
     stats_.cancelled += dropped;
@@ -195,18 +211,22 @@ void Prefetcher::WorkerLoop() {
     const BlockId id = queue_.begin()->second;
     queue_.erase(queue_.begin());
     pending_.erase(id);
-    in_flight_.insert(id);
+    const auto cancelled = std::make_shared<std::atomic<bool>>(false);
+    in_flight_.emplace(id, cancelled);
     lock.Unlock();
 
     bool was_resident = false;
+    bool stopped = false;  // cancelled while read
     std::optional<Error> error;
     try {
+      const ReadCancellationScope scope(cancelled.get());
       // The handle Get() returns is dropped at once: prefetched blocks wait
       // in the cache unpinned.
       was_resident = cache_.Touch(id);
       if (!was_resident) cache_.Get(id);
     } catch (const Error& e) {
-      error = ThreadOwnCopy(e);
+      stopped = cancelled->load(std::memory_order_relaxed);
+      if (!stopped) error = ThreadOwnCopy(e);
     } catch (const std::exception& e) {
       // A BlockSource should throw only Error; keep anything else (e.g.
       // bad_alloc) from escaping the thread, which would terminate.
@@ -217,7 +237,7 @@ void Prefetcher::WorkerLoop() {
     }
 
     bool callback_threw = false;
-    if (on_complete_) {
+    if (on_complete_ && !stopped) {
       try {
         on_complete_(id, error ? &*error : nullptr);
       } catch (...) {
@@ -227,7 +247,9 @@ void Prefetcher::WorkerLoop() {
 
     lock.Lock();
     in_flight_.erase(id);
-    if (error) {
+    if (stopped) {
+      ++stats_.cancelled;
+    } else if (error) {
       ++stats_.failed;
       errors_.insert_or_assign(id, ThreadOwnCopy(*error));
     } else {

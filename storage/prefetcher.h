@@ -3,10 +3,11 @@
 //
 // The intended caller is a renderer that, each frame, knows the blocks it
 // wants in order of importance. It hands the whole list to Submit(), which
-// REPLACES the pending queue: blocks no longer wanted are cancelled if no
-// worker has started them, blocks still wanted are re-ranked, blocks already
-// resident are skipped (counted as hits), and blocks being read stay in
-// flight. Single requests can also be added with Add(), and withdrawn with
+// REPLACES the pending queue: blocks no longer wanted are cancelled (if a
+// worker is reading one from a server, its transfer stops:
+// storage/read_cancellation.h), blocks still wanted are re-ranked, blocks
+// already resident are skipped (counted as hits), and blocks being read stay
+// in flight. Single requests can also be added with Add(), and withdrawn with
 // Cancel() / CancelAll().
 //
 // Priority. A lower Priority value is more important. Submit() ranks its list
@@ -26,15 +27,17 @@
 //
 // Concurrency. All public methods are thread-safe. Submit/Add/Cancel/
 // CancelAll/Stats/LastError never block on I/O; WaitFor() and Drain() block
-// until the named work is done. The destructor drops pending requests, waits
-// for reads already in flight to finish and joins the workers; the cache must
-// outlive the Prefetcher.
+// until the named work is done. The destructor drops pending requests, stops
+// reads in flight from a server, waits for the others to finish and joins
+// the workers; the cache must outlive the Prefetcher.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -64,7 +67,7 @@ struct PrefetchStats {
   std::uint64_t completed = 0;       // read into the cache by a worker
   std::uint64_t found_resident = 0;  // resident by the time a worker started them
   std::uint64_t failed = 0;          // their read threw
-  std::uint64_t cancelled = 0;       // dropped before a worker started them
+  std::uint64_t cancelled = 0;       // dropped before a worker started them, or stopped while read
   std::uint64_t callback_errors = 0;  // completion callbacks that threw (swallowed)
 
   std::string ToString() const;
@@ -104,11 +107,12 @@ class Prefetcher {
   // nothing was queued because the block is resident or already in flight.
   bool Add(const BlockId& id, Priority priority) EXCLUDES(mutex_);
 
-  // Drops a pending request; returns whether one was pending. A request
-  // already in flight is not interrupted.
+  // Drops a pending request, or stops one in flight from a server; returns
+  // whether one was pending.
   bool Cancel(const BlockId& id) EXCLUDES(mutex_);
 
-  // Drops every pending request; returns how many there were.
+  // Drops every pending request and stops those in flight from a server;
+  // returns how many were pending.
   std::size_t CancelAll() EXCLUDES(mutex_);
 
   // Blocks until `id` is neither pending nor in flight (at once if it never
@@ -148,7 +152,8 @@ class Prefetcher {
   std::uint64_t next_sequence_ GUARDED_BY(mutex_) = 0;
   Queue queue_ GUARDED_BY(mutex_);
   std::unordered_map<BlockId, Queue::iterator, BlockIdHash> pending_ GUARDED_BY(mutex_);
-  std::unordered_set<BlockId, BlockIdHash> in_flight_ GUARDED_BY(mutex_);
+  // Requests a worker is reading, each with the flag that cancels its read.
+  std::unordered_map<BlockId, std::shared_ptr<std::atomic<bool>>, BlockIdHash> in_flight_ GUARDED_BY(mutex_);
   std::unordered_map<BlockId, Error, BlockIdHash> errors_ GUARDED_BY(mutex_);
   PrefetchStats stats_ GUARDED_BY(mutex_);
   // Last member: destroyed (joined) first, while everything above is alive.

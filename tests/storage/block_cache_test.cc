@@ -4,11 +4,14 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <optional>
 #include <random>
 #include <thread>
 #include <vector>
 
 #include "base/error.h"
+#include "storage/read_cancellation.h"
 #include "tests/storage/cache_test_source.h"
 
 namespace octocosm {
@@ -244,6 +247,42 @@ TEST(BlockCacheTest, SourceErrorReachesEveryWaiterAndIsNotCached) {
   source.ClearFailure(Block(5));
   EXPECT_EQ(cache.Get(Block(5)).bytes(), CacheTestSource::ContentOf(Block(5), 64));
   EXPECT_EQ(source.ReadsOf(Block(5)), 2u);
+}
+
+// A read its reader cancels (a prefetch no longer wanted,
+// storage/read_cancellation.h) throws to that reader only: a Get() waiting
+// on it did not cancel, and reads the block itself.
+TEST(BlockCacheTest, AWaiterOnACancelledReadReadsTheBlockItself) {
+  CacheTestSource source(64);
+  BlockCache cache(&source, 1 << 20);
+  source.SilentOnce(Block(5));
+  std::atomic<bool> cancelled{false};
+  std::optional<Error> reader_error;
+  std::optional<Bytes> waited;
+  std::jthread reader([&] {
+    const ReadCancellationScope scope(&cancelled);
+    try {
+      cache.Get(Block(5));
+    } catch (const Error& e) {
+      reader_error = e;
+    }
+  });
+  ASSERT_TRUE(source.WaitForReadsStarted(1));
+  std::jthread waiter([&] { waited = cache.Get(Block(5)).bytes(); });
+  for (int spins = 0; cache.Stats().misses < 2 && spins < 20'000; ++spins) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ(cache.Stats().misses, 2u);
+  cancelled = true;
+  reader.join();
+  waiter.join();
+  ASSERT_TRUE(reader_error.has_value());
+  EXPECT_NE(std::string(reader_error->what()).find("read cancelled"), std::string::npos) << reader_error->what();
+  ASSERT_TRUE(waited.has_value());
+  EXPECT_EQ(*waited, CacheTestSource::ContentOf(Block(5), 64));
+  EXPECT_EQ(source.ReadsOf(Block(5)), 2u);
+  EXPECT_TRUE(cache.Contains(Block(5)));
+  EXPECT_EQ(cache.Stats().read_failures, 0u);
 }
 
 TEST(BlockCacheTest, NotFoundFromTheSourcePropagatesWithItsKind) {

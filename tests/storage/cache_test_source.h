@@ -5,6 +5,7 @@
 // deterministically.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstddef>
@@ -16,6 +17,7 @@
 
 #include "base/error.h"
 #include "storage/block_source.h"
+#include "storage/read_cancellation.h"
 
 namespace octocosm::cachetest {
 
@@ -50,6 +52,15 @@ class CacheTestSource : public BlockSource {
   void ClearFailure(const BlockId& id) {
     std::lock_guard lock(mutex_);
     failures_.erase(id);
+  }
+
+  // The next read of `id` behaves as a read from a silent server: it waits
+  // until the reading thread's read is cancelled
+  // (storage/read_cancellation.h), then throws kIo "read cancelled". Later
+  // reads return the block as usual.
+  void SilentOnce(const BlockId& id) {
+    std::lock_guard lock(mutex_);
+    silent_.push_back(id);
   }
 
   void SetDelay(std::chrono::microseconds delay) {
@@ -97,6 +108,7 @@ class CacheTestSource : public BlockSource {
     std::optional<Error> failure;
     std::chrono::microseconds delay{};
     std::size_t size = 0;
+    bool silent = false;
     {
       std::unique_lock lock(mutex_);
       order_.push_back(id);
@@ -105,11 +117,22 @@ class CacheTestSource : public BlockSource {
       changed_.wait(lock, [&] { return gate_open_; });
       if (auto it = failures_.find(id); it != failures_.end()) failure = it->second;
       delay = delay_;
+      if (auto it = std::find(silent_.begin(), silent_.end(), id); it != silent_.end()) {
+        silent = true;
+        silent_.erase(it);
+      }
       auto size_it = sizes_.find(id);
       size = size_it == sizes_.end() ? default_size_ : size_it->second;
     }
     if (delay.count() > 0) std::this_thread::sleep_for(delay);
     if (failure) throw *failure;
+    if (silent) {
+      const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);  // a bug fails, not hangs
+      while (!ReadCancelled() && std::chrono::steady_clock::now() < give_up) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      throw Error::Io("test server", "read cancelled (no longer wanted)");
+    }
     return ContentOf(id, size);
   }
 
@@ -120,6 +143,7 @@ class CacheTestSource : public BlockSource {
   std::unordered_map<BlockId, std::size_t, BlockIdHash> sizes_;
   std::unordered_map<BlockId, Error, BlockIdHash> failures_;
   std::chrono::microseconds delay_{0};
+  mutable std::vector<BlockId> silent_;  // taken by the read they silence
   bool gate_open_ = true;
   mutable std::vector<BlockId> order_;
   mutable std::unordered_map<BlockId, std::size_t, BlockIdHash> reads_;

@@ -7,11 +7,13 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <random>
 #include <thread>
 
 #include "base/error.h"
+#include "storage/read_cancellation.h"
 #include "tests/support/fake_http_server.h"
 
 namespace octocosm {
@@ -227,6 +229,48 @@ TEST(HttpFile, ASilentServerTimesOut) {
   EXPECT_EQ(e.kind(), ErrorKind::kIo);
   EXPECT_NE(std::string(e.what()).find("gave up"), std::string::npos) << e.what();
   EXPECT_LT(seconds, 30.0);  // 3 attempts of a 1 s stall limit each, and the backoff
+}
+
+// A read whose caller cancels it (a prefetch no longer wanted) stops while
+// the server keeps it waiting: at once, not after the stall limit, and with
+// no retry. The same file reads on afterwards.
+TEST(HttpFile, ACancelledReadStopsItsTransferAndIsNotRetried) {
+  FakeHttpServer server;
+  const std::string contents = RandomBytes(1 << 20, 10);
+  server.Put("/f", contents);
+  HttpOptions options;
+  options.stall_timeout_s = 20;
+  auto file = HttpFile::Open(server.Url("/f"), options);
+  server.SetScript([](const FakeHttpServer::Request&) { return FakeHttpServer::Behaviour{Answer::kSilence}; });
+  const int requests_before = server.requests();
+  std::atomic<bool> cancelled{false};
+  std::thread canceller([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    cancelled = true;
+  });
+  const auto start = std::chrono::steady_clock::now();
+  const Error e = ErrorOf([&] {
+    const ReadCancellationScope scope(&cancelled);
+    Read(*file, 400000, 70000);
+  });
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  canceller.join();
+  EXPECT_EQ(e.kind(), ErrorKind::kIo);
+  EXPECT_NE(std::string(e.what()).find("read cancelled"), std::string::npos) << e.what();
+  EXPECT_NE(std::string(e.what()).find(server.Url("/f")), std::string::npos) << e.what();
+  EXPECT_GE(seconds, 0.2);
+  EXPECT_LT(seconds, 2.5);  // libcurl asks at least once a second while nothing moves
+  EXPECT_EQ(server.requests() - requests_before, 1);
+  {
+    // Already cancelled: no request at all. (The head, fetched at open, is
+    // no request either.)
+    const ReadCancellationScope scope(&cancelled);
+    EXPECT_NE(std::string(ErrorOf([&] { Read(*file, 600000, 100); }).what()).find("read cancelled"), std::string::npos);
+    EXPECT_EQ(Read(*file, 0, 100), contents.substr(0, 100));
+  }
+  EXPECT_EQ(server.requests() - requests_before, 1);
+  server.SetScript([](const FakeHttpServer::Request&) { return FakeHttpServer::Behaviour{}; });
+  EXPECT_EQ(Read(*file, 400000, 70000), contents.substr(400000, 70000));
 }
 
 TEST(HttpFile, AServerThatIsNotThereIsAnIoErrorNamingTheUrl) {

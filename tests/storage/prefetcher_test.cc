@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <memory>
 #include <random>
 #include <thread>
@@ -188,7 +189,7 @@ TEST(PrefetcherTest, CancelledRequestsAreNeverRead) {
 
   EXPECT_TRUE(prefetcher.Cancel(Block(3)));
   EXPECT_FALSE(prefetcher.Cancel(Block(3)));   // no longer pending
-  EXPECT_FALSE(prefetcher.Cancel(Block(1)));   // in flight: not interrupted
+  EXPECT_FALSE(prefetcher.Cancel(Block(1)));   // in flight, not pending (a read from a server would stop)
   EXPECT_FALSE(prefetcher.Cancel(Block(77)));  // never asked for
   prefetcher.WaitFor(Block(3));                // returns at once: not pending
   EXPECT_EQ(prefetcher.Stats().queue_depth, 4u);
@@ -202,6 +203,70 @@ TEST(PrefetcherTest, CancelledRequestsAreNeverRead) {
   EXPECT_EQ(stats.cancelled, 5u);
   EXPECT_EQ(stats.completed, 1u);
   ExpectAccountingBalances(stats);
+}
+
+// A block read from a server that the next Submit no longer wants stops
+// while the server keeps it waiting: counted as cancelled, not as a failure,
+// no error remembered, no callback. Wanted again, it is read anew.
+TEST(PrefetcherTest, AReadFromAServerNoLongerWantedStops) {
+  CacheTestSource source;
+  BlockCache cache(&source, 1 << 20);
+  std::atomic<int> callbacks{0};
+  Prefetcher::Options options = Workers(1);
+  options.on_complete = [&](const BlockId&, const Error*) { ++callbacks; };
+  Prefetcher prefetcher(cache, options);
+  source.SilentOnce(Block(1));
+  prefetcher.Submit(Blocks({1, 2}));
+  ASSERT_TRUE(source.WaitForReadsStarted(1));
+  prefetcher.Submit(Blocks({2}));
+  prefetcher.Drain();
+  PrefetchStats stats = prefetcher.Stats();
+  EXPECT_EQ(stats.cancelled, 1u) << stats.ToString();
+  EXPECT_EQ(stats.completed, 1u) << stats.ToString();
+  EXPECT_EQ(stats.failed, 0u) << stats.ToString();
+  ExpectAccountingBalances(stats);
+  EXPECT_FALSE(prefetcher.LastError(Block(1)).has_value());
+  EXPECT_EQ(callbacks.load(), 1);
+  EXPECT_FALSE(cache.Contains(Block(1)));
+  EXPECT_TRUE(cache.Contains(Block(2)));
+  EXPECT_EQ(cache.Stats().read_failures, 0u);
+
+  prefetcher.Submit(Blocks({1}));
+  prefetcher.Drain();
+  EXPECT_TRUE(cache.Contains(Block(1)));
+  EXPECT_EQ(source.ReadsOf(Block(1)), 2u);
+  stats = prefetcher.Stats();
+  EXPECT_EQ(stats.completed, 2u) << stats.ToString();
+  ExpectAccountingBalances(stats);
+}
+
+// Cancel() and CancelAll() stop reads in flight from a server too; the
+// destructor stops them rather than waiting for the server.
+TEST(PrefetcherTest, CancelAndDestructionStopReadsInFlight) {
+  CacheTestSource source;
+  BlockCache cache(&source, 1 << 20);
+  {
+    Prefetcher prefetcher(cache, Workers(2));
+    source.SilentOnce(Block(1));
+    source.SilentOnce(Block(2));
+    prefetcher.Submit(Blocks({1, 2}));
+    ASSERT_TRUE(source.WaitForReadsStarted(2));
+    EXPECT_FALSE(prefetcher.Cancel(Block(1)));  // in flight, not pending
+    prefetcher.WaitFor(Block(1));
+    EXPECT_EQ(prefetcher.Stats().cancelled, 1u);
+    EXPECT_EQ(prefetcher.CancelAll(), 0u);
+    prefetcher.Drain();
+    EXPECT_EQ(prefetcher.Stats().cancelled, 2u);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  {
+    Prefetcher prefetcher(cache, Workers(1));
+    source.SilentOnce(Block(3));
+    prefetcher.Submit(Blocks({3}));
+    ASSERT_TRUE(source.WaitForReadsStarted(3));
+  }
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));  // the silent read gives up at 20 s
+  EXPECT_EQ(cache.Stats().entries, 0u);
 }
 
 TEST(PrefetcherTest, FailuresAreCountedAndRememberedNotThrown) {
