@@ -12,6 +12,10 @@
 //                   centre) through every epoch, as `octocosm follow` finds
 //                   them, from the directory and from the URL, each store
 //                   opened afresh.
+//   query           every point of a box an eighth of the cube wide at the
+//                   first epoch's centre, at full detail (as `octocosm
+//                   query --box`), from the directory and from the URL, each
+//                   store opened afresh.
 //   many clients    --clients processes, each its own path and link, all at
 //                   once against one nginx; each one's rate against one
 //                   client's alone (measured the same way just before), and
@@ -40,6 +44,7 @@
 #include "bench/throttled_proxy.h"
 #include "index/dataset.h"
 #include "query/particle_lookup.h"
+#include "query/query.h"
 #include "query/region.h"
 #include "render/gl_context.h"
 #include "render/offscreen_renderer.h"
@@ -66,6 +71,7 @@ struct Flags {
   double error = 2;
   std::string backend = "osmesa";
   int follow = 100;
+  bool query = true;
   // Client mode (the bench starts itself so): render this URL's path `variant`.
   std::string client_url;
   int variant = 0;
@@ -213,6 +219,31 @@ FollowRun Follow(const std::string& store, std::span<const std::uint64_t> ids) {
   return run;
 }
 
+struct QueryRun {
+  double seconds = 0;  // opening the store and reading every point of the box
+  std::uint64_t points = 0;
+  std::uint64_t blocks = 0;
+};
+
+QueryRun QueryBox(const std::string& store) {
+  const auto start = Clock::now();
+  const Dataset dataset = Dataset::Open(store);
+  const Cube& cube = dataset.cube(0);
+  std::array<double, 3> lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = cube.origin[a] + cube.size * (0.5 - 1.0 / 16);
+    hi[a] = cube.origin[a] + cube.size * (0.5 + 1.0 / 16);
+  }
+  const std::unique_ptr<Region> box = MakeBoxRegion(lo, hi, cube);
+  QueryOptions options;
+  options.level = kMaxLevel;
+  QueryRun run;
+  const QueryStats stats = RunQuery(dataset, *box, options, [&](const QueryBatch& batch) { run.points += batch.count; });
+  run.seconds = Seconds(start);
+  run.blocks = stats.reads.blocks;
+  return run;
+}
+
 void PrintRun(const char* what, const PathRun& r, double bytes_per_frame) {
   std::printf("%-28s %10.2f %10.2f %10.2f %10.3f %14.0f\n", what, r.open_and_first_s, r.first_pass_fps, r.warm_fps,
               r.new_view_s, bytes_per_frame);
@@ -243,6 +274,19 @@ void Coordinate(const Flags& f) {
                 remote.warm_fps / local.warm_fps);
   }
   std::fflush(stdout);
+
+  if (f.query) {
+    const QueryRun local_query = QueryBox(f.store);
+    auto trunk = std::make_shared<PacedLink>(shared_rate);
+    ThrottledProxy proxy(nginx.port(), f.rtt_ms / 1e3, rate, trunk);
+    const QueryRun remote_query = QueryBox(StoreUrl(proxy.port(), f));
+    std::printf("query a box of 1/512 of the cube at full detail (%llu points, %llu blocks): local %.3f s, remote "
+                "%.3f s (%.1f round trips), %.1f MB fetched\n",
+                static_cast<unsigned long long>(remote_query.points), static_cast<unsigned long long>(remote_query.blocks),
+                local_query.seconds, remote_query.seconds, remote_query.seconds / (f.rtt_ms / 1e3),
+                static_cast<double>(proxy.bytes_to_client()) / 1e6);
+    std::fflush(stdout);
+  }
 
   const Dataset local_dataset = Dataset::Open(f.store);
   if (f.follow > 0 && local_dataset.has_id_index()) {
@@ -297,6 +341,7 @@ int main(int argc, char** argv) {
   app.add_option("--error", f.error, "screen-space error threshold, pixels")->default_val(2);
   app.add_option("--backend", f.backend, "osmesa or egl (a GPU)")->default_val("osmesa");
   app.add_option("--follow", f.follow, "IDs to follow through the epochs (0: none; stores with IDs)")->default_val(100);
+  app.add_flag("!--no-query", f.query, "skip the box query");
   app.add_option("--client", f.client_url, "(used by the bench itself) render this store URL's path and print figures");
   app.add_option("--variant", f.variant, "(with --client) which camera path")->default_val(0);
   CLI11_PARSE(app, argc, argv);
