@@ -12,6 +12,7 @@
 
 #include "base/error.h"
 #include "storage/file.h"
+#include "storage/page_file_reader.h"
 
 namespace octocosm {
 namespace {
@@ -98,6 +99,7 @@ StoreWriter::StoreWriter(std::string directory, nlohmann::json dataset, nlohmann
   }
   LockDirectory();
   manifest_.store_id = options.store_id != 0 ? options.store_id : RandomStoreId();
+  first_epoch_ = options.first_epoch;
   manifest_.page_size = options.page_size;
   manifest_.dataset = std::move(dataset);
   manifest_.attribute_schema = std::move(attribute_schema);
@@ -223,7 +225,7 @@ std::uint32_t StoreWriter::BeginEpoch(double time, double redshift) {
     throw Error::InvalidArgument("epoch time and redshift must be finite numbers");
   }
   EpochInfo info;
-  info.epoch = static_cast<std::uint32_t>(manifest_.epochs.size());
+  info.epoch = first_epoch_ + static_cast<std::uint32_t>(manifest_.epochs.size());
   info.file = EpochFileName(info.epoch);
   info.time = time;
   info.redshift = redshift;
@@ -258,6 +260,10 @@ void StoreWriter::SetDataset(nlohmann::json dataset) {
 
 void StoreWriter::Finish() {
   RequireUnfinished("Finish");
+  if (first_epoch_ != 0) {
+    throw Error::InvalidArgument("Finish on " + directory_ + ", a part of a store from epoch " +
+                                 std::to_string(first_epoch_) + "; call FinishPart");
+  }
   if (open_epoch_) {
     throw Error::InvalidArgument("Finish while epoch " + std::to_string(open_epoch_->epoch) + " of " +
                                  directory_ + " is open; call EndEpoch first");
@@ -279,6 +285,51 @@ void StoreWriter::Finish() {
   finished_bytes_ += text.size();
   finished_ = true;
   UnlockDirectory();
+}
+
+std::vector<EpochInfo> StoreWriter::FinishPart() {
+  RequireUnfinished("FinishPart");
+  if (open_epoch_) {
+    throw Error::InvalidArgument("FinishPart while epoch " + std::to_string(open_epoch_->epoch) + " of " +
+                                 directory_ + " is open; call EndEpoch first");
+  }
+  SyncDirectory(directory_);
+  finished_ = true;
+  UnlockDirectory();
+  return manifest_.epochs;
+}
+
+void StoreWriter::AdoptEpochs(const std::string& part_directory, const std::vector<EpochInfo>& epochs) {
+  RequireUnfinished("AdoptEpochs");
+  if (open_epoch_) {
+    throw Error::InvalidArgument("AdoptEpochs while epoch " + std::to_string(open_epoch_->epoch) + " of " +
+                                 directory_ + " is open; call EndEpoch first");
+  }
+  for (const EpochInfo& epoch : epochs) {
+    const std::uint32_t expected = first_epoch_ + static_cast<std::uint32_t>(manifest_.epochs.size());
+    const std::string from = JoinPath(part_directory, epoch.file);
+    if (epoch.epoch != expected || epoch.file != EpochFileName(epoch.epoch)) {
+      throw Error::InvalidArgument("adopting " + from + " as epoch " + std::to_string(epoch.epoch) + " of " +
+                                   directory_ + ", whose next epoch is " + std::to_string(expected));
+    }
+    {
+      const std::unique_ptr<PageFileReader> reader = PageFileReader::Open(from);
+      const PageFileHeader& header = reader->header();
+      if (header.store_id != manifest_.store_id || header.epoch != epoch.epoch ||
+          header.page_size != manifest_.page_size || reader->block_count() != epoch.block_count ||
+          header.file_size() != epoch.file_size) {
+        throw Error::InvalidArgument("adopting " + from + " into " + directory_ +
+                                     ": its header or size is not that of the part's epoch " +
+                                     std::to_string(epoch.epoch) + " of this store");
+      }
+    }
+    const std::string to = JoinPath(directory_, epoch.file);
+    RenameFile(from, to);
+    created_files_.push_back(to);
+    finished_bytes_ += epoch.file_size;
+    manifest_.epochs.push_back(epoch);
+  }
+  SyncDirectory(directory_);
 }
 
 std::uint64_t StoreWriter::bytes_written() const {

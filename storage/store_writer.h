@@ -49,6 +49,11 @@ struct StoreWriterOptions {
   // 0: draw a random id (the normal case). Tests fix it to build two stores
   // that differ in nothing else.
   std::uint64_t store_id = 0;
+  // The number of the first epoch this writer writes. Above 0 for a part of
+  // a store that several processes write (FinishPart, AdoptEpochs): each
+  // writes a share of the epochs under their final numbers and the store's
+  // id, and one of them adopts the others' page files.
+  std::uint32_t first_epoch = 0;
 };
 
 class StoreWriter {
@@ -79,6 +84,18 @@ class StoreWriter {
   // epoch still open is an error (kInvalidArgument): end it first.
   void Finish();
 
+  // For a part (StoreWriterOptions::first_epoch): ends without a manifest,
+  // leaving the page files for the store's writer to adopt, and returns
+  // them. From now on the writer removes nothing; whoever holds the part's
+  // directory removes what is never adopted.
+  std::vector<EpochInfo> FinishPart();
+  // Moves the page files of `epochs` (from a part's FinishPart, in order)
+  // from `part_directory` into this store as its next epochs. Checks that
+  // each file is there with its size, this store's id and the epoch's
+  // number: kInvalidArgument otherwise. Removed again, like this writer's
+  // own, if the store is never finished.
+  void AdoptEpochs(const std::string& part_directory, const std::vector<EpochInfo>& epochs);
+
   std::uint64_t store_id() const { return manifest_.store_id; }
   // Bytes written to all files so far, the manifest included once written.
   std::uint64_t bytes_written() const;
@@ -93,6 +110,7 @@ class StoreWriter {
 
   const std::string directory_;
   Manifest manifest_;
+  std::uint32_t first_epoch_ = 0;
   std::optional<PageFileWriter> epoch_writer_;
   std::optional<EpochInfo> open_epoch_;
   std::vector<std::string> created_files_;  // finished page files, removed if never committed

@@ -107,6 +107,91 @@ TEST(Store, MultiEpochRoundTrip) {
   }
 }
 
+// Several processes write one store: each a part of its epochs under their
+// final numbers, and the store's writer adopts the parts' page files.
+TEST(Store, PartsAdoptedInOrderMakeTheStoreOneWriterMakes) {
+  const std::uint32_t page_size = 4096;
+  StoreWriterOptions options;
+  options.page_size = page_size;
+  options.store_id = 0x5eed;
+  ScratchDirectory whole_dir, store_dir;
+  const StoreContents contents = WriteStore(whole_dir.path(), page_size, 3, 40, 7, options);
+  // The same blocks, epoch 0 by the store's writer, epochs 1 and 2 by a part.
+  StoreWriter store(store_dir.path(), kDataset, kSchema, options);
+  auto write_epoch = [&](StoreWriter& writer, std::uint32_t epoch) {
+    EXPECT_EQ(writer.BeginEpoch(0.25 * (epoch + 1), 3.0 / (epoch + 1) - 1.0), epoch);
+    for (const auto& [key, info] : contents[epoch]) writer.AddBlock(key, BlockContent(epoch, key, info.first), info.second);
+    writer.EndEpoch();
+  };
+  write_epoch(store, 0);
+  const std::string part_dir = store_dir.path() + "/part-1";
+  StoreWriterOptions part_options = options;
+  part_options.first_epoch = 1;
+  std::vector<EpochInfo> part_epochs;
+  {
+    StoreWriter part(part_dir, nlohmann::json::object(), nlohmann::json::object(), part_options);
+    write_epoch(part, 1);
+    write_epoch(part, 2);
+    ExpectError(ErrorKind::kInvalidArgument, [&] { part.Finish(); });
+    part_epochs = part.FinishPart();
+  }
+  ASSERT_EQ(part_epochs.size(), 2u);
+  EXPECT_EQ(part_epochs[0].epoch, 1u);
+  EXPECT_TRUE(std::filesystem::exists(part_dir + "/epoch-00002.pages"));  // kept for adoption
+  EXPECT_FALSE(std::filesystem::exists(part_dir + "/" + kWriterLockFileName));
+  // Out of order, or another store's files: refused, nothing moved.
+  std::string message = ExpectError(ErrorKind::kInvalidArgument, [&] {
+    store.AdoptEpochs(part_dir, {part_epochs[1]});
+  });
+  EXPECT_NE(message.find("next epoch is 1"), std::string::npos) << message;
+  store.AdoptEpochs(part_dir, part_epochs);
+  EXPECT_FALSE(std::filesystem::exists(part_dir + "/epoch-00001.pages"));
+  store.Finish();
+  std::filesystem::remove(part_dir);
+
+  const StoreReader reader = StoreReader::Open(store_dir.path());
+  ExpectStoreReadsBack(reader, contents);
+  const StoreReader whole = StoreReader::Open(whole_dir.path());
+  EXPECT_EQ(reader.manifest_json(), whole.manifest_json());
+  for (std::uint32_t epoch = 0; epoch < 3; ++epoch) {
+    const std::string name = "/" + EpochFileName(epoch);
+    EXPECT_EQ(storagetest::FileSize(store_dir.path() + name), storagetest::FileSize(whole_dir.path() + name));
+  }
+}
+
+// A part that another store's id marks, or a store never finished, leaves
+// nothing in the store's directory.
+TEST(Store, AdoptedEpochsOfAnUnfinishedStoreAreRemoved) {
+  ScratchDirectory dir;
+  const std::string store_dir = dir.path() + "/store", part_dir = dir.path() + "/part";
+  StoreWriterOptions part_options;
+  part_options.first_epoch = 0;
+  part_options.store_id = 1111;
+  std::vector<EpochInfo> part_epochs;
+  {
+    StoreWriter part(part_dir, nlohmann::json::object(), nlohmann::json::object(), part_options);
+    part.BeginEpoch(0, 0);
+    part.AddBlock(1, BlockContent(0, 1, 100), 1);
+    part.EndEpoch();
+    part_epochs = part.FinishPart();
+  }
+  {
+    StoreWriterOptions options;
+    options.store_id = 2222;
+    StoreWriter store(store_dir, kDataset, kSchema, options);
+    const std::string message = ExpectError(ErrorKind::kInvalidArgument, [&] { store.AdoptEpochs(part_dir, part_epochs); });
+    EXPECT_NE(message.find("not that of the part"), std::string::npos) << message;
+  }
+  {
+    StoreWriterOptions options;
+    options.store_id = 1111;
+    StoreWriter store(store_dir, kDataset, kSchema, options);
+    store.AdoptEpochs(part_dir, part_epochs);
+    EXPECT_TRUE(std::filesystem::exists(store_dir + "/epoch-00000.pages"));
+  }
+  EXPECT_FALSE(std::filesystem::exists(store_dir));
+}
+
 TEST(Store, OpenReadsOnlyManifestAndHeaders) {
   ScratchDirectory dir;
   WriteStore(dir.path(), 4096, 4, 500, 1);
