@@ -18,32 +18,34 @@ std::optional<double> EpochRecord::ScaleFactor() const {
   return std::nullopt;
 }
 
+nlohmann::json EpochRecord::ToJson(std::size_t epoch_number) const {
+  const EpochRecord& r = *this;
+  nlohmann::json epoch = {{"epoch", epoch_number},
+                          {"input", r.input},
+                          {"cube", {{"origin", r.cube.origin}, {"size", r.cube.size}, {"periodic", r.cube.periodic}}},
+                          {"points", r.summary.points},
+                          {"missing_in_next", r.missing_in_next},
+                          {"missing_in_prev", r.missing_in_prev},
+                          {"duplicate_ids", r.duplicate_ids}};
+  if (r.summary.mass) epoch["mass"] = *r.summary.mass;
+  if (r.summary.nodes) epoch["nodes"] = *r.summary.nodes;
+  if (r.summary.leaves) epoch["leaves"] = *r.summary.leaves;
+  if (r.summary.depth) epoch["depth"] = *r.summary.depth;
+  if (r.to_next) {
+    const EpochLink& link = *r.to_next;
+    epoch["to_next"] = {{"velocity_scale", link.velocity_scale},
+                        {"fit_residual", link.fit_residual},
+                        {"least_squares_scale", link.least_squares_scale},
+                        {"inlier_fraction", link.inlier_fraction},
+                        {"matched", link.matched},
+                        {"max_excursion", link.max_excursion}};
+  }
+  return epoch;
+}
+
 nlohmann::json DatasetManifest::ToJson() const {
   nlohmann::json epoch_list = nlohmann::json::array();
-  for (std::size_t e = 0; e < epochs.size(); ++e) {
-    const EpochRecord& r = epochs[e];
-    nlohmann::json epoch = {{"epoch", e},
-                            {"input", r.input},
-                            {"cube", {{"origin", r.cube.origin}, {"size", r.cube.size}, {"periodic", r.cube.periodic}}},
-                            {"points", r.summary.points},
-                            {"missing_in_next", r.missing_in_next},
-                            {"missing_in_prev", r.missing_in_prev},
-                            {"duplicate_ids", r.duplicate_ids}};
-    if (r.summary.mass) epoch["mass"] = *r.summary.mass;
-    if (r.summary.nodes) epoch["nodes"] = *r.summary.nodes;
-    if (r.summary.leaves) epoch["leaves"] = *r.summary.leaves;
-    if (r.summary.depth) epoch["depth"] = *r.summary.depth;
-    if (r.to_next) {
-      const EpochLink& link = *r.to_next;
-      epoch["to_next"] = {{"velocity_scale", link.velocity_scale},
-                          {"fit_residual", link.fit_residual},
-                          {"least_squares_scale", link.least_squares_scale},
-                          {"inlier_fraction", link.inlier_fraction},
-                          {"matched", link.matched},
-                          {"max_excursion", link.max_excursion}};
-    }
-    epoch_list.push_back(std::move(epoch));
-  }
+  for (std::size_t e = 0; e < epochs.size(); ++e) epoch_list.push_back(epochs[e].ToJson(e));
   return {{"generator", generator},
           {"capacity", capacity},
           {"max_level", max_level},
@@ -62,9 +64,7 @@ nlohmann::json DatasetManifest::ToJson() const {
           {"epochs", std::move(epoch_list)}};
 }
 
-namespace {
-
-EpochRecord EpochFromJson(const nlohmann::json& epoch) {
+EpochRecord EpochRecord::FromJson(const nlohmann::json& epoch) {
   EpochRecord r;
   const auto& c = epoch.at("cube");
   r.cube = Cube{c.at("origin").get<std::array<double, 3>>(), c.at("size").get<double>(), c.at("periodic").get<bool>()};
@@ -86,8 +86,6 @@ EpochRecord EpochFromJson(const nlohmann::json& epoch) {
   if (epoch.contains("input")) r.input = epoch.at("input");
   return r;
 }
-
-}  // namespace
 
 DatasetManifest DatasetManifest::FromJson(const nlohmann::json& json, const std::string& path) {
   DatasetManifest m;
@@ -117,7 +115,7 @@ DatasetManifest DatasetManifest::FromJson(const nlohmann::json& json, const std:
     m.has_velocity_dispersion = json.value("has_velocity_dispersion", false);
     m.has_shape = json.value("has_shape", false);
     m.id_index = json.value("id_index", std::string());
-    for (const auto& epoch : json.at("epochs")) m.epochs.push_back(EpochFromJson(epoch));
+    for (const auto& epoch : json.at("epochs")) m.epochs.push_back(EpochRecord::FromJson(epoch));
   } catch (const nlohmann::json::exception& e) {
     throw Error::Corruption(path, std::string("dataset metadata is not what octocosm ingest writes: ") + e.what());
   } catch (const Error& e) {

@@ -59,6 +59,13 @@ struct EpochRecord {
   // The scale factor of the epoch's snapshot: its recorded time where the
   // header says the run is cosmological (or 1 / (1 + z) without a time).
   std::optional<double> ScaleFactor() const;
+
+  // As the dataset manifest's epoch `epoch_number`. FromJson throws
+  // nlohmann::json's exceptions for missing members or wrong types, and
+  // kInvalidArgument for an impossible cube (DatasetManifest::FromJson
+  // turns both into kCorruption naming the file).
+  nlohmann::json ToJson(std::size_t epoch_number) const;
+  static EpochRecord FromJson(const nlohmann::json& json);
 };
 
 struct DatasetManifest {

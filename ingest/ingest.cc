@@ -479,15 +479,20 @@ struct ChunkedEpoch {
 // to the next. Ingest() below reads as its steps.
 class IngestRun {
  public:
-  explicit IngestRun(const IngestOptions& options);
+  // The whole series into options.output, or a share of it into a part's
+  // directory (IngestShareInto).
+  explicit IngestRun(const IngestOptions& options, const IngestShare* share = nullptr,
+                     const std::string& part_directory = "");
   void IngestEpoch(std::size_t e);
   IngestReport Finish();
+  IngestPart FinishPart();
 
  private:
   std::unique_ptr<ParticleSource> Smooth(std::unique_ptr<ParticleSource> raw);
   std::unique_ptr<ParticleSource> Prepare(std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock);
   std::unique_ptr<SortedEpoch> SortEpoch(ParticleSource& source, std::size_t e);
   Bounds SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report);
+  void LinkFromPrevious(std::size_t e);
   Cube ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const;
   ChunkedEpoch ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
                           EpochPoints& points, EpochReport& epoch_report);
@@ -497,7 +502,9 @@ class IngestRun {
   void WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_table, ExternalSorter<IdLeafRecord>* id_pairs);
 
   const IngestOptions& options_;
+  const std::string output_;
   const std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  const std::size_t first_epoch_;
   IngestReport report_;
   unsigned threads_;
   MemoryShares shares_;
@@ -516,6 +523,12 @@ class IngestRun {
   std::unique_ptr<ParticleSource> next_source_;
   std::uint64_t missing_in_prev_ = 0;  // of the epoch to come, counted by the join before it
 };
+
+std::unique_ptr<StoreWriter> MakeIdStoreWriter(const std::string& output, const StoreWriterOptions& options) {
+  return std::make_unique<StoreWriter>((fs::path(output) / "ids").string(),
+                                       nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
+                                       nlohmann::json::object(), options);
+}
 
 IngestReport StartReport(const IngestOptions& options) {
   if (options.inputs.empty()) throw Error::InvalidArgument("ingest: no input snapshots given");
@@ -556,14 +569,20 @@ DatasetManifest ManifestFor(const IngestOptions& options, bool has_id, bool has_
   return m;
 }
 
-StoreWriterOptions StoreOptions(const IngestOptions& options) {
+StoreWriterOptions StoreOptions(const IngestOptions& options, const IngestShare* share, bool id_index) {
   StoreWriterOptions store_options;
-  store_options.page_size = options.page_size;
+  store_options.page_size = id_index ? std::max(options.page_size, kIdIndexMinPageSize) : options.page_size;
+  if (share != nullptr) {
+    store_options.store_id = id_index ? share->id_store_id : share->store_id;
+    store_options.first_epoch = static_cast<std::uint32_t>(share->first_epoch);
+  }
   return store_options;
 }
 
-IngestRun::IngestRun(const IngestOptions& options)
+IngestRun::IngestRun(const IngestOptions& options, const IngestShare* share, const std::string& part_directory)
     : options_(options),
+      output_(share != nullptr ? part_directory : options.output),
+      first_epoch_(share != nullptr ? share->first_epoch : 0),
       report_(StartReport(options)),
       threads_(options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency())),
       shares_(report_.memory_budget, threads_, options),
@@ -573,24 +592,19 @@ IngestRun::IngestRun(const IngestOptions& options)
       has_velocity_(source_->header().has_velocity),
       join_epochs_(has_id_ && options.inputs.size() > 1),
       manifest_(ManifestFor(options, has_id_, has_velocity_, join_epochs_)),
-      output_guard_(options.output),
-      store_(options.output, manifest_.ToJson(),
+      output_guard_(output_),
+      store_(output_, manifest_.ToJson(),
              AttributeSchema(has_velocity_, has_id_, join_epochs_, manifest_.has_velocity_dispersion, manifest_.has_shape),
-             StoreOptions(options)),
+             StoreOptions(options, share, false)),
       id_index_page_size_(std::max(options.page_size, kIdIndexMinPageSize)),
       screened_(options.inputs.size()) {
-  if (has_id_) {
-    StoreWriterOptions id_store_options = StoreOptions(options);
-    id_store_options.page_size = id_index_page_size_;
-    id_store_ = std::make_unique<StoreWriter>((fs::path(options.output) / "ids").string(),
-                                              nlohmann::json{{"id_index_of", ".."}, {"layout", "index/id_index.h"}},
-                                              nlohmann::json::object(), id_store_options);
-  }
+  if (has_id_) id_store_ = MakeIdStoreWriter(output_, StoreOptions(options, share, true));
   output_guard_.StoreLocked();
   // Inside the output by default: where this run may surely write, and where
   // a rerun finds it if a kill leaves it behind (TempDirectory). Made after
   // the store writers, which clear away an abandoned store first.
-  temp_.emplace(options.temp_dir.empty() ? options.output : options.temp_dir, "octocosm-ingest");
+  temp_.emplace(options.temp_dir.empty() ? output_ : options.temp_dir, "octocosm-ingest");
+  if (first_epoch_ > 0) source_.reset();  // opened at the share's first epoch
 }
 
 // The leaves' smoothing lengths from neighbours (or the snapshot's own),
@@ -636,7 +650,10 @@ std::unique_ptr<SortedEpoch> IngestRun::SortEpoch(ParticleSource& source, std::s
 Bounds IngestRun::SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report) {
   Bounds bounds;
   if (join_epochs_) {
-    if (!sorted_current_) sorted_current_ = SortEpoch(*source_, e);
+    if (!sorted_current_) {
+      sorted_current_ = SortEpoch(*source_, e);
+      if (e == first_epoch_ && e > 0) LinkFromPrevious(e);
+    }
     if (e + 1 < options_.inputs.size()) {
       if (options_.neighbours > 0) clock.Lap("sort");
       next_source_ = Prepare(OpenSnapshot(options_.inputs[e + 1], options_.read), e + 1, nullptr);
@@ -650,6 +667,20 @@ Bounds IngestRun::SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epo
     bounds = *screened_[e].bounds;  // the survey's, before the smoothing pass
   }
   return bounds;
+}
+
+// The first epoch of a share after the first: the join of the epoch before
+// it, read and sorted again here, writes this epoch's links back and counts
+// what the previous epoch lacks, as the single run's join does.
+void IngestRun::LinkFromPrevious(std::size_t e) {
+  ScreenedEpoch previous = Screen(OpenSnapshot(options_.inputs[e - 1], options_.read), options_,
+                                  "epoch " + std::to_string(e - 1));
+  const std::unique_ptr<SortedEpoch> sorted = SortEpoch(*previous.source, e - 1);
+  const Cube cube = ChooseCube(previous.source->header(), sorted->bounds());
+  const JoinStats join = JoinedPass(*sorted, sorted_current_.get(), "", LinkFilePath(temp_->path(), e),
+                                    cube.periodic ? cube.size : 0.0, options_.read.chunk_particles,
+                                    [](const ParticleChunk&) {});
+  missing_in_prev_ = join.new_in_next;
 }
 
 Cube IngestRun::ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const {
@@ -865,6 +896,19 @@ void IngestRun::IngestEpoch(std::size_t e) {
   source_smoothed_ = source_ != nullptr;
 }
 
+IngestPart IngestRun::FinishPart() {
+  IngestPart part;
+  part.directory = output_;
+  if (id_store_) part.id_epochs = id_store_->FinishPart();
+  part.epochs = store_.FinishPart();
+  output_guard_.Commit();
+  part.records = manifest_.epochs;
+  report_.store_bytes = store_.bytes_written() + (id_store_ ? id_store_->bytes_written() : 0);
+  report_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  part.report = report_;
+  return part;
+}
+
 IngestReport IngestRun::Finish() {
   if (id_store_) id_store_->Finish();
   store_.SetDataset(manifest_.ToJson());
@@ -890,6 +934,243 @@ IngestReport Ingest(const IngestOptions& options) {
   IngestRun run(options);
   for (std::size_t e = 0; e < options.inputs.size(); ++e) run.IngestEpoch(e);
   return run.Finish();
+}
+
+IngestPart IngestShareInto(const IngestOptions& options, const IngestShare& share, const std::string& part_directory) {
+  if (share.first_epoch > share.end_epoch || share.end_epoch > options.inputs.size()) {
+    throw Error::InvalidArgument("ingest: a share of epochs [" + std::to_string(share.first_epoch) + ", " +
+                                 std::to_string(share.end_epoch) + ") of a series of " +
+                                 std::to_string(options.inputs.size()));
+  }
+  if (share.first_epoch == share.end_epoch) {
+    IngestPart part;
+    part.directory = part_directory;
+    return part;
+  }
+  IngestRun run(options, &share, part_directory);
+  for (std::size_t e = share.first_epoch; e < share.end_epoch; ++e) run.IngestEpoch(e);
+  return run.FinishPart();
+}
+
+namespace {
+
+// What the series carries, from its first snapshot's header.
+struct SeriesColumns {
+  bool has_id = false, has_velocity = false, join_epochs = false;
+};
+
+SeriesColumns ColumnsOf(const IngestOptions& options) {
+  const std::unique_ptr<ParticleSource> first = OpenSnapshot(options.inputs.front(), options.read);
+  SeriesColumns c;
+  c.has_id = first->header().has_id;
+  c.has_velocity = first->header().has_velocity;
+  c.join_epochs = c.has_id && options.inputs.size() > 1;
+  return c;
+}
+
+}  // namespace
+
+struct IngestAssembly::Output {
+  explicit Output(const IngestOptions& options)
+      : report(StartReport(options)),
+        columns(ColumnsOf(options)),
+        manifest(ManifestFor(options, columns.has_id, columns.has_velocity, columns.join_epochs)),
+        guard(options.output),
+        store(options.output, manifest.ToJson(),
+              AttributeSchema(columns.has_velocity, columns.has_id, columns.join_epochs,
+                              manifest.has_velocity_dispersion, manifest.has_shape),
+              StoreOptions(options, nullptr, false)) {
+    if (columns.has_id) id_store = MakeIdStoreWriter(options.output, StoreOptions(options, nullptr, true));
+    guard.StoreLocked();
+  }
+
+  const std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
+  IngestReport report;
+  SeriesColumns columns;
+  DatasetManifest manifest;
+  // Declared in the order they must be made; destroyed the other way round.
+  OutputGuard guard;
+  StoreWriter store;
+  std::unique_ptr<StoreWriter> id_store;
+  std::size_t parts = 0;
+  std::optional<RemoveOnInterrupt> remove_parts;
+  bool assembled = false;
+};
+
+IngestAssembly::IngestAssembly(const IngestOptions& options, std::size_t parts)
+    : options_(options), output_(std::make_unique<Output>(options)) {
+  output_->parts = parts;
+  output_->remove_parts.emplace([this] {
+    std::error_code ignored;
+    for (std::size_t k = 0; k < output_->parts; ++k) fs::remove_all(PartDirectory(options_.output, k), ignored);
+  });
+}
+
+IngestAssembly::~IngestAssembly() {
+  output_->remove_parts.reset();
+  if (output_->assembled) return;
+  std::error_code ignored;
+  for (std::size_t k = 0; k < output_->parts; ++k) fs::remove_all(PartDirectory(options_.output, k), ignored);
+}
+
+std::uint64_t IngestAssembly::store_id() const { return output_->store.store_id(); }
+
+std::uint64_t IngestAssembly::id_store_id() const { return output_->id_store ? output_->id_store->store_id() : 0; }
+
+IngestShare IngestAssembly::Share(std::size_t epochs, std::size_t part, std::size_t parts) {
+  if (parts == 0 || part >= parts) {
+    throw Error::InvalidArgument("ingest: no share " + std::to_string(part) + " of " + std::to_string(parts));
+  }
+  IngestShare share;
+  share.first_epoch = epochs * part / parts;
+  share.end_epoch = epochs * (part + 1) / parts;
+  return share;
+}
+
+std::string IngestAssembly::PartDirectory(const std::string& output, std::size_t part) {
+  return (fs::path(output) / ("octocosm-part-" + std::to_string(part))).string();
+}
+
+IngestReport IngestAssembly::Assemble(const std::vector<IngestPart>& parts) {
+  Output& out = *output_;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    const IngestPart& part = parts[k];
+    if (part.records.size() != part.epochs.size() || (out.id_store && part.id_epochs.size() != part.epochs.size())) {
+      throw Error::InvalidArgument("ingest: part " + std::to_string(k) + " (" + part.directory +
+                                   ") describes its epochs inconsistently");
+    }
+    out.store.AdoptEpochs(part.directory, part.epochs);
+    if (out.id_store) out.id_store->AdoptEpochs((fs::path(part.directory) / "ids").string(), part.id_epochs);
+    out.manifest.epochs.insert(out.manifest.epochs.end(), part.records.begin(), part.records.end());
+    const IngestReport& r = part.report;
+    out.report.epochs.insert(out.report.epochs.end(), r.epochs.begin(), r.epochs.end());
+    out.report.input_points += r.input_points;
+    out.report.read_points += r.read_points;
+    out.report.dropped_points += r.dropped_points;
+    out.report.max_chunk_points = std::max(out.report.max_chunk_points, r.max_chunk_points);
+  }
+  if (out.manifest.epochs.size() != options_.inputs.size()) {
+    throw Error::InvalidArgument("ingest: the parts hold " + std::to_string(out.manifest.epochs.size()) +
+                                 " epochs of the series' " + std::to_string(options_.inputs.size()));
+  }
+  if (out.id_store) out.id_store->Finish();
+  out.store.SetDataset(out.manifest.ToJson());
+  out.store.Finish();
+  out.guard.Commit();
+  out.assembled = true;
+  out.remove_parts.reset();
+  std::error_code ignored;
+  for (std::size_t k = 0; k < out.parts; ++k) fs::remove_all(PartDirectory(options_.output, k), ignored);
+  out.report.store_bytes = out.store.bytes_written() + (out.id_store ? out.id_store->bytes_written() : 0);
+  out.report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - out.start).count();
+  return out.report;
+}
+
+namespace {
+
+nlohmann::json EpochInfoJson(const EpochInfo& e) {
+  return {{"epoch", e.epoch}, {"file", e.file}, {"time", e.time}, {"redshift", e.redshift},
+          {"block_count", e.block_count}, {"file_size", e.file_size}};
+}
+
+EpochInfo EpochInfoFromJson(const nlohmann::json& j) {
+  EpochInfo e;
+  e.epoch = j.at("epoch").get<std::uint32_t>();
+  e.file = j.at("file").get<std::string>();
+  e.time = j.at("time").get<double>();
+  e.redshift = j.at("redshift").get<double>();
+  e.block_count = j.at("block_count").get<std::uint64_t>();
+  e.file_size = j.at("file_size").get<std::uint64_t>();
+  return e;
+}
+
+nlohmann::json EpochReportJson(const EpochReport& r) {
+  nlohmann::json phases = nlohmann::json::array();
+  for (const EpochReport::Phase& p : r.phases) phases.push_back({p.name, p.seconds, p.cpu_seconds});
+  nlohmann::json j = {{"points", r.points}, {"read_points", r.read_points}, {"dropped_points", r.dropped_points},
+                      {"nodes", r.nodes}, {"leaves", r.leaves}, {"chunks", r.chunks},
+                      {"spilled_points", r.spilled_points}, {"resident", r.resident}, {"mapped", r.mapped},
+                      {"phases", phases}, {"depth", r.depth}, {"mass", r.mass},
+                      {"missing_in_next", r.missing_in_next}, {"missing_in_prev", r.missing_in_prev},
+                      {"duplicate_ids", r.duplicate_ids}, {"ids_sorted", r.ids_sorted}};
+  if (r.to_next) {
+    const EpochLink& l = *r.to_next;
+    j["to_next"] = {l.velocity_scale, l.fit_residual, l.least_squares_scale, l.inlier_fraction, l.matched, l.max_excursion};
+  }
+  return j;
+}
+
+EpochReport EpochReportFromJson(const nlohmann::json& j) {
+  EpochReport r;
+  r.points = j.at("points").get<std::uint64_t>();
+  r.read_points = j.at("read_points").get<std::uint64_t>();
+  r.dropped_points = j.at("dropped_points").get<std::uint64_t>();
+  r.nodes = j.at("nodes").get<std::uint64_t>();
+  r.leaves = j.at("leaves").get<std::uint64_t>();
+  r.chunks = j.at("chunks").get<std::uint64_t>();
+  r.spilled_points = j.at("spilled_points").get<std::uint64_t>();
+  r.resident = j.at("resident").get<bool>();
+  r.mapped = j.at("mapped").get<bool>();
+  for (const auto& p : j.at("phases")) {
+    r.phases.push_back({p.at(0).get<std::string>(), p.at(1).get<double>(), p.at(2).get<double>()});
+  }
+  r.depth = j.at("depth").get<int>();
+  r.mass = j.at("mass").get<double>();
+  r.missing_in_next = j.at("missing_in_next").get<std::uint64_t>();
+  r.missing_in_prev = j.at("missing_in_prev").get<std::uint64_t>();
+  r.duplicate_ids = j.at("duplicate_ids").get<std::uint64_t>();
+  r.ids_sorted = j.at("ids_sorted").get<bool>();
+  if (j.contains("to_next")) {
+    const auto& l = j.at("to_next");
+    r.to_next = EpochLink{l.at(0).get<double>(), l.at(1).get<double>(), l.at(2).get<double>(),
+                          l.at(3).get<double>(), l.at(4).get<std::uint64_t>(), l.at(5).get<double>()};
+  }
+  return r;
+}
+
+}  // namespace
+
+nlohmann::json IngestPart::ToJson() const {
+  nlohmann::json epoch_list = nlohmann::json::array(), id_list = nlohmann::json::array();
+  nlohmann::json record_list = nlohmann::json::array(), report_list = nlohmann::json::array();
+  for (const EpochInfo& e : epochs) epoch_list.push_back(EpochInfoJson(e));
+  for (const EpochInfo& e : id_epochs) id_list.push_back(EpochInfoJson(e));
+  for (std::size_t i = 0; i < records.size(); ++i) record_list.push_back(records[i].ToJson(i));
+  for (const EpochReport& r : report.epochs) report_list.push_back(EpochReportJson(r));
+  return {{"directory", directory},
+          {"epochs", epoch_list},
+          {"id_epochs", id_list},
+          {"records", record_list},
+          {"report",
+           {{"epochs", report_list}, {"input_points", report.input_points}, {"read_points", report.read_points},
+            {"dropped_points", report.dropped_points}, {"store_bytes", report.store_bytes},
+            {"max_chunk_points", report.max_chunk_points}, {"memory_budget", report.memory_budget},
+            {"seconds", report.seconds}}}};
+}
+
+IngestPart IngestPart::FromJson(const nlohmann::json& json, const std::string& what) {
+  IngestPart part;
+  try {
+    part.directory = json.at("directory").get<std::string>();
+    for (const auto& e : json.at("epochs")) part.epochs.push_back(EpochInfoFromJson(e));
+    for (const auto& e : json.at("id_epochs")) part.id_epochs.push_back(EpochInfoFromJson(e));
+    for (const auto& r : json.at("records")) part.records.push_back(EpochRecord::FromJson(r));
+    const auto& report = json.at("report");
+    for (const auto& r : report.at("epochs")) part.report.epochs.push_back(EpochReportFromJson(r));
+    part.report.input_points = report.at("input_points").get<std::uint64_t>();
+    part.report.read_points = report.at("read_points").get<std::uint64_t>();
+    part.report.dropped_points = report.at("dropped_points").get<std::uint64_t>();
+    part.report.store_bytes = report.at("store_bytes").get<std::uint64_t>();
+    part.report.max_chunk_points = report.at("max_chunk_points").get<std::uint64_t>();
+    part.report.memory_budget = report.at("memory_budget").get<std::uint64_t>();
+    part.report.seconds = report.at("seconds").get<double>();
+  } catch (const nlohmann::json::exception& e) {
+    throw Error::Corruption(what, std::string("not an ingest part's description: ") + e.what());
+  } catch (const Error& e) {
+    if (e.kind() == ErrorKind::kInvalidArgument) throw Error::Corruption(what, e.what());
+    throw;
+  }
+  return part;
 }
 
 }  // namespace octocosm

@@ -28,17 +28,22 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <utility>
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "index/cube.h"
 #include "index/dataset.h"
+#include "index/dataset_manifest.h"
 #include "index/neighbour_radius.h"
 #include "index/subtree_builder.h"
 #include "ingest/outliers.h"
 #include "ingest/snapshot/snapshot_source.h"
+#include "storage/manifest.h"
 #include "storage/page_file_format.h"
 
 namespace octocosm {
@@ -108,6 +113,64 @@ struct IngestReport {
   std::uint64_t max_chunk_points = 0;
   std::uint64_t memory_budget = 0;
   double seconds = 0;
+};
+
+// Several processes ingest one series together (tools/ingest_ranks.h runs
+// them under mpirun): each ingests a share of the epochs into a part, whose
+// page files the process holding the output adopts (IngestAssembly). The
+// store is the one Ingest() writes from the same inputs and options: the
+// same blocks, the same manifests but for the store ids. A share's first
+// epoch is joined to the epoch before it, read again for its links.
+struct IngestShare {
+  std::size_t first_epoch = 0, end_epoch = 0;   // [first, end) of IngestOptions::inputs
+  std::uint64_t store_id = 0, id_store_id = 0;  // the store's and its ID index's (IngestAssembly)
+};
+
+struct IngestPart {
+  std::string directory;                     // its page files; the ID index's in ids/
+  std::vector<EpochInfo> epochs, id_epochs;  // as StoreWriter::FinishPart gave them
+  std::vector<EpochRecord> records;          // the dataset manifest's records of these epochs
+  IngestReport report;
+
+  // For sending between processes: exact, doubles included.
+  nlohmann::json ToJson() const;
+  // kCorruption naming `what` when a member is missing or of the wrong type.
+  static IngestPart FromJson(const nlohmann::json& json, const std::string& what);
+};
+
+// Ingests the epochs of `share` into `part_directory` (created; removed
+// again on failure). Nothing of it is a store until adopted.
+IngestPart IngestShareInto(const IngestOptions& options, const IngestShare& share, const std::string& part_directory);
+
+// The output of an ingest by several processes: takes the output directory
+// as Ingest() does (a store's lock, removed on failure where this made it),
+// fixes the store ids the shares write under, and assembles their parts.
+class IngestAssembly {
+ public:
+  // For an ingest in `parts` parts.
+  IngestAssembly(const IngestOptions& options, std::size_t parts);
+  ~IngestAssembly();
+  IngestAssembly(const IngestAssembly&) = delete;
+  IngestAssembly& operator=(const IngestAssembly&) = delete;
+
+  // The ids that every share writes under.
+  std::uint64_t store_id() const;
+  std::uint64_t id_store_id() const;  // 0 without IDs
+  // Adopts the parts' epochs in order, writes the manifests, and removes
+  // the part directories. The parts must cover the epochs in order.
+  IngestReport Assemble(const std::vector<IngestPart>& parts);
+
+  // Share `part` of `parts` of a series of `epochs`: consecutive epochs, as
+  // even as they divide; empty where there are more parts than epochs.
+  // Without the store ids.
+  static IngestShare Share(std::size_t epochs, std::size_t part, std::size_t parts);
+  // Where part `part` goes: inside the output, so that adopting it is a rename.
+  static std::string PartDirectory(const std::string& output, std::size_t part);
+
+ private:
+  struct Output;
+  const IngestOptions& options_;
+  std::unique_ptr<Output> output_;
 };
 
 // Half of the physical memory, at least 256 MiB: "a safe fraction of RAM".
