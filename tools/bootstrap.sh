@@ -37,6 +37,8 @@ packages=(
   python3-venv python3-pip python3-wheel
   # stores read over HTTP(S) with range requests; the tests serve them with nginx
   libcurl4-openssl-dev nginx-light
+  # ingest spread over processes with mpirun (Open MPI)
+  openmpi-bin libopenmpi-dev
   # Not here: libclang-rt-14-dev, which only the long libFuzzer runs need
   # (docs/TESTING.md); CI runs the fuzz targets under our own driver.
 )

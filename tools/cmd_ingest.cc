@@ -1,5 +1,6 @@
 // octocosm ingest: snapshots -> store.
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -10,6 +11,7 @@
 #include "storage/page_file_format.h"
 #include "tools/cli_util.h"
 #include "tools/commands.h"
+#include "tools/ingest_ranks.h"
 #include "ingest/ingest.h"
 #include "tools/read_flags.h"
 
@@ -29,7 +31,10 @@ void AddIngestCommand(CLI::App& app) {
       "a multi-file snapshot is named by its base name (snap_005 for snap_005.0, snap_005.1, ...) or any of\n"
       "its files. Formats: GADGET 1 and 2 (either endianness), HDF5 (GADGET-4, AREPO, SWIFT), raw binary\n"
       "(--format raw --raw-layout), CSV (docs/INPUT_FORMATS.md). Runs with glibc's huge-page malloc\n"
-      "(GLIBC_TUNABLES=glibc.malloc.hugetlb=1) unless GLIBC_TUNABLES already sets it (docs/INGEST.md).");
+      "(GLIBC_TUNABLES=glibc.malloc.hugetlb=1) unless GLIBC_TUNABLES already sets it (docs/INGEST.md).\n"
+      "Under mpirun (mpirun -n P octocosm ingest ...) the epochs of a series are shared among the P ranks,\n"
+      "each with --memory and --threads of its own (default: its share of its node's); the store is the one\n"
+      "a single process writes (docs/INGEST.md, \"Over MPI ranks\").");
   cmd->add_option("inputs", o.inputs, "snapshots, one per epoch")->required();
   cmd->add_option("-o,--output", o.output, "store directory to create (must not hold a store)")->required();
   cmd->add_option("-n,--capacity", o.tree.capacity, "most points per node")->default_val(16000)->check(CLI::Range(1, 100000000));
@@ -90,11 +95,18 @@ void AddIngestCommand(CLI::App& app) {
       if (v.size() != 6) throw Error::InvalidArgument("--clip-box '" + flags->clip_box + "': expected x0,y0,z0,x1,y1,z1");
       options.clip_box = PositionBox{{v[0], v[1], v[2]}, {v[3], v[4], v[5]}};
     }
-    const IngestReport report = Ingest(options);
-    std::printf("ingested %s points in %zu epoch(s) into %s: %s, %.1f s, %.2f M points/s\n",
+    const int processes = LaunchedProcesses();
+    std::optional<IngestReport> ranked;
+    if (processes > 1) {
+      ranked = IngestOnRanks(options);
+      if (!ranked) return;  // a rank other than 0: rank 0 reports
+    }
+    const IngestReport report = ranked ? std::move(*ranked) : Ingest(options);
+    std::printf("ingested %s points in %zu epoch(s) into %s: %s, %.1f s, %.2f M points/s%s\n",
                 HumanCount(static_cast<double>(report.input_points)).c_str(), report.epochs.size(),
                 options.output.c_str(), HumanBytes(static_cast<double>(report.store_bytes)).c_str(), report.seconds,
-                report.seconds > 0 ? static_cast<double>(report.input_points) / report.seconds / 1e6 : 0.0);
+                report.seconds > 0 ? static_cast<double>(report.input_points) / report.seconds / 1e6 : 0.0,
+                processes > 1 ? (" on " + std::to_string(processes) + " MPI ranks").c_str() : "");
     if (report.dropped_points) {
       std::printf("  read %llu points, dropped %llu (outside --clip-box or outliers), stored %llu\n",
                   static_cast<unsigned long long>(report.read_points),

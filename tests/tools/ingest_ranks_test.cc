@@ -1,0 +1,123 @@
+// mpirun -n P octocosm ingest (tools/ingest_ranks.h): on 2 and 4 ranks, more
+// than this machine has cores, the store equals the one a single process
+// writes from the same snapshots, block for block, manifest for manifest;
+// a rank that fails ends the whole ingest with its error and leaves nothing.
+// Runs where Open MPI is installed (label mpi).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "index/dataset.h"
+#include "index/id_index.h"
+#include "storage/store_reader.h"
+#include "tests/ingest/store_check.h"
+#include "tests/support/program_run.h"
+#include "tests/support/temp_dir.h"
+
+namespace octocosm {
+namespace {
+
+namespace fs = std::filesystem;
+using testing_support::FirstDifference;
+using testing_support::CheckTree;
+using testing_support::ProgramRun;
+using testing_support::RunCommand;
+
+// mpirun may run as root in containers and CI; the shared-memory transport
+// copies through its own buffers where the kernel forbids cross-process reads.
+const std::string kMpiEnvironment =
+    "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=none "
+    "OMPI_MCA_rmaps_base_oversubscribe=1";
+
+class IngestRanksTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const ProgramRun synth = Run(std::string(OCTOCOSM_BINARY) + " synth pm -q -N 20 --outputs 6 --steps 12 -o " +
+                                 (dir_.path() / "snapshots").string());
+    ASSERT_EQ(synth.status, 0) << synth.Describe();
+    for (const auto& entry : fs::directory_iterator(dir_.path() / "snapshots")) inputs_.push_back(entry.path().string());
+    std::sort(inputs_.begin(), inputs_.end());
+    ASSERT_EQ(inputs_.size(), 6u);
+  }
+
+  ProgramRun Run(const std::string& command, const std::string& environment = "") const {
+    return RunCommand(command, 300, dir_.path() / "log.txt", environment);
+  }
+
+  // octocosm ingest of the snapshots into `store`, on `ranks` MPI ranks (0: no mpirun).
+  ProgramRun Ingest(const std::string& store, int ranks) const {
+    std::string command = ranks > 0 ? std::string(MPIEXEC) + " -n " + std::to_string(ranks) + " " : std::string();
+    command += std::string(OCTOCOSM_BINARY) + " ingest -q -n 400 --neighbours 8 --memory 64M -o " + store;
+    for (const std::string& input : inputs_) command += " " + input;
+    return Run(command, ranks > 0 ? kMpiEnvironment : "");
+  }
+
+  testing_support::TempDir dir_{"ingest-ranks"};
+  std::vector<std::string> inputs_;
+};
+
+// Every ID of `expected` (by its leaves) is found in the same leaf through
+// `store`'s ID index, and no ID is found that expected lacks. The index's
+// bytes may differ: its leaf table lists the leaves in the order the build
+// threads finished them.
+std::string FirstIdIndexDifference(const Dataset& store, const testing_support::TreeCheck& expected, std::uint32_t epoch) {
+  const IdIndexReader ids(store.id_index_directory());
+  std::vector<std::uint64_t> wanted;
+  for (const auto& [id, point] : expected.leaf_points) wanted.push_back(id);
+  wanted.push_back(~std::uint64_t{0} - 7);  // in no epoch
+  const std::vector<std::optional<NodeKey>> found = ids.FindAll(epoch, wanted);
+  for (std::size_t i = 0; i + 1 < wanted.size(); ++i) {
+    if (!found[i] || *found[i] != expected.leaf_points.at(wanted[i]).leaf) return "ID " + std::to_string(wanted[i]);
+  }
+  return found.back() ? "an ID in no epoch found" : "";
+}
+
+TEST_F(IngestRanksTest, TwoAndFourRanksWriteTheStoreOneProcessWrites) {
+  const std::string single = (dir_.path() / "single").string();
+  const ProgramRun one = Ingest(single, 0);
+  ASSERT_EQ(one.status, 0) << one.Describe();
+  const Dataset expected = Dataset::Open(single);
+  ASSERT_EQ(expected.epoch_count(), 6u);
+  for (int ranks : {2, 4}) {
+    SCOPED_TRACE(std::to_string(ranks) + " ranks");
+    const std::string store = (dir_.path() / ("ranks-" + std::to_string(ranks))).string();
+    const ProgramRun run = Ingest(store, ranks);
+    ASSERT_EQ(run.status, 0) << run.Describe();
+    EXPECT_NE(run.output.find("on " + std::to_string(ranks) + " MPI ranks"), std::string::npos) << run.output;
+    const Dataset got = Dataset::Open(store);
+    ASSERT_EQ(got.epoch_count(), expected.epoch_count());
+    // The dataset manifest: cubes, counts, links' fits, snapshot headers.
+    EXPECT_EQ(got.store().dataset(), expected.store().dataset());
+    EXPECT_EQ(got.store().attribute_schema(), expected.store().attribute_schema());
+    for (std::uint32_t e = 0; e < got.epoch_count(); ++e) {
+      const testing_support::TreeCheck want = CheckTree(expected, e);
+      EXPECT_EQ(FirstDifference(CheckTree(got, e), want), "") << "epoch " << e;
+      EXPECT_EQ(FirstIdIndexDifference(got, want, e), "") << "epoch " << e;
+      EXPECT_EQ(got.store().epochs()[e].time, expected.store().epochs()[e].time);
+    }
+    const ProgramRun verify = Run(std::string(OCTOCOSM_BINARY) + " verify " + store);
+    EXPECT_EQ(verify.status, 0) << verify.Describe();
+    // Nothing but the store is left in the output.
+    for (const auto& entry : fs::directory_iterator(store)) {
+      const std::string name = entry.path().filename();
+      EXPECT_TRUE(name == "manifest.json" || name == "ids" || name.rfind("epoch-", 0) == 0) << name;
+    }
+  }
+}
+
+TEST_F(IngestRanksTest, AFailedRankEndsTheIngestWithItsErrorAndLeavesNoStore) {
+  // The fifth epoch, rank 1's on two ranks, cut short.
+  fs::resize_file(inputs_[4], fs::file_size(inputs_[4]) / 2);
+  const std::string store = (dir_.path() / "store").string();
+  const ProgramRun run = Ingest(store, 2);
+  EXPECT_NE(run.status, 0) << run.Describe();
+  EXPECT_NE(run.output.find(fs::path(inputs_[4]).filename().string()), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("ingest rank 1"), std::string::npos) << run.output;
+  EXPECT_FALSE(fs::exists(store)) << "left behind: " << store;
+}
+
+}  // namespace
+}  // namespace octocosm
