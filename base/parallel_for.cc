@@ -1,5 +1,7 @@
 #include "base/parallel_for.h"
 
+#include <sched.h>
+
 #include <algorithm>
 #include <atomic>
 #include <exception>
@@ -33,10 +35,16 @@ void RunWorkers(int threads, const std::function<void(int worker, const std::ato
   if (first_error) std::rethrow_exception(first_error);
 }
 
+unsigned CoresAllowed() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (::sched_getaffinity(0, sizeof set, &set) == 0 && CPU_COUNT(&set) > 0) return static_cast<unsigned>(CPU_COUNT(&set));
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
 int ResolveThreadCount(int requested) {
   if (requested > 0) return requested;
-  const unsigned hardware = std::thread::hardware_concurrency();
-  return hardware == 0 ? 1 : static_cast<int>(hardware);
+  return static_cast<int>(CoresAllowed());
 }
 
 void ParallelFor(std::size_t count, int threads, const std::function<void(std::size_t, std::size_t)>& body,

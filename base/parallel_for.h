@@ -38,7 +38,13 @@ void ParallelForDynamic(std::size_t count, int threads, std::size_t grain,
 // takes its items in an order of its own, run on this.
 void RunWorkers(int threads, const std::function<void(int worker, const std::atomic<bool>& stop)>& work);
 
-// The thread count to use for `requested` (0 means all hardware threads).
+// The thread count to use for `requested` (0 means one per core this process
+// may run on, CoresAllowed).
 int ResolveThreadCount(int requested);
+
+// The cores this process may run on (its CPU affinity: taskset, a cgroup's
+// cpuset, or mpirun's binding of a rank), at least 1. Threads beyond them
+// only take turns.
+unsigned CoresAllowed();
 
 }  // namespace octocosm

@@ -584,7 +584,7 @@ IngestRun::IngestRun(const IngestOptions& options, const IngestShare* share, con
       output_(share != nullptr ? part_directory : options.output),
       first_epoch_(share != nullptr ? share->first_epoch : 0),
       report_(StartReport(options)),
-      threads_(options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency())),
+      threads_(options.threads ? options.threads : CoresAllowed()),
       shares_(report_.memory_budget, threads_, options),
       // The first epoch, opened to learn what the series carries.
       source_(OpenSnapshot(options.inputs[0], options.read)),

@@ -57,7 +57,7 @@ void AddIngestCommand(CLI::App& app) {
       ->check(CLI::Range(0, 4096));
   cmd->add_option("--memory", flags->memory, "memory budget, e.g. 2G (default: half the physical memory)");
   cmd->add_option("--temp-dir", o.temp_dir, "where the temporary directory goes (default: inside the output directory)");
-  cmd->add_option("--threads", o.threads, "worker threads (default: all cores)")->default_val(0);
+  cmd->add_option("--threads", o.threads, "worker threads (default: one per core this process may run on)")->default_val(0);
   cmd->add_option("--page-size", flags->page_size, "page size of the store, a power of two 4K..16M (its ID index: at least 64K)")->default_val("4K");
   cmd->add_option("--cube", flags->cube,
                   "the cube to index, 'x,y,z,size' (default: the periodic box, else the bounding cube); also accepts "

@@ -1,12 +1,14 @@
 #include "tools/ingest_ranks.h"
 
 #include <cstdio>
+#include <algorithm>
 #include <cstdlib>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "base/error.h"
+#include "base/parallel_for.h"
 #include "base/progress.h"
 
 #if OCTOCOSM_WITH_MPI
@@ -104,7 +106,15 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
   const int ranks = CommSize(MPI_COMM_WORLD);
   const int on_node = RanksOnThisNode();
   if (options.threads == 0) {
-    options.threads = std::max(1u, std::thread::hardware_concurrency() / static_cast<unsigned>(on_node));
+    const unsigned share = std::max(1u, std::thread::hardware_concurrency() / static_cast<unsigned>(on_node));
+    const unsigned allowed = CoresAllowed();
+    options.threads = std::min(share, allowed);
+    if (allowed < share && rank == 0) {
+      std::fprintf(stderr,
+                   "octocosm: ingest rank 0: mpirun bound this rank to %u of the %u cores that are its share of the "
+                   "node; mpirun --bind-to none (or --map-by slot:PE=%u) lets it use them all\n",
+                   allowed, share, share);
+    }
   }
   if (options.memory_budget == 0) {
     options.memory_budget = std::max<std::uint64_t>(DefaultMemoryBudget() / static_cast<std::uint64_t>(on_node),

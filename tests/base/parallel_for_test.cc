@@ -3,6 +3,7 @@
 #include "base/parallel_for.h"
 
 #include <gtest/gtest.h>
+#include <sched.h>
 
 #include <algorithm>
 #include <atomic>
@@ -144,6 +145,28 @@ TEST(RunWorkers, AnErrorSetsStopForTheOthersAndIsRethrown) {
   }
   EXPECT_TRUE(saw_stop);
   EXPECT_TRUE(returned_before_rethrow);
+}
+
+// A process that may run on one core (taskset, a cpuset, mpirun's binding of
+// a rank) gets one thread by default, not one per core of the machine.
+TEST(ResolveThreadCount, DefaultsToTheCoresThisThreadMayRunOn) {
+  EXPECT_GE(CoresAllowed(), 1u);
+  EXPECT_EQ(ResolveThreadCount(0), static_cast<int>(CoresAllowed()));
+  EXPECT_EQ(ResolveThreadCount(5), 5);
+  unsigned bound = 0;
+  std::thread([&] {  // affinity is per thread: this one's only
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    cpu_set_t all;
+    ASSERT_EQ(::sched_getaffinity(0, sizeof all, &all), 0);
+    int first = 0;
+    while (!CPU_ISSET(first, &all)) ++first;
+    CPU_SET(first, &one);
+    ASSERT_EQ(::sched_setaffinity(0, sizeof one, &one), 0);
+    bound = CoresAllowed();
+    EXPECT_EQ(ResolveThreadCount(0), 1);
+  }).join();
+  EXPECT_EQ(bound, 1u);
 }
 
 }  // namespace
