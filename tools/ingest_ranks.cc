@@ -122,6 +122,11 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
   }
   // One progress display: rank 0's.
   if (rank != 0) options.quiet = true;
+  if (rank == 0 && static_cast<std::size_t>(ranks) > options.inputs.size()) {
+    std::fprintf(stderr,
+                 "octocosm: ingest: %d ranks for %zu epoch(s): an epoch is one rank's work, so %zu rank(s) have none\n",
+                 ranks, options.inputs.size(), static_cast<std::size_t>(ranks) - options.inputs.size());
+  }
 
   // Rank 0 takes the output (as a single ingest would) and fixes the ids
   // every part's page files carry.
