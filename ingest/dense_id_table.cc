@@ -3,9 +3,12 @@
 #include <algorithm>
 #include <cstring>
 #include <new>
+#include <numeric>
 #include <string>
+#include <type_traits>
 
 #include "base/error.h"
+#include "base/parallel_for.h"
 
 namespace octocosm {
 
@@ -148,6 +151,35 @@ void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
   } else {
     RecordLeaf(static_cast<std::uint32_t*>(slots_.get()), first_, span_, ids, slot_value);
   }
+}
+
+void DenseIdTable::SortLeaves(int threads) {
+  std::vector<std::uint32_t> order(leaves_.size());
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return leaves_[a] < leaves_[b]; });
+  // renumber[old ordinal + 1] = new ordinal + 1; 0 stays 0.
+  std::vector<std::uint32_t> renumber(leaves_.size() + 1, 0);
+  bool sorted = true;
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    renumber[order[k] + 1] = static_cast<std::uint32_t>(k + 1);
+    sorted &= order[k] == k;
+  }
+  if (sorted) return;
+  const auto rewrite = [&](auto* slots) {
+    ParallelFor(static_cast<std::size_t>(span_), threads, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        if (slots[i] != 0) slots[i] = static_cast<std::remove_pointer_t<decltype(slots)>>(renumber[slots[i]]);
+      }
+    });
+  };
+  if (narrow_) {
+    rewrite(static_cast<std::uint16_t*>(slots_.get()));
+  } else {
+    rewrite(static_cast<std::uint32_t*>(slots_.get()));
+  }
+  std::vector<std::uint64_t> keys(leaves_.size());
+  for (std::size_t k = 0; k < order.size(); ++k) keys[k] = leaves_[order[k]];
+  leaves_ = std::move(keys);
 }
 
 }  // namespace octocosm

@@ -59,7 +59,8 @@ class IdCensus {
 };
 
 // Slot i holds which leaf has ID first + i: 0 where no particle has that ID,
-// else one more than the leaf's ordinal in the order leaves were added.
+// else one more than the leaf's ordinal in the order leaves were added (in
+// key order after SortLeaves).
 // Slots are 16 bits while at most 65535 leaves have been added (10^8
 // clustered points make about 34,000) and are widened to 32 bits in place
 // when the 65536th arrives: the key itself would take 8 bytes, and the
@@ -88,6 +89,13 @@ class DenseIdTable {
   std::span<const std::uint16_t> narrow_slots() const NO_THREAD_SAFETY_ANALYSIS;
   std::span<const std::uint32_t> wide_slots() const NO_THREAD_SAFETY_ANALYSIS;
   std::span<const std::uint64_t> leaves() const NO_THREAD_SAFETY_ANALYSIS { return leaves_; }
+
+  // Renumbers the leaves in key order, rewriting the slots to match, so that
+  // the table (and the ID index written from it) does not depend on the
+  // order in which build threads finished their leaves, nor on how the
+  // epoch was spread over threads or processes. Once no Add runs; slots no
+  // leaf wrote are left untouched (they cost no memory).
+  void SortLeaves(int threads) NO_THREAD_SAFETY_ANALYSIS;
 
   std::uint64_t first() const { return first_; }
   std::uint64_t span() const { return span_; }

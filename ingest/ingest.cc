@@ -770,6 +770,7 @@ void IngestRun::WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_tabl
   id_store_->BeginEpoch(header.time, header.redshift);
   IdIndexEpochWriter ids(*id_store_, id_index_page_size_);
   if (id_table != nullptr) {
+    id_table->SortLeaves(static_cast<int>(threads_));
     if (id_table->narrow()) {
       ids.AddTable(id_table->first(), id_table->narrow_slots(), id_table->leaves());
     } else {

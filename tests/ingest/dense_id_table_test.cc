@@ -179,6 +179,41 @@ TEST(DenseIdTable, StaysNarrowUpToTheMostNarrowLeaves) {
   for (std::uint64_t i = 0; i < leaves; ++i) ASSERT_EQ(table.narrow_slots()[i], i + 1) << i;
 }
 
+// Leaves come in the order threads finish them; sorted, the table is the
+// same whatever that order was, narrow or wide.
+TEST(DenseIdTable, SortedLeavesMakeTheSameTableInAnyOrderOfAdding) {
+  for (const std::uint64_t leaves : {std::uint64_t{300}, DenseIdTable::kMostNarrowLeaves + 3}) {
+    std::vector<std::uint64_t> order(leaves);
+    std::iota(order.begin(), order.end(), 0);
+    std::vector<std::pair<std::vector<std::uint64_t>, std::vector<std::uint32_t>>> tables;
+    for (const std::uint64_t seed : {1, 2}) {
+      std::shuffle(order.begin(), order.end(), std::mt19937_64(seed));
+      DenseIdTable table(10, 3 * leaves + 4);  // three IDs a leaf, the last of each absent
+      for (const std::uint64_t j : order) {
+        const std::vector<std::uint64_t> ids = {10 + 3 * j, 11 + 3 * j};
+        table.Add(ids, NodeKey::FromValue(NodeKey::Root().DescendantRange(8).first + (j * 7919) % leaves));
+      }
+      table.SortLeaves(2);
+      ASSERT_TRUE(std::is_sorted(table.leaves().begin(), table.leaves().end()));
+      std::vector<std::uint32_t> slots;
+      if (table.narrow()) {
+        slots.assign(table.narrow_slots().begin(), table.narrow_slots().end());
+      } else {
+        slots.assign(table.wide_slots().begin(), table.wide_slots().end());
+      }
+      for (std::uint64_t i = 0; i < slots.size(); ++i) {
+        if (i % 3 == 2 || i >= 3 * leaves) {
+          ASSERT_EQ(slots[i], 0u) << i;
+          continue;
+        }
+        ASSERT_EQ(table.leaves()[slots[i] - 1], NodeKey::Root().DescendantRange(8).first + (i / 3 * 7919) % leaves) << i;
+      }
+      tables.emplace_back(std::vector<std::uint64_t>(table.leaves().begin(), table.leaves().end()), slots);
+    }
+    EXPECT_EQ(tables[0], tables[1]) << leaves << " leaves";
+  }
+}
+
 TEST(DenseIdTable, RefusesIdsOutsideItsRangeAndIdsRecordedTwice) {
   DenseIdTable table(50, 10);
   const NodeKey leaf = NodeKey::Root().Child(2);

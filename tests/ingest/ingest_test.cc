@@ -142,6 +142,7 @@ TEST_F(IngestTest, StoreIsOneWholeBuildWhereverTheChunksAreCut) {
     sparse_top += leaf && k.level() >= 1 && k.level() <= 2;
   }
   ASSERT_GT(sparse_top, 3u) << "the data must have sparse nodes above the chunks";
+  std::vector<Bytes> first_id_index;  // the ID index's blocks, the same in every setting
   for (const std::uint64_t max_chunk : {0, 400, 3000}) {
     for (const unsigned threads : {1u, 2u}) {
       SCOPED_TRACE("max_chunk_points " + std::to_string(max_chunk) + ", threads " + std::to_string(threads));
@@ -155,6 +156,12 @@ TEST_F(IngestTest, StoreIsOneWholeBuildWhereverTheChunksAreCut) {
         ASSERT_TRUE(check.blocks.count(key)) << NodeKey::FromValue(key).Path();
         ASSERT_EQ(check.blocks.at(key).front(), bytes) << NodeKey::FromValue(key).Path();
       }
+      const StoreReader ids = StoreReader::Open(o.output + "/ids");
+      std::vector<Bytes> id_index;
+      ids.Scan(0, 0, ~std::uint64_t{0}, [&](const IndexEntry& e) { return id_index.push_back(ids.ReadBlock({0, e.key})), true; });
+      ASSERT_FALSE(id_index.empty());
+      if (first_id_index.empty()) first_id_index = id_index;
+      EXPECT_TRUE(id_index == first_id_index) << "the ID index's blocks differ";
     }
   }
 }
