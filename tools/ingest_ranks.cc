@@ -27,8 +27,6 @@ int LaunchedProcesses() {
 
 #if OCTOCOSM_WITH_MPI
 
-bool HaveMpi() { return true; }
-
 namespace {
 
 // MPI for the length of one ingest: only the main thread calls it.
@@ -167,8 +165,6 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
 }
 
 #else
-
-bool HaveMpi() { return false; }
 
 std::optional<IngestReport> IngestOnRanks(IngestOptions) {
   throw Error::InvalidArgument("ingest: this octocosm was built without MPI, so it cannot share an ingest among the " +

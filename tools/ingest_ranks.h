@@ -20,9 +20,6 @@ namespace octocosm {
 // mpirun (Open MPI's, or a PMI launcher such as srun).
 int LaunchedProcesses();
 
-// Whether this program was built with MPI.
-bool HaveMpi();
-
 // Runs the ingest on the ranks of MPI_COMM_WORLD. Where the options leave
 // them to the default, each rank takes its share of its node's cores and
 // memory. Returns the report on rank 0, nothing on the others. Throws on the
