@@ -154,9 +154,11 @@ void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
 }
 
 void DenseIdTable::SortLeaves(int threads) {
-  std::vector<std::uint32_t> order(leaves_.size());
+  const std::span<const std::uint64_t> keys_by_ordinal = leaves();  // unlocked, as leaves() is
+  std::vector<std::uint32_t> order(keys_by_ordinal.size());
   std::iota(order.begin(), order.end(), 0u);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return leaves_[a] < leaves_[b]; });
+  std::sort(order.begin(), order.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return keys_by_ordinal[a] < keys_by_ordinal[b]; });
   // renumber[old ordinal + 1] = new ordinal + 1; 0 stays 0.
   std::vector<std::uint32_t> renumber(leaves_.size() + 1, 0);
   bool sorted = true;
