@@ -29,6 +29,40 @@ struct PointCloud {
 using KdTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloud>, PointCloud, 3, std::uint32_t>;
 
+// The k smallest squared distances seen, in ascending order, nanoflann's
+// KNNResultSet without the indices and with a starting bound: until it holds
+// k distances, only those below the bound are offered, so the search prunes
+// from its first step.
+class BoundedKnnSet {
+ public:
+  using DistanceType = double;
+  using IndexType = std::uint32_t;
+  using CountType = std::size_t;
+
+  BoundedKnnSet(double* distances, std::size_t k, double squared_bound) : distances_(distances), k_(k) {
+    distances_[k_ - 1] = squared_bound;
+  }
+  std::size_t size() const { return count_; }
+  bool full() const { return count_ == k_; }
+  // While not full, the last slot holds the bound: insertions below only
+  // reach it when the k-th distance arrives.
+  double worstDist() const { return distances_[k_ - 1]; }
+  bool addPoint(double distance, std::uint32_t) {
+    std::size_t i = count_;
+    for (; i > 0 && distances_[i - 1] > distance; --i) {
+      if (i < k_) distances_[i] = distances_[i - 1];
+    }
+    if (i < k_) distances_[i] = distance;
+    if (count_ < k_) ++count_;
+    return true;
+  }
+
+ private:
+  double* distances_;
+  std::size_t k_;
+  std::size_t count_ = 0;
+};
+
 // Leaves of about this many points: a measured balance between the tree's
 // depth and the scan of a leaf for k in the tens.
 constexpr std::size_t kLeafPoints = 16;
@@ -95,27 +129,31 @@ NeighbourRadii::NeighbourRadii(std::span<const double> positions, std::span<cons
 
 NeighbourRadii::~NeighbourRadii() = default;
 
-double NeighbourRadii::Radius(const double* query, int k, std::size_t first_block) const {
+double NeighbourRadii::Radius(const double* query, int k, std::size_t first_block, double bound) const {
   if (k < 1) throw Error::InvalidArgument("NeighbourRadii: k must be at least 1, not " + std::to_string(k));
-  if (count_ < static_cast<std::size_t>(k)) return std::numeric_limits<double>::infinity();
-  thread_local std::vector<std::uint32_t> indices;
-  thread_local std::vector<double> squared;
-  indices.resize(static_cast<std::size_t>(k));
-  squared.resize(static_cast<std::size_t>(k));
-  nanoflann::KNNResultSet<double, std::uint32_t> result(static_cast<std::size_t>(k));
-  result.init(indices.data(), squared.data());
-  if (first_block >= blocks_.size()) {
+  if (first_block >= std::max<std::size_t>(blocks_.size(), 1)) {
     throw Error::InvalidArgument("NeighbourRadii: block " + std::to_string(first_block) + " of " +
                                  std::to_string(blocks_.size()));
   }
-  // The result set keeps the k nearest over every block searched. After the
-  // first block the k-th distance is small; a block whose box lies farther
-  // cannot improve it.
-  blocks_[first_block]->index.findNeighbors(result, query, nanoflann::SearchParams());
-  for (std::size_t b = 0; b < blocks_.size(); ++b) {
-    if (b == first_block || (result.full() && blocks_[b]->SquaredDistance(query) > result.worstDist())) continue;
-    blocks_[b]->index.findNeighbors(result, query, nanoflann::SearchParams());
-  }
+  if (count_ < static_cast<std::size_t>(k)) return std::numeric_limits<double>::infinity();
+  thread_local std::vector<double> squared;
+  squared.resize(static_cast<std::size_t>(k));
+  const auto search = [&](double squared_bound) {
+    BoundedKnnSet result(squared.data(), static_cast<std::size_t>(k), squared_bound);
+    // The result set keeps the k nearest over every block searched. After the
+    // first block the k-th distance is small; a block whose box lies farther
+    // cannot improve it.
+    blocks_[first_block]->index.findNeighbors(result, query, nanoflann::SearchParams());
+    for (std::size_t b = 0; b < blocks_.size(); ++b) {
+      if (b == first_block || blocks_[b]->SquaredDistance(query) > result.worstDist()) continue;
+      blocks_[b]->index.findNeighbors(result, query, nanoflann::SearchParams());
+    }
+    return result.full();
+  };
+  // Widened a little so that rounding in the caller's sum cannot put the
+  // k-th neighbour just outside.
+  const double squared_bound = bound * bound * (1 + 1e-9);
+  if (!(std::isfinite(squared_bound) && search(squared_bound))) search(std::numeric_limits<double>::infinity());
   return std::sqrt(squared[static_cast<std::size_t>(k) - 1]);
 }
 

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstddef>
+#include <limits>
 #include <memory>
 #include <span>
 #include <vector>
@@ -47,7 +48,15 @@ class NeighbourRadii {
   // first: the answer is the same whichever it is, but it comes fastest from
   // the block that holds the query's neighbours. Thread-safe (the trees are
   // read only).
-  double Radius(const double* query, int k, std::size_t first_block = 0) const;
+  //
+  // `bound`, when finite, is an upper bound of the answer that the caller
+  // knows: a query's radius is at most a nearby query's radius plus the
+  // distance between the two, so callers that search in spatial order pass
+  // that. The search then skips everything farther from the start instead of
+  // narrowing down from infinity. A bound below the answer costs a second
+  // search, never a wrong answer.
+  double Radius(const double* query, int k, std::size_t first_block = 0,
+                double bound = std::numeric_limits<double>::infinity()) const;
 
  private:
   struct Block;

@@ -54,6 +54,10 @@ constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 using Vec3 = std::array<double, 3>;
 
+double Distance(const Vec3& a, const Vec3& b) {
+  return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+}
+
 // Frees a vector's memory. (`v = {}` only empties it: it picks the
 // initializer-list assignment, which keeps the capacity. That kept every
 // region's buffers of the out-of-core search alive, about 130 bytes a
@@ -375,9 +379,12 @@ class SmoothingPass {
     float* table = table_->data();
     ParallelForDynamic(task.queries.size(), threads_, 1024, [&](std::size_t begin, std::size_t end) {
       std::vector<Unresolved> local;
+      double bound = kInfinity;  // the previous query's radius plus the step to this one
       for (std::size_t q = begin; q < end; ++q) {
         const Query& query = task.queries[q];
-        const double radius = radii.Radius(query.position.data(), neighbours_, task.query_blocks[q]);
+        if (q > begin) bound += Distance(task.queries[q - 1].position, query.position);
+        const double radius = radii.Radius(query.position.data(), neighbours_, task.query_blocks[q], bound);
+        bound = radius;
         if (SphereInsideLoad(query.position, radius, task.load, domain_)) {
           table[query.ordinal] = static_cast<float>(radius);
         } else {

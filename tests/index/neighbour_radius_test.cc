@@ -90,6 +90,39 @@ TEST(NeighbourRadii, BlocksBuiltOnSeveralThreadsGiveTheOneTreesRadii) {
   for (const auto& b : bad) EXPECT_THROW(NeighbourRadii(points, std::span<const std::size_t>(b, 2), 2), Error);
 }
 
+// A bound from the previous query (its radius plus the step) gives every
+// radius the search without one gives; so does a bound below the answer,
+// which is searched again, and one at exactly the answer.
+TEST(NeighbourRadii, ABoundNeverChangesTheAnswer) {
+  std::mt19937_64 rng(13);
+  std::normal_distribution<double> clump(0.0, 0.01);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::vector<double> points;
+  for (int i = 0; i < 8000; ++i) {
+    const bool in_clump = i % 2 == 0;
+    for (int a = 0; a < 3; ++a) points.push_back(in_clump ? 0.4 + clump(rng) : uniform(rng));
+  }
+  std::vector<std::size_t> begins = {0, 2000, 5000};
+  const NeighbourRadii radii(points, begins, 2);
+  for (int k : {1, 8, 32}) {
+    double previous = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < 8000; i += 7) {
+      const double* q = &points[3 * i];
+      const double exact = radii.Radius(q, k);
+      ASSERT_EQ(exact, BruteForceRadius(points, q, k)) << k << " " << i;
+      double step = 0;
+      if (i >= 7) {
+        for (int a = 0; a < 3; ++a) step += (q[a] - q[a - 21]) * (q[a] - q[a - 21]);
+      }
+      EXPECT_EQ(radii.Radius(q, k, 0, previous + std::sqrt(step)), exact) << k << " " << i;
+      EXPECT_EQ(radii.Radius(q, k, 2, exact), exact) << k << " " << i;
+      EXPECT_EQ(radii.Radius(q, k, 1, exact * 0.5), exact) << k << " " << i;
+      EXPECT_EQ(radii.Radius(q, k, 0, 0.0), exact) << k << " " << i;
+      previous = exact;
+    }
+  }
+}
+
 TEST(NeighbourRadii, CoincidentPointsAndTooFewPoints) {
   std::vector<double> points(3 * 50, 0.25);
   const NeighbourRadii radii(points);
