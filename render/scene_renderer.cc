@@ -390,6 +390,11 @@ std::vector<const SelectionOverlay*> SceneRenderer::ReadyOverlays(const std::vec
   return overlays;
 }
 
+// Resident blocks are scattered in memory and the draws visit them in the
+// plan's order: each is asked for this many draws ahead, so that tens of
+// thousands of blocks do not each wait for memory in turn.
+constexpr std::size_t kDrawLookahead = 8;
+
 void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& copies,
                                const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats) {
   FrameSettings settings;
@@ -415,7 +420,16 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
         hierarchy(c.epoch), c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
         [&](std::int32_t node) { return resident(node)->block.octant_offsets(); });
     splat_.SetCopy(c.direction, c.weight);
-    for (const DrawRange& range : plan.ranges) splat_.Draw(resident(range.node)->block, range.first, range.count);
+    for (std::size_t i = 0; i < plan.ranges.size(); ++i) {
+      if (i + kDrawLookahead < plan.ranges.size()) {
+        // Both cache lines of a block's placement and cube.
+        const auto* ahead = reinterpret_cast<const char*>(resident(plan.ranges[i + kDrawLookahead].node));
+        __builtin_prefetch(ahead);
+        __builtin_prefetch(ahead + 64);
+      }
+      const DrawRange& range = plan.ranges[i];
+      splat_.Draw(resident(range.node)->block, range.first, range.count);
+    }
     stats.points_drawn += plan.points;
     stats.draws += plan.ranges.size();
     stats.stand_ins += plan.stand_ins;
