@@ -25,15 +25,23 @@ double BruteForceRadius(const std::vector<double>& points, const double* q, int 
   return d[static_cast<std::size_t>(k - 1)];
 }
 
-TEST(NeighbourRadii, EqualsTheKthDistanceOfAllPointsOnClusteredPoints) {
-  std::mt19937_64 rng(7);
+// `n` points in the unit cube: every other one in a Gaussian clump (sigma
+// 0.01) around (centre, centre, centre), the others uniform.
+std::vector<double> ClumpAndBackground(int n, double centre, std::mt19937_64& rng) {
   std::normal_distribution<double> clump(0.0, 0.01);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   std::vector<double> points;
-  for (int i = 0; i < 3000; ++i) {
+  for (int i = 0; i < n; ++i) {
     const bool in_clump = i % 2 == 0;
-    for (int a = 0; a < 3; ++a) points.push_back(in_clump ? 0.3 + clump(rng) : uniform(rng));
+    for (int a = 0; a < 3; ++a) points.push_back(in_clump ? centre + clump(rng) : uniform(rng));
   }
+  return points;
+}
+
+TEST(NeighbourRadii, EqualsTheKthDistanceOfAllPointsOnClusteredPoints) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const std::vector<double> points = ClumpAndBackground(3000, 0.3, rng);
   const NeighbourRadii radii(points);
   for (int k : {1, 2, 8, 32, 100}) {
     for (std::size_t i = 0; i < 3000; i += 37) {
@@ -95,14 +103,8 @@ TEST(NeighbourRadii, BlocksBuiltOnSeveralThreadsGiveTheOneTreesRadii) {
 // which is searched again, and one at exactly the answer.
 TEST(NeighbourRadii, ABoundNeverChangesTheAnswer) {
   std::mt19937_64 rng(13);
-  std::normal_distribution<double> clump(0.0, 0.01);
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
-  std::vector<double> points;
-  for (int i = 0; i < 8000; ++i) {
-    const bool in_clump = i % 2 == 0;
-    for (int a = 0; a < 3; ++a) points.push_back(in_clump ? 0.4 + clump(rng) : uniform(rng));
-  }
-  std::vector<std::size_t> begins = {0, 2000, 5000};
+  const std::vector<double> points = ClumpAndBackground(8000, 0.4, rng);
+  const std::vector<std::size_t> begins = {0, 2000, 5000};
   const NeighbourRadii radii(points, begins, 2);
   for (int k : {1, 8, 32}) {
     double previous = std::numeric_limits<double>::infinity();
