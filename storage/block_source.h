@@ -6,8 +6,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <optional>
+#include <span>
 #include <vector>
 
+#include "base/error.h"
 #include "base/hash.h"
 
 namespace octocosm {
@@ -30,6 +33,12 @@ struct BlockIdHash {
   }
 };
 
+// Where a block lies in its epoch's file, in bytes.
+struct BlockExtent {
+  std::uint64_t offset = 0;
+  std::uint64_t length = 0;
+};
+
 class BlockSource {
  public:
   virtual ~BlockSource() = default;
@@ -44,6 +53,22 @@ class BlockSource {
   // blocks (the cache) recycles evicted buffers this way instead of touching
   // fresh memory for every block. The default allocates.
   virtual void ReadBlock(const BlockId& id, Bytes& buffer) const { buffer = ReadBlock(id); }
+
+  // Reading blocks that lie near one another in a file with one request:
+  // worth it where each read is a round trip to a server (storage/http_file.h).
+  // A source that says so locates its blocks; the prefetcher then reads the
+  // wanted blocks near the one it takes together (storage/read_coalescing.h).
+  virtual bool CoalescesReads() const { return false; }
+  // Where the block lies; nullopt where not known (it is then read alone).
+  virtual std::optional<BlockExtent> Locate(const BlockId& /*id*/) const { return std::nullopt; }
+  // Reads several blocks, verified, each into its buffer (reusing its
+  // capacity), with as few requests as the source can. Throws as ReadBlock
+  // does for the first block that fails; the buffers are then unspecified.
+  // The default reads one at a time.
+  virtual void ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buffers) const {
+    if (ids.size() != buffers.size()) throw Error::InvalidArgument("ReadBlocks: as many buffers as blocks, please");
+    for (std::size_t i = 0; i < ids.size(); ++i) ReadBlock(ids[i], buffers[i]);
+  }
 };
 
 }  // namespace octocosm

@@ -50,6 +50,22 @@ RandomAccessFile RandomAccessFile::Open(const std::string& path) {
   return RandomAccessFile(path, UniqueFd(fd));
 }
 
+void CheckAscendingRanges(std::span<const RangeRead> ranges, const std::string& path) {
+  for (std::size_t i = 1; i < ranges.size(); ++i) {
+    if (ranges[i].offset < ranges[i - 1].offset + ranges[i - 1].out.size()) {
+      throw Error::InvalidArgument("ranges read from " + path + " must ascend without overlapping: bytes at " +
+                                   std::to_string(ranges[i].offset) + " follow " +
+                                   std::to_string(ranges[i - 1].out.size()) + " bytes at " +
+                                   std::to_string(ranges[i - 1].offset));
+    }
+  }
+}
+
+void ReadableFile::ReadRanges(std::span<RangeRead> ranges) const {
+  CheckAscendingRanges(ranges, path());
+  for (RangeRead& range : ranges) range.got = ReadAt(range.offset, range.out);
+}
+
 std::size_t RandomAccessFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const {
   std::size_t done = 0;
   while (done < out.size()) {

@@ -37,6 +37,13 @@ class UniqueFd {
   int fd_ = -1;
 };
 
+// One range of a ReadableFile::ReadRanges call.
+struct RangeRead {
+  std::uint64_t offset = 0;
+  std::span<std::uint8_t> out;
+  std::size_t got = 0;  // set by ReadRanges: bytes read, fewer than out.size() only where the file ends
+};
+
 // A read-only file read at offsets, by any number of threads at once: a local
 // file (RandomAccessFile) or one on an HTTP server (HttpFile, storage/http_file.h).
 class ReadableFile {
@@ -45,6 +52,12 @@ class ReadableFile {
   // Reads up to out.size() bytes at `offset`; fewer only where the file ends.
   // Returns the number of bytes read.
   virtual std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const = 0;
+  // Reads several ranges, given in ascending order of offset and not
+  // overlapping (kInvalidArgument otherwise). A remote file fetches those it
+  // does not hold with one request from the first one's start to the last
+  // one's end, the bytes between them fetched and dropped (the caller keeps
+  // the gaps small); a local one reads each.
+  virtual void ReadRanges(std::span<RangeRead> ranges) const;
   virtual std::uint64_t Size() const = 0;
   // The path or URL, for messages.
   virtual const std::string& path() const = 0;
@@ -61,6 +74,10 @@ class ReadableFile {
   // reads from several threads begin.
   virtual void KeepResident(std::uint64_t /*offset*/, std::uint64_t /*length*/) {}
 };
+
+// kInvalidArgument naming `path` unless the ranges ascend without overlapping
+// (ReadableFile::ReadRanges).
+void CheckAscendingRanges(std::span<const RangeRead> ranges, const std::string& path);
 
 // A local read-only file read with pread: no shared file offset, so one
 // object may serve any number of threads at once.

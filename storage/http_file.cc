@@ -212,9 +212,15 @@ std::size_t HttpFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) 
   if (offset >= size_ || out.empty()) return 0;
   const std::size_t length = static_cast<std::size_t>(std::min<std::uint64_t>(out.size(), size_ - offset));
   out = out.first(length);
+  if (!ReadHeld(offset, out)) FetchAndCache(offset, out);
+  return length;
+}
+
+bool HttpFile::ReadHeld(std::uint64_t offset, std::span<std::uint8_t> out) const {
+  const std::size_t length = out.size();
   if (offset + length <= head_.size()) {
     std::memcpy(out.data(), head_.data() + offset, length);
-    return length;
+    return true;
   }
   if (offset >= resident_offset_ && offset + length <= resident_offset_ + resident_length_) {
     // A failed fetch throws out of call_once, so the next read tries again.
@@ -224,14 +230,39 @@ std::size_t HttpFile::ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) 
       resident_ = std::move(bytes);
     });
     std::memcpy(out.data(), resident_.data() + (offset - resident_offset_), length);
-    return length;
+    return true;
   }
-  ReadRange(offset, out);
-  return length;
+  return !cache_key_.empty() && options_.cache->Get(cache_key_, offset, out);
+}
+
+void HttpFile::ReadRanges(std::span<RangeRead> ranges) const {
+  CheckAscendingRanges(ranges, url_);
+  std::vector<RangeRead*> missing;
+  for (RangeRead& range : ranges) {
+    range.got = 0;
+    if (range.offset >= size_ || range.out.empty()) continue;
+    range.got = static_cast<std::size_t>(std::min<std::uint64_t>(range.out.size(), size_ - range.offset));
+    if (!ReadHeld(range.offset, range.out.first(range.got))) missing.push_back(&range);
+  }
+  if (missing.empty()) return;
+  // One request for all the missing ranges: a round trip to the server costs
+  // more than the few bytes between them.
+  const std::uint64_t first = missing.front()->offset;
+  std::vector<std::uint8_t> span(static_cast<std::size_t>(missing.back()->offset + missing.back()->got - first));
+  FetchRange(first, span, nullptr);
+  for (RangeRead* range : missing) {
+    const auto bytes = std::span<const std::uint8_t>(span).subspan(static_cast<std::size_t>(range->offset - first), range->got);
+    std::memcpy(range->out.data(), bytes.data(), bytes.size());
+    if (!cache_key_.empty()) options_.cache->Put(cache_key_, range->offset, bytes);
+  }
 }
 
 void HttpFile::ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) const {
   if (!cache_key_.empty() && options_.cache->Get(cache_key_, offset, out)) return;
+  FetchAndCache(offset, out);
+}
+
+void HttpFile::FetchAndCache(std::uint64_t offset, std::span<std::uint8_t> out) const {
   FetchRange(offset, out, nullptr);
   if (!cache_key_.empty()) options_.cache->Put(cache_key_, offset, out);
 }

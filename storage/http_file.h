@@ -72,6 +72,7 @@ class HttpFile final : public ReadableFile {
   HttpFile& operator=(const HttpFile&) = delete;
 
   std::size_t ReadAt(std::uint64_t offset, std::span<std::uint8_t> out) const override;
+  void ReadRanges(std::span<RangeRead> ranges) const override;
   std::uint64_t Size() const override { return size_; }
   const std::string& path() const override { return url_; }
   bool remote() const override { return true; }
@@ -90,8 +91,13 @@ class HttpFile final : public ReadableFile {
   };
 
   HttpFile(std::string url, HttpOptions options);
+  // Fills `out` (within the file) from what is held without a request of its
+  // own: the head, the resident range (fetched whole at its first read), the
+  // cache. False when it must be fetched.
+  bool ReadHeld(std::uint64_t offset, std::span<std::uint8_t> out) const;
   // A range from the cache, else fetched (and then cached).
   void ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) const;
+  void FetchAndCache(std::uint64_t offset, std::span<std::uint8_t> out) const;
   // One range request with retries; fills `out` with exactly bytes
   // [offset, offset + out.size()) of the file, or throws. At open
   // (`opened` not null) the file's size is not known yet: the answer may be

@@ -1,6 +1,7 @@
 #include "storage/page_file_reader.h"
 
 #include <array>
+#include <vector>
 
 #include "base/error.h"
 #include "storage/checksum.h"
@@ -71,32 +72,59 @@ void PageFileReader::Scan(std::uint64_t lo, std::uint64_t hi,
   index_.Scan(lo, hi, visit);
 }
 
-void PageFileReader::ReadBlockInto(const IndexEntry& entry, std::span<std::uint8_t> out) const {
+void PageFileReader::CheckBuffer(const IndexEntry& entry, std::span<const std::uint8_t> out) const {
   if (out.size() < entry.byte_length) {
     throw Error::InvalidArgument(BlockLabel(entry.key) + " of " + path() + " is " +
                                  std::to_string(entry.byte_length) + " bytes; the buffer holds " +
                                  std::to_string(out.size()));
   }
-  auto bytes = out.first(static_cast<std::size_t>(entry.byte_length));
-  if (!bytes.empty()) {
-    // One positioned read of exactly the block: what an HTTP reader would
-    // ask for as one range request.
-    const std::uint64_t offset = entry.first_page * header_.page_size;
-    std::size_t got = file_->ReadAt(offset, bytes);
-    block_reads_.fetch_add(1, std::memory_order_relaxed);
-    bytes_read_.fetch_add(got, std::memory_order_relaxed);
-    if (got != bytes.size()) {
-      throw Error::Corruption(path(), BlockLabel(entry.key) + ": truncated: expected " +
-                                          std::to_string(bytes.size()) + " bytes at offset " +
-                                          std::to_string(offset) + ", the file ends after " +
-                                          std::to_string(got));
-    }
+}
+
+void PageFileReader::VerifyBlock(const IndexEntry& entry, std::span<const std::uint8_t> bytes, std::size_t got) const {
+  if (got != bytes.size()) {
+    throw Error::Corruption(path(), BlockLabel(entry.key) + ": truncated: expected " + std::to_string(bytes.size()) +
+                                        " bytes at offset " + std::to_string(BlockOffset(entry)) +
+                                        ", the file ends after " + std::to_string(got));
   }
   std::uint64_t computed = Checksum64(bytes);
   if (computed != entry.checksum) {
     throw Error::Corruption(path(), BlockLabel(entry.key) + ": checksum mismatch: stored " +
                                         Hex64(entry.checksum) + ", computed " + Hex64(computed));
   }
+}
+
+void PageFileReader::ReadBlockInto(const IndexEntry& entry, std::span<std::uint8_t> out) const {
+  CheckBuffer(entry, out);
+  auto bytes = out.first(static_cast<std::size_t>(entry.byte_length));
+  std::size_t got = 0;
+  if (!bytes.empty()) {
+    // One positioned read of exactly the block: what an HTTP reader would
+    // ask for as one range request.
+    got = file_->ReadAt(BlockOffset(entry), bytes);
+    block_reads_.fetch_add(1, std::memory_order_relaxed);
+    bytes_read_.fetch_add(got, std::memory_order_relaxed);
+  }
+  VerifyBlock(entry, bytes, got);
+}
+
+void PageFileReader::ReadBlocksInto(std::span<const IndexEntry> entries,
+                                    std::span<const std::span<std::uint8_t>> outs) const {
+  if (entries.size() != outs.size()) {
+    throw Error::InvalidArgument("ReadBlocksInto: " + std::to_string(entries.size()) + " blocks of " + path() +
+                                 " for " + std::to_string(outs.size()) + " buffers");
+  }
+  std::vector<RangeRead> ranges(entries.size());
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    CheckBuffer(entries[i], outs[i]);
+    ranges[i].offset = BlockOffset(entries[i]);
+    ranges[i].out = outs[i].first(static_cast<std::size_t>(entries[i].byte_length));
+  }
+  file_->ReadRanges(ranges);
+  std::uint64_t got = 0;
+  for (const RangeRead& range : ranges) got += range.got;
+  block_reads_.fetch_add(entries.size(), std::memory_order_relaxed);
+  bytes_read_.fetch_add(got, std::memory_order_relaxed);
+  for (std::size_t i = 0; i < entries.size(); ++i) VerifyBlock(entries[i], ranges[i].out, ranges[i].got);
 }
 
 void PageFileReader::ReadBlockRange(const IndexEntry& entry, std::uint64_t offset, std::span<std::uint8_t> out) const {

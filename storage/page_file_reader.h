@@ -67,6 +67,13 @@ class PageFileReader {
   // that ends early (the contents of `out` are then unspecified), kIo if the
   // OS fails, kInvalidArgument if `out` is too small.
   void ReadBlockInto(const IndexEntry& entry, std::span<std::uint8_t> out) const;
+  // The same for several blocks, given in ascending order of offset, each
+  // into its own buffer: from a server with one request for all (the pages
+  // between them are fetched and dropped; ReadableFile::ReadRanges). Throws
+  // for the first block that fails; the buffers are then unspecified.
+  void ReadBlocksInto(std::span<const IndexEntry> entries, std::span<const std::span<std::uint8_t>> outs) const;
+  // Where a block starts in the file.
+  std::uint64_t BlockOffset(const IndexEntry& entry) const { return entry.first_page * header_.page_size; }
   // Reads bytes [offset, offset + out.size()) of a block WITHOUT verifying
   // them: the block checksum covers the whole block only. For callers whose
   // payload carries its own checksums for the parts they read (the block
@@ -90,6 +97,11 @@ class PageFileReader {
   PageFileReader(std::unique_ptr<ReadableFile> file, const PageFileHeader& header, Options options);
   void ReadIndexPage(std::uint64_t page_number, std::span<std::uint8_t> out) const;
   std::string BlockLabel(std::uint64_t key) const;
+  // Throws kInvalidArgument unless `out` holds the block.
+  void CheckBuffer(const IndexEntry& entry, std::span<const std::uint8_t> out) const;
+  // Throws kCorruption for a block read short (`got` of bytes.size() bytes)
+  // or failing its checksum.
+  void VerifyBlock(const IndexEntry& entry, std::span<const std::uint8_t> bytes, std::size_t got) const;
 
   std::unique_ptr<ReadableFile> file_;
   const PageFileHeader header_;

@@ -157,7 +157,9 @@ StoreReader::StoreReader(std::string directory, nlohmann::json manifest_json, Ma
     : directory_(std::move(directory)),
       manifest_json_(std::move(manifest_json)),
       manifest_(std::move(manifest)),
-      page_files_(std::move(page_files)) {}
+      page_files_(std::move(page_files)) {
+  for (const auto& file : page_files_) coalesces_reads_ = coalesces_reads_ || file->remote();
+}
 
 const PageFileReader& StoreReader::page_file(std::uint32_t epoch) const {
   if (epoch >= page_files_.size()) {
@@ -196,6 +198,51 @@ void StoreReader::ReadBlock(const BlockId& id, Bytes& buffer) const {
   }
   buffer.resize(static_cast<std::size_t>(entry->byte_length));
   file.ReadBlockInto(*entry, buffer);
+}
+
+std::optional<BlockExtent> StoreReader::Locate(const BlockId& id) const {
+  if (id.epoch >= page_files_.size()) return std::nullopt;
+  const PageFileReader& file = *page_files_[id.epoch];
+  const std::optional<IndexEntry> entry = file.Lookup(id.key);
+  if (!entry) return std::nullopt;
+  return BlockExtent{file.BlockOffset(*entry), entry->byte_length};
+}
+
+void StoreReader::ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buffers) const {
+  if (ids.size() != buffers.size()) throw Error::InvalidArgument("ReadBlocks: as many buffers as blocks, please");
+  struct Wanted {
+    IndexEntry entry;
+    std::size_t position;  // in ids
+  };
+  std::vector<std::size_t> order(ids.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return ids[a].epoch < ids[b].epoch; });
+  for (std::size_t begin = 0; begin < order.size();) {
+    const std::uint32_t epoch = ids[order[begin]].epoch;
+    const PageFileReader& file = page_file(epoch);
+    std::vector<Wanted> wanted;
+    std::size_t end = begin;
+    for (; end < order.size() && ids[order[end]].epoch == epoch; ++end) {
+      const BlockId& id = ids[order[end]];
+      std::optional<IndexEntry> entry = file.Lookup(id.key);
+      if (!entry) {
+        throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(epoch) + ") in " + file.path());
+      }
+      wanted.push_back(Wanted{*entry, order[end]});
+    }
+    std::sort(wanted.begin(), wanted.end(),
+              [](const Wanted& a, const Wanted& b) { return a.entry.first_page < b.entry.first_page; });
+    std::vector<IndexEntry> entries;
+    std::vector<std::span<std::uint8_t>> outs;
+    for (const Wanted& w : wanted) {
+      Bytes& buffer = buffers[w.position];
+      buffer.resize(static_cast<std::size_t>(w.entry.byte_length));
+      entries.push_back(w.entry);
+      outs.emplace_back(buffer);
+    }
+    file.ReadBlocksInto(entries, outs);
+    begin = end;
+  }
 }
 
 void StoreReader::ReadBlockRange(const BlockId& id, std::uint64_t offset, std::span<std::uint8_t> out) const {

@@ -41,6 +41,12 @@ class StoreReader : public BlockSource {
   // epoch or key.
   Bytes ReadBlock(const BlockId& id) const override;
   void ReadBlock(const BlockId& id, Bytes& buffer) const override;
+  // Where some epoch is on a server.
+  bool CoalescesReads() const override { return coalesces_reads_; }
+  std::optional<BlockExtent> Locate(const BlockId& id) const override;
+  // Blocks of one epoch are read with PageFileReader::ReadBlocksInto (one
+  // request from a server); of several, an epoch at a time.
+  void ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buffers) const override;
   // Reads a block into `out` without allocating; returns its length. `out`
   // must hold the block (Lookup tells its byte_length); kInvalidArgument if
   // it does not.
@@ -85,6 +91,7 @@ class StoreReader : public BlockSource {
   nlohmann::json manifest_json_;
   Manifest manifest_;
   std::vector<std::unique_ptr<PageFileReader>> page_files_;  // one per epoch
+  bool coalesces_reads_ = false;
 };
 
 }  // namespace octocosm

@@ -13,8 +13,10 @@
 #include <thread>
 
 #include "base/error.h"
+#include "storage/range_cache.h"
 #include "storage/read_cancellation.h"
 #include "tests/support/fake_http_server.h"
+#include "tests/support/temp_dir.h"
 
 namespace octocosm {
 namespace {
@@ -99,6 +101,62 @@ TEST(HttpFile, ASmallFileComesWholeWithTheFirstRequest) {
   auto empty = HttpFile::Open(server.Url("/empty"), QuickOptions());
   EXPECT_EQ(empty->Size(), 0u);
   EXPECT_EQ(Read(*empty, 0, 10), "");
+}
+
+std::vector<RangeRead> Ranges(std::vector<std::pair<std::uint64_t, std::size_t>> wanted,
+                              std::vector<std::string>& buffers) {
+  buffers.clear();
+  for (const auto& [offset, length] : wanted) buffers.emplace_back(length, '\0');
+  std::vector<RangeRead> ranges;
+  for (std::size_t i = 0; i < wanted.size(); ++i) {
+    ranges.push_back(RangeRead{wanted[i].first,
+                               std::span<std::uint8_t>(reinterpret_cast<std::uint8_t*>(buffers[i].data()), buffers[i].size())});
+  }
+  return ranges;
+}
+
+TEST(HttpFile, SeveralRangesComeWithOneRequestAndAreCachedOneByOne) {
+  FakeHttpServer server;
+  const std::string contents = RandomBytes(1 << 20, 3);
+  server.Put("/f", contents);
+  testing_support::TempDir cache_dir("http-ranges");
+  HttpOptions options = QuickOptions();
+  options.cache = RangeCache::Open(cache_dir.path().string(), 16 << 20);
+  const std::vector<std::pair<std::uint64_t, std::size_t>> wanted = {
+      {100000, 5000}, {110000, 3000}, {200000, 10000}, {(1 << 20) - 100, 300}};
+  {
+    auto file = HttpFile::Open(server.Url("/f"), options);
+    std::vector<std::string> buffers;
+    std::vector<RangeRead> ranges = Ranges(wanted, buffers);
+    file->ReadRanges(ranges);
+    for (std::size_t i = 0; i < wanted.size(); ++i) {
+      const std::size_t expected = i + 1 < wanted.size() ? wanted[i].second : 100;  // the last is cut at the end
+      ASSERT_EQ(ranges[i].got, expected) << i;
+      EXPECT_EQ(buffers[i].substr(0, expected), contents.substr(wanted[i].first, expected)) << i;
+    }
+    EXPECT_EQ(file->stats().requests, 2u);  // the open and one for all four ranges
+  }
+  {
+    // Each range was cached on its own: a reader asking for some of them,
+    // and one more, fetches only that one.
+    auto file = HttpFile::Open(server.Url("/f"), options);
+    std::vector<std::string> buffers;
+    std::vector<RangeRead> ranges = Ranges({{110000, 3000}, {150000, 64}, {200000, 10000}}, buffers);
+    file->ReadRanges(ranges);
+    EXPECT_EQ(buffers[0], contents.substr(110000, 3000));
+    EXPECT_EQ(buffers[1], contents.substr(150000, 64));
+    EXPECT_EQ(buffers[2], contents.substr(200000, 10000));
+    EXPECT_EQ(file->stats().requests, 2u);
+    EXPECT_EQ(file->stats().bytes_fetched, 65536u + 64u);  // the open's first bytes and the one range
+  }
+  {
+    auto file = HttpFile::Open(server.Url("/f"), QuickOptions());
+    std::vector<std::string> buffers;
+    std::vector<RangeRead> ranges = Ranges({{200000, 10}, {100000, 10}}, buffers);
+    EXPECT_EQ(ErrorOf([&] { file->ReadRanges(ranges); }).kind(), ErrorKind::kInvalidArgument);
+    ranges = Ranges({{100000, 10}, {100005, 10}}, buffers);
+    EXPECT_EQ(ErrorOf([&] { file->ReadRanges(ranges); }).kind(), ErrorKind::kInvalidArgument);
+  }
 }
 
 TEST(HttpFile, ManyThreadsReadAtOnce) {

@@ -267,6 +267,46 @@ TEST(PageFile, ReadBlockIntoCallerBuffer) {
   }
 }
 
+TEST(PageFile, ReadBlocksIntoReadsSeveralInFileOrderAndVerifiesEach) {
+  ScratchDirectory dir;
+  const std::string path = dir.File("several.pages");
+  auto expected = WriteRandomPageFile(path, 4096, 60, 12);
+  auto reader = PageFileReader::Open(path);
+  std::vector<IndexEntry> entries;
+  reader->Scan(0, UINT64_MAX, [&](const IndexEntry& entry) { return entries.push_back(entry), true; });
+  std::sort(entries.begin(), entries.end(),
+            [](const IndexEntry& a, const IndexEntry& b) { return a.first_page < b.first_page; });
+  // Every other block, so that the reads have gaps between them.
+  std::vector<IndexEntry> wanted;
+  for (std::size_t i = 0; i < entries.size(); i += 2) wanted.push_back(entries[i]);
+  std::vector<Bytes> buffers(wanted.size());
+  std::vector<std::span<std::uint8_t>> outs;
+  for (std::size_t i = 0; i < wanted.size(); ++i) {
+    buffers[i].assign(static_cast<std::size_t>(wanted[i].byte_length) + 7, 0xee);
+    outs.emplace_back(buffers[i]);
+  }
+  reader->ReadBlocksInto(wanted, outs);
+  for (std::size_t i = 0; i < wanted.size(); ++i) {
+    const Bytes& want = expected.at(wanted[i].key).bytes;
+    EXPECT_TRUE(std::equal(want.begin(), want.end(), buffers[i].begin())) << Hex64(wanted[i].key);
+  }
+  EXPECT_EQ(reader->stats().block_reads, wanted.size());
+
+  // Out of the file's order: refused.
+  std::vector<IndexEntry> reversed(wanted.rbegin(), wanted.rend());
+  std::vector<std::span<std::uint8_t>> reversed_outs(outs.rbegin(), outs.rend());
+  ExpectError(ErrorKind::kInvalidArgument, [&] { reader->ReadBlocksInto(reversed, reversed_outs); });
+
+  // A damaged block among them is named.
+  const auto damaged = std::find_if(wanted.begin() + 1, wanted.end(), [](const IndexEntry& e) { return e.byte_length > 0; });
+  ASSERT_NE(damaged, wanted.end());
+  storagetest::FlipByte(path, reader->BlockOffset(*damaged), 0x10);
+  auto reopened = PageFileReader::Open(path);
+  const std::string message = ExpectError(ErrorKind::kCorruption, [&] { reopened->ReadBlocksInto(wanted, outs); });
+  EXPECT_NE(message.find("block " + Hex64(damaged->key)), std::string::npos) << message;
+  EXPECT_NE(message.find("checksum mismatch"), std::string::npos) << message;
+}
+
 // ---------------------------------------------------------------------------
 // Damage. Each test writes a small file, damages it, and checks the error.
 
