@@ -264,6 +264,75 @@ PinnedBlock BlockCache::Get(const BlockId& id) {
   return PinnedBlock(this, flight->entry);
 }
 
+std::vector<bool> BlockCache::Load(std::span<const BlockId> ids) {
+  std::vector<bool> read(ids.size(), false);
+  std::vector<BlockId> reading;
+  std::vector<std::shared_ptr<Flight>> flights;
+  std::vector<Bytes> buffers;
+  {
+    MutexLock lock(mutex_);
+    if (source_ == nullptr) {
+      throw Error::InvalidArgument("block cache has no source to read missing blocks from");
+    }
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      if (FindLocked(ids[i]) != nullptr || flights_.contains(ids[i])) continue;
+      auto flight = std::make_shared<Flight>();
+      flights_.emplace(ids[i], flight);
+      reading.push_back(ids[i]);
+      flights.push_back(std::move(flight));
+      buffers.emplace_back();
+      if (!spare_buffers_.empty()) {
+        buffers.back() = std::move(spare_buffers_.back());
+        spare_buffers_.pop_back();
+      }
+      read[i] = true;
+      ++stats_.source_reads;
+      ++stats_.reads_in_flight;
+    }
+  }
+  if (reading.empty()) return read;
+
+  std::exception_ptr thrown;
+  try {
+    source_->ReadBlocks(reading, buffers);
+  } catch (...) {
+    thrown = std::current_exception();
+  }
+
+  // Handles that keep each new entry pinned until the lock is released, so
+  // that inserting one cannot evict another before its waiters have it.
+  std::vector<PinnedBlock> inserted;
+  inserted.reserve(reading.size());
+  MutexLock lock(mutex_);
+  for (std::size_t i = 0; i < reading.size(); ++i) {
+    Flight& flight = *flights[i];
+    flights_.erase(reading[i]);
+    --stats_.reads_in_flight;
+    flight.done = true;
+    if (thrown) {
+      // Waiters read their blocks themselves, as after a cancelled read.
+      flight.cancelled = true;
+    } else {
+      try {
+        stats_.bytes_read += buffers[i].size();
+        flight.entry = InsertPinnedLocked(reading[i], MakeShared(std::move(buffers[i])),
+                                          static_cast<std::uint32_t>(1 + flight.waiters));
+        inserted.push_back(PinnedBlock(this, flight.entry));
+      } catch (...) {
+        flight.other_error = std::current_exception();
+      }
+    }
+    flight.done_cv.SignalAll();
+  }
+  if (thrown) {
+    if (!ReadCancelled()) stats_.read_failures += reading.size();
+    lock.Unlock();
+    std::rethrow_exception(thrown);
+  }
+  lock.Unlock();
+  return read;
+}
+
 PinnedBlock BlockCache::TryGet(const BlockId& id) {
   MutexLock lock(mutex_);
   Entry* entry = FindLocked(id);

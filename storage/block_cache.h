@@ -50,6 +50,7 @@
 #include <list>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -70,9 +71,11 @@ struct CacheStats {
   // that joins a read already in flight is a miss that did not read.
   std::uint64_t hits = 0;
   std::uint64_t misses = 0;
-  std::uint64_t source_reads = 0;    // ReadBlock calls started (successful or not)
-  std::uint64_t read_failures = 0;   // ReadBlock calls that threw (not counting cancelled ones)
-  std::uint64_t bytes_read = 0;      // bytes returned by successful ReadBlock calls
+  // Blocks read from the source: a ReadBlock call, or a block of a
+  // ReadBlocks call (Load()).
+  std::uint64_t source_reads = 0;    // started (successful or not)
+  std::uint64_t read_failures = 0;   // whose call threw (not counting cancelled ones)
+  std::uint64_t bytes_read = 0;      // returned by successful calls
   std::uint64_t inserts = 0;         // entries added, by Insert() or by a read
   std::uint64_t evictions = 0;       // entries dropped to stay within budget
   // Gauges (charges include kEntryOverheadBytes per entry).
@@ -109,6 +112,15 @@ class BlockCache {
   // Error: kind and message) and nothing is cached for the block; a later
   // Get() tries again.
   PinnedBlock Get(const BlockId& id) EXCLUDES(mutex_);
+
+  // Reads those of `ids` that are neither resident nor being read with one
+  // BlockSource::ReadBlocks call (from a server: blocks near one another in
+  // one request) and caches them unpinned; returns, for each of `ids`,
+  // whether this call read it. A Get() of one of them meanwhile waits for
+  // this read. When the read fails, nothing of it is cached, its error is
+  // thrown to the caller, and those waiting Get() calls read their blocks
+  // themselves: the failure may be another block's.
+  std::vector<bool> Load(std::span<const BlockId> ids) EXCLUDES(mutex_);
 
   // Non-blocking: returns the block pinned if it is resident, else an empty
   // handle (also while a read of it is still in flight).
@@ -178,6 +190,9 @@ class BlockCache {
   void EvictLocked() REQUIRES(mutex_);
   // Called by PinnedBlock::Release().
   void Unpin(Entry* entry) EXCLUDES(mutex_);
+
+  friend class Prefetcher;  // asks the source whether and where to coalesce reads
+  const BlockSource* source() const { return source_; }
 
   const BlockSource* const source_;
   const std::size_t capacity_bytes_;

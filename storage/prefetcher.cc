@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "storage/read_cancellation.h"
+#include "storage/read_coalescing.h"
 
 namespace octocosm {
 
@@ -20,6 +21,30 @@ std::string DescribeBlock(const BlockId& id) {
 // message is invisible to ThreadSanitizer (see block_cache.cc).
 Error ThreadOwnCopy(const Error& error) { return Error(error.kind(), error.what()); }
 
+// Those of `candidates` whose blocks lie near `first`'s (CoalesceAround).
+// Locating a block may read its epoch's index; a failure to locate leaves
+// the block out (its own read reports it).
+std::vector<BlockId> Neighbours(const BlockSource& source, const BlockId& first,
+                                std::span<const BlockId> candidates) {
+  try {
+    const std::optional<BlockExtent> first_extent = source.Locate(first);
+    if (!first_extent) return {};
+    std::vector<BlockId> located;
+    std::vector<BlockExtent> extents;
+    for (const BlockId& id : candidates) {
+      if (std::optional<BlockExtent> extent = source.Locate(id)) {
+        located.push_back(id);
+        extents.push_back(*extent);
+      }
+    }
+    std::vector<BlockId> near;
+    for (std::size_t i : CoalesceAround(*first_extent, extents)) near.push_back(located[i]);
+    return near;
+  } catch (...) {
+    return {};
+  }
+}
+
 }  // namespace
 
 std::string PrefetchStats::ToString() const {
@@ -35,7 +60,9 @@ std::string PrefetchStats::ToString() const {
 Prefetcher::Prefetcher(BlockCache& cache) : Prefetcher(cache, Options{}) {}
 
 Prefetcher::Prefetcher(BlockCache& cache, Options options)
-    : cache_(cache), on_complete_(std::move(options.on_complete)) {
+    : cache_(cache),
+      on_complete_(std::move(options.on_complete)),
+      coalesce_(options.coalesce_reads && cache.source() != nullptr && cache.source()->CoalescesReads()) {
   if (options.workers == 0) {
     throw Error::InvalidArgument("prefetcher needs at least one worker thread");
   }
@@ -65,7 +92,7 @@ Prefetcher::~Prefetcher() {
     stats_.cancelled += queue_.size();
     queue_.clear();
     pending_.clear();
-    for (auto& [id, cancelled] : in_flight_) cancelled->store(true, std::memory_order_relaxed);
+    for (auto& [id, block] : in_flight_) SetWantedLocked(block, false);
   }
   work_cv_.SignalAll();
   idle_cv_.SignalAll();
@@ -75,6 +102,33 @@ Prefetcher::~Prefetcher() {
 void Prefetcher::QueueLocked(const BlockId& id, Priority priority) {
   auto position = queue_.emplace(QueueKey{priority, next_sequence_++}, id).first;
   pending_.insert_or_assign(id, position);
+}
+
+void Prefetcher::JoinReadLocked(const BlockId& id, const std::shared_ptr<Read>& read) {
+  ++read->blocks;
+  in_flight_.insert_or_assign(id, InFlight{read, true});
+  read->cancelled.store(read->unwanted == read->blocks, std::memory_order_relaxed);
+}
+
+void Prefetcher::SetWantedLocked(InFlight& block, bool wanted) {
+  if (block.wanted == wanted) return;
+  block.wanted = wanted;
+  Read& read = *block.read;
+  if (wanted) {
+    --read.unwanted;
+  } else {
+    ++read.unwanted;
+  }
+  read.cancelled.store(read.unwanted == read.blocks, std::memory_order_relaxed);
+}
+
+std::vector<BlockId> Prefetcher::CandidatesLocked(const BlockId& first) const {
+  std::vector<BlockId> candidates;
+  std::size_t looked_at = 0;
+  for (auto it = queue_.begin(); it != queue_.end() && looked_at < kCoalesceCandidates; ++it, ++looked_at) {
+    if (it->second.epoch == first.epoch) candidates.push_back(it->second);
+  }
+  return candidates;
 }
 
 std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
@@ -113,9 +167,16 @@ std::size_t Prefetcher::Submit(std::span<const BlockId> wanted) {
     stats_.cancelled += queue_.size();
     // Reads no longer wanted stop; a read wanted again goes on if it has not
     // stopped yet (else the next Submit queues it again).
+    // Blocks wanted again are marked before those no longer wanted, so that
+    // a read of several never looks unwanted on the way.
     if (!in_flight_.empty()) {
       const std::unordered_set<BlockId, BlockIdHash> still_wanted(wanted.begin(), wanted.end());
-      for (auto& [id, cancelled] : in_flight_) cancelled->store(!still_wanted.contains(id), std::memory_order_relaxed);
+      for (auto& [id, block] : in_flight_) {
+        if (still_wanted.contains(id)) SetWantedLocked(block, true);
+      }
+      for (auto& [id, block] : in_flight_) {
+        if (!still_wanted.contains(id)) SetWantedLocked(block, false);
+      }
     }
     queue_ = std::move(next);
     depth = queue_.size();
@@ -129,7 +190,7 @@ bool Prefetcher::Add(const BlockId& id, Priority priority) {
   {
     MutexLock lock(mutex_);
     if (auto reading = in_flight_.find(id); reading != in_flight_.end()) {
-      reading->second->store(false, std::memory_order_relaxed);  // wanted after all, if not stopped yet
+      SetWantedLocked(reading->second, true);  // wanted after all, if not stopped yet
       return false;
     }
     if (auto it = pending_.find(id); it != pending_.end()) {
@@ -151,9 +212,7 @@ bool Prefetcher::Add(const BlockId& id, Priority priority) {
 bool Prefetcher::Cancel(const BlockId& id) {
   {
     MutexLock lock(mutex_);
-    if (auto reading = in_flight_.find(id); reading != in_flight_.end()) {
-      reading->second->store(true, std::memory_order_relaxed);
-    }
+    if (auto reading = in_flight_.find(id); reading != in_flight_.end()) SetWantedLocked(reading->second, false);
     auto it = pending_.find(id);
     if (it == pending_.end()) return false;
     queue_.erase(it->second);
@@ -169,7 +228,7 @@ std::size_t Prefetcher::CancelAll() {
   {
     MutexLock lock(mutex_);
     dropped = queue_.size();
-    for (auto& [reading, cancelled] : in_flight_) cancelled->store(true, std::memory_order_relaxed);
+    for (auto& [id, block] : in_flight_) SetWantedLocked(block, false);
     queue_.clear();
     pending_.clear();
     stats_.cancelled += dropped;
@@ -208,57 +267,106 @@ void Prefetcher::WorkerLoop() {
   while (true) {
     while (!stopping_ && queue_.empty()) work_cv_.Wait(mutex_);
     if (stopping_) return;
-    const BlockId id = queue_.begin()->second;
+    std::vector<BlockId> blocks{queue_.begin()->second};
     queue_.erase(queue_.begin());
-    pending_.erase(id);
-    const auto cancelled = std::make_shared<std::atomic<bool>>(false);
-    in_flight_.emplace(id, cancelled);
+    pending_.erase(blocks.front());
+    const auto read = std::make_shared<Read>();
+    JoinReadLocked(blocks.front(), read);
+    if (coalesce_) {
+      const std::vector<BlockId> candidates = CandidatesLocked(blocks.front());
+      if (!candidates.empty()) {
+        lock.Unlock();
+        const std::vector<BlockId> near = Neighbours(*cache_.source(), blocks.front(), candidates);
+        lock.Lock();
+        // Other workers may have taken some meanwhile, or Submit dropped them.
+        for (const BlockId& id : near) {
+          auto it = pending_.find(id);
+          if (it == pending_.end()) continue;
+          queue_.erase(it->second);
+          pending_.erase(it);
+          JoinReadLocked(id, read);
+          blocks.push_back(id);
+        }
+      }
+    }
     lock.Unlock();
 
-    bool was_resident = false;
-    bool stopped = false;  // cancelled while read
-    std::optional<Error> error;
-    try {
-      const ReadCancellationScope scope(cancelled.get());
-      // The handle Get() returns is dropped at once: prefetched blocks wait
-      // in the cache unpinned.
-      was_resident = cache_.Touch(id);
-      if (!was_resident) cache_.Get(id);
-    } catch (const Error& e) {
-      stopped = cancelled->load(std::memory_order_relaxed);
-      if (!stopped) error = ThreadOwnCopy(e);
-    } catch (const std::exception& e) {
-      // A BlockSource should throw only Error; keep anything else (e.g.
-      // bad_alloc) from escaping the thread, which would terminate.
-      error = Error(ErrorKind::kIo, "prefetch of " + DescribeBlock(id) + " failed: " + e.what());
-    } catch (...) {
-      error = Error(ErrorKind::kIo, "prefetch of " + DescribeBlock(id) +
-                                        " failed with an exception that is not a std::exception");
-    }
+    const std::vector<Outcome> outcomes = ReadInto(blocks, *read);
 
-    bool callback_threw = false;
-    if (on_complete_ && !stopped) {
-      try {
-        on_complete_(id, error ? &*error : nullptr);
-      } catch (...) {
-        callback_threw = true;
+    std::vector<bool> callback_threw(blocks.size(), false);
+    if (on_complete_) {
+      for (std::size_t i = 0; i < blocks.size(); ++i) {
+        if (outcomes[i].stopped) continue;
+        try {
+          on_complete_(blocks[i], outcomes[i].error ? &*outcomes[i].error : nullptr);
+        } catch (...) {
+          callback_threw[i] = true;
+        }
       }
     }
 
     lock.Lock();
-    in_flight_.erase(id);
-    if (stopped) {
-      ++stats_.cancelled;
-    } else if (error) {
-      ++stats_.failed;
-      errors_.insert_or_assign(id, ThreadOwnCopy(*error));
-    } else {
-      ++(was_resident ? stats_.found_resident : stats_.completed);
-      errors_.erase(id);
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      const BlockId& id = blocks[i];
+      const Outcome& outcome = outcomes[i];
+      in_flight_.erase(id);
+      if (outcome.stopped) {
+        ++stats_.cancelled;
+      } else if (outcome.error) {
+        ++stats_.failed;
+        errors_.insert_or_assign(id, ThreadOwnCopy(*outcome.error));
+      } else {
+        ++(outcome.was_resident ? stats_.found_resident : stats_.completed);
+        errors_.erase(id);
+      }
+      if (callback_threw[i]) ++stats_.callback_errors;
     }
-    if (callback_threw) ++stats_.callback_errors;
     idle_cv_.SignalAll();
   }
+}
+
+std::vector<Prefetcher::Outcome> Prefetcher::ReadInto(std::span<const BlockId> blocks, const Read& read) {
+  std::vector<Outcome> outcomes(blocks.size());
+  std::vector<bool> loaded(blocks.size(), false);
+  if (blocks.size() > 1) {
+    try {
+      const ReadCancellationScope scope(&read.cancelled);
+      loaded = cache_.Load(blocks);
+    } catch (...) {
+      // Stopped: so is every block of it. Failed: each block is read alone
+      // below, and tells its own error.
+      if (read.cancelled.load(std::memory_order_relaxed)) {
+        for (Outcome& outcome : outcomes) outcome.stopped = true;
+        return outcomes;
+      }
+    }
+  }
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    if (!loaded[i]) outcomes[i] = ReadOne(blocks[i], read);
+  }
+  return outcomes;
+}
+
+Prefetcher::Outcome Prefetcher::ReadOne(const BlockId& id, const Read& read) {
+  Outcome outcome;
+  try {
+    const ReadCancellationScope scope(&read.cancelled);
+    // The handle Get() returns is dropped at once: prefetched blocks wait
+    // in the cache unpinned.
+    outcome.was_resident = cache_.Touch(id);
+    if (!outcome.was_resident) cache_.Get(id);
+  } catch (const Error& e) {
+    outcome.stopped = read.cancelled.load(std::memory_order_relaxed);
+    if (!outcome.stopped) outcome.error = ThreadOwnCopy(e);
+  } catch (const std::exception& e) {
+    // A BlockSource should throw only Error; keep anything else (e.g.
+    // bad_alloc) from escaping the thread, which would terminate.
+    outcome.error = Error(ErrorKind::kIo, "prefetch of " + DescribeBlock(id) + " failed: " + e.what());
+  } catch (...) {
+    outcome.error = Error(ErrorKind::kIo, "prefetch of " + DescribeBlock(id) +
+                                              " failed with an exception that is not a std::exception");
+  }
+  return outcome;
 }
 
 }  // namespace octocosm

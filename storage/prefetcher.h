@@ -15,6 +15,14 @@
 // Workers always take the pending request with the lowest value; equal values
 // are taken in the order they were queued.
 //
+// Coalescing. Where the cache's source says that reading neighbouring blocks
+// together pays (a store on a server: BlockSource::CoalescesReads), a worker
+// that takes a request also takes the pending requests, among the next most
+// important, for blocks near it in the same file (storage/read_coalescing.h)
+// and reads them with one request (BlockCache::Load). Such a read stops only
+// when none of its blocks is wanted any more; when it fails, its blocks are
+// read one at a time, so that each error is its own block's.
+//
 // Completion. A worker reads through BlockCache::Get() (so a prefetch and a
 // foreground Get() of the same block share one read) and releases its handle
 // at once: finished blocks sit in the cache unpinned, subject to LRU eviction.
@@ -87,6 +95,9 @@ class Prefetcher {
 
   struct Options {
     std::size_t workers = 2;  // at least 1
+    // Read blocks near one another together where the source coalesces
+    // reads (above); off, every block is read alone.
+    bool coalesce_reads = true;
     CompletionCallback on_complete;
   };
 
@@ -138,9 +149,40 @@ class Prefetcher {
   };
   using Queue = std::map<QueueKey, BlockId>;
 
+  // One read by a worker: of one block, or of several near one another.
+  struct Read {
+    // Set while none of its blocks is wanted: a read from a server stops.
+    std::atomic<bool> cancelled{false};
+    std::size_t blocks = 0;    // guarded by mutex_
+    std::size_t unwanted = 0;  // guarded by mutex_
+  };
+  struct InFlight {
+    std::shared_ptr<Read> read;
+    bool wanted = true;
+  };
+  // What became of one block a worker read.
+  struct Outcome {
+    bool was_resident = false;
+    bool stopped = false;  // cancelled while read
+    std::optional<Error> error;
+  };
+  // The pending requests looked at for blocks near the one a worker takes.
+  static constexpr std::size_t kCoalesceCandidates = 512;
+
   void WorkerLoop() EXCLUDES(mutex_);
   // Puts `id` (not pending) on the queue.
   void QueueLocked(const BlockId& id, Priority priority) REQUIRES(mutex_);
+  // Makes `id` (taken off the queue) one of the blocks of `read`.
+  void JoinReadLocked(const BlockId& id, const std::shared_ptr<Read>& read) REQUIRES(mutex_);
+  // Marks a block in flight wanted or not; its read is cancelled while none
+  // of its blocks is wanted.
+  void SetWantedLocked(InFlight& block, bool wanted) REQUIRES(mutex_);
+  // The blocks of the next kCoalesceCandidates pending requests in `first`'s epoch.
+  std::vector<BlockId> CandidatesLocked(const BlockId& first) const REQUIRES(mutex_);
+  // Reads `blocks` (one read's) into the cache: together where there are
+  // several, else (or when that fails) one at a time.
+  std::vector<Outcome> ReadInto(std::span<const BlockId> blocks, const Read& read) EXCLUDES(mutex_);
+  Outcome ReadOne(const BlockId& id, const Read& read) EXCLUDES(mutex_);
 
   BlockCache& cache_;
   const CompletionCallback on_complete_;
@@ -152,8 +194,9 @@ class Prefetcher {
   std::uint64_t next_sequence_ GUARDED_BY(mutex_) = 0;
   Queue queue_ GUARDED_BY(mutex_);
   std::unordered_map<BlockId, Queue::iterator, BlockIdHash> pending_ GUARDED_BY(mutex_);
-  // Requests a worker is reading, each with the flag that cancels its read.
-  std::unordered_map<BlockId, std::shared_ptr<std::atomic<bool>>, BlockIdHash> in_flight_ GUARDED_BY(mutex_);
+  // Requests a worker is reading, each with its read.
+  std::unordered_map<BlockId, InFlight, BlockIdHash> in_flight_ GUARDED_BY(mutex_);
+  const bool coalesce_;  // the cache's source coalesces reads
   std::unordered_map<BlockId, Error, BlockIdHash> errors_ GUARDED_BY(mutex_);
   PrefetchStats stats_ GUARDED_BY(mutex_);
   // Last member: destroyed (joined) first, while everything above is alive.

@@ -470,5 +470,55 @@ TEST(BlockCacheTest, StatsToStringNamesTheNumbers) {
   EXPECT_NE(text.find("/1000 B"), std::string::npos) << text;
 }
 
+TEST(BlockCacheTest, LoadReadsTheMissingBlocksWithOneSourceCall) {
+  CacheTestSource source;
+  source.EnableCoalescing();
+  BlockCache cache(&source, 1 << 20);
+  cache.Insert(Block(2), CacheTestSource::ContentOf(Block(2), 256));
+  const std::vector<BlockId> ids = {Block(1), Block(2), Block(3)};
+  EXPECT_EQ(cache.Load(ids), (std::vector<bool>{true, false, true}));
+  const auto batches = source.Batches();
+  ASSERT_EQ(batches.size(), 1u);
+  EXPECT_EQ(batches[0], (std::vector<BlockId>{Block(1), Block(3)}));
+  for (std::uint64_t key : {1, 3}) {
+    PinnedBlock block = cache.TryGet(Block(key));
+    ASSERT_TRUE(block) << key;
+    EXPECT_EQ(block.bytes(), source.ContentOf(Block(key)));
+  }
+  const CacheStats stats = cache.Stats();
+  EXPECT_EQ(stats.source_reads, 2u);
+  EXPECT_EQ(stats.pinned_entries, 0u);  // cached, not held
+  EXPECT_EQ(stats.reads_in_flight, 0u);
+  EXPECT_EQ(cache.Load(ids), (std::vector<bool>{false, false, false}));
+}
+
+TEST(BlockCacheTest, AFailedLoadCachesNothingAndItsWaitersReadTheirOwnBlocks) {
+  CacheTestSource source;
+  source.EnableCoalescing();
+  source.FailWith(Block(3), Error::Corruption("test server", "block 3 is damaged"));
+  BlockCache cache(&source, 1 << 20);
+  source.CloseGate();
+  OpenGateOnExit open_gate(source);
+  std::thread loader([&] {
+    const std::vector<BlockId> ids = {Block(1), Block(3)};
+    EXPECT_THROW(cache.Load(ids), Error);
+  });
+  ASSERT_TRUE(source.WaitForReadsStarted(1));
+  // A Get() of block 1 waits for the Load's read of it ...
+  std::thread getter([&] {
+    PinnedBlock block = cache.Get(Block(1));
+    EXPECT_EQ(block.bytes(), source.ContentOf(Block(1)));
+  });
+  for (int i = 0; i < 20000 && cache.Stats().misses < 1; ++i) std::this_thread::sleep_for(std::chrono::microseconds(100));
+  source.OpenGate();
+  loader.join();
+  getter.join();
+  // ... which fails for block 3; the Get() reads block 1 itself, and gets it.
+  EXPECT_EQ(source.ReadsOf(Block(1)), 2u);
+  EXPECT_TRUE(cache.Contains(Block(1)));
+  EXPECT_FALSE(cache.Contains(Block(3)));
+  EXPECT_EQ(cache.Stats().read_failures, 2u);
+}
+
 }  // namespace
 }  // namespace octocosm

@@ -2,7 +2,9 @@
 // are a pure function of the id, so any reader can check what it got. The
 // source counts and records reads, can fail chosen blocks, add a delay, and
 // hold reads at a closed gate so that a test can arrange concurrent misses
-// deterministically.
+// deterministically. With coalescing on it behaves as a store on a server:
+// block k of an epoch lies at byte k * 1000 of its file, and ReadBlocks
+// records each call as one read of several blocks.
 #pragma once
 
 #include <algorithm>
@@ -11,6 +13,7 @@
 #include <cstddef>
 #include <mutex>
 #include <optional>
+#include <span>
 #include <thread>
 #include <unordered_map>
 #include <vector>
@@ -104,39 +107,80 @@ class CacheTestSource : public BlockSource {
     return order_;
   }
 
-  Bytes ReadBlock(const BlockId& id) const override {
+  void EnableCoalescing() { coalescing_ = true; }
+  bool CoalescesReads() const override { return coalescing_; }
+  std::optional<BlockExtent> Locate(const BlockId& id) const override {
+    if (!coalescing_) return std::nullopt;
+    return BlockExtent{id.key * 1000, SizeOf(id)};
+  }
+  // ReadBlocks calls, each with its blocks.
+  std::vector<std::vector<BlockId>> Batches() const {
+    std::lock_guard lock(mutex_);
+    return batches_;
+  }
+  // One read for all: the gate, the delay and a silence (any block's) once,
+  // then the first failing block's error or every block.
+  void ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buffers) const override {
+    {
+      std::lock_guard lock(mutex_);
+      batches_.emplace_back(ids.begin(), ids.end());
+    }
     std::optional<Error> failure;
-    std::chrono::microseconds delay{};
-    std::size_t size = 0;
     bool silent = false;
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      Admission admission = Admit(ids[i], /*wait=*/i == 0);
+      if (admission.failure && !failure) failure = admission.failure;
+      silent = silent || admission.silent;
+      buffers[i] = ContentOf(ids[i], admission.size);
+    }
+    if (failure) throw *failure;
+    if (silent) WaitUntilCancelled();
+  }
+
+  Bytes ReadBlock(const BlockId& id) const override {
+    Admission admission = Admit(id, /*wait=*/true);
+    if (admission.failure) throw *admission.failure;
+    if (admission.silent) WaitUntilCancelled();
+    return ContentOf(id, admission.size);
+  }
+
+ private:
+  struct Admission {
+    std::optional<Error> failure;
+    bool silent = false;
+    std::size_t size = 0;
+  };
+  // Records the read of `id`; with `wait`, passes the gate and sleeps the
+  // delay.
+  Admission Admit(const BlockId& id, bool wait) const {
+    Admission admission;
+    std::chrono::microseconds delay{};
     {
       std::unique_lock lock(mutex_);
       order_.push_back(id);
       ++reads_[id];
       changed_.notify_all();
-      changed_.wait(lock, [&] { return gate_open_; });
-      if (auto it = failures_.find(id); it != failures_.end()) failure = it->second;
+      if (wait) changed_.wait(lock, [&] { return gate_open_; });
+      if (auto it = failures_.find(id); it != failures_.end()) admission.failure = it->second;
       delay = delay_;
       if (auto it = std::find(silent_.begin(), silent_.end(), id); it != silent_.end()) {
-        silent = true;
+        admission.silent = true;
         silent_.erase(it);
       }
       auto size_it = sizes_.find(id);
-      size = size_it == sizes_.end() ? default_size_ : size_it->second;
+      admission.size = size_it == sizes_.end() ? default_size_ : size_it->second;
     }
-    if (delay.count() > 0) std::this_thread::sleep_for(delay);
-    if (failure) throw *failure;
-    if (silent) {
-      const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);  // a bug fails, not hangs
-      while (!ReadCancelled() && std::chrono::steady_clock::now() < give_up) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      }
-      throw Error::Io("test server", "read cancelled (no longer wanted)");
+    if (wait && delay.count() > 0) std::this_thread::sleep_for(delay);
+    return admission;
+  }
+  [[noreturn]] static void WaitUntilCancelled() {
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);  // a bug fails, not hangs
+    while (!ReadCancelled() && std::chrono::steady_clock::now() < give_up) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
-    return ContentOf(id, size);
+    throw Error::Io("test server", "read cancelled (no longer wanted)");
   }
 
- private:
   const std::size_t default_size_;
   mutable std::mutex mutex_;
   mutable std::condition_variable changed_;
@@ -147,6 +191,8 @@ class CacheTestSource : public BlockSource {
   bool gate_open_ = true;
   mutable std::vector<BlockId> order_;
   mutable std::unordered_map<BlockId, std::size_t, BlockIdHash> reads_;
+  bool coalescing_ = false;
+  mutable std::vector<std::vector<BlockId>> batches_;
 };
 
 // Opens the gate when it goes out of scope. Declared after the threads or

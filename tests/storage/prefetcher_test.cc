@@ -443,5 +443,84 @@ TEST(PrefetcherTest, ConcurrentSubmitsAndForegroundReadsStayConsistent) {
   EXPECT_EQ(cache_stats.source_reads, source.TotalReads());
 }
 
+TEST(PrefetcherTest, NeighbouringBlocksFromAServerAreReadTogether) {
+  CacheTestSource source;
+  source.EnableCoalescing();  // block k at byte k * 1000, 256 bytes each
+  BlockCache cache(&source, 1 << 20);
+  Prefetcher::Options options;
+  options.workers = 1;
+  Prefetcher prefetcher(cache, options);
+  // Blocks 1-10 lie 744 bytes apart; block 500 half a megabyte away.
+  prefetcher.Submit(Blocks({1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 500}));
+  prefetcher.Drain();
+  const auto batches = source.Batches();
+  ASSERT_EQ(batches.size(), 1u);
+  EXPECT_EQ(batches[0], Blocks({1, 2, 3, 4, 5, 6, 7, 8, 9, 10}));
+  EXPECT_EQ(source.ReadsOf(Block(500)), 1u);
+  for (std::uint64_t key : {1, 5, 10, 500}) EXPECT_TRUE(cache.Contains(Block(key))) << key;
+  const PrefetchStats stats = prefetcher.Stats();
+  EXPECT_EQ(stats.completed, 11u);
+  EXPECT_EQ(stats.in_flight, 0u);
+  EXPECT_EQ(stats.queued, stats.completed + stats.found_resident + stats.failed + stats.cancelled);
+}
+
+TEST(PrefetcherTest, AFailedReadOfSeveralBlocksReadsEachAlone) {
+  CacheTestSource source;
+  source.EnableCoalescing();
+  source.FailWith(Block(4), Error::Corruption("test server", "block 4 is damaged"));
+  BlockCache cache(&source, 1 << 20);
+  Prefetcher::Options options;
+  options.workers = 1;
+  std::atomic<int> errors{0};
+  options.on_complete = [&](const BlockId&, const Error* error) {
+    if (error != nullptr) ++errors;
+  };
+  Prefetcher prefetcher(cache, options);
+  prefetcher.Submit(Blocks({1, 2, 3, 4, 5, 6}));
+  prefetcher.Drain();
+  ASSERT_EQ(source.Batches().size(), 1u);
+  // Each block was then read alone: only block 4 fails, with its own error.
+  EXPECT_EQ(source.ReadsOf(Block(2)), 2u);
+  const PrefetchStats stats = prefetcher.Stats();
+  EXPECT_EQ(stats.completed, 5u);
+  EXPECT_EQ(stats.failed, 1u);
+  EXPECT_EQ(errors.load(), 1);
+  ASSERT_TRUE(prefetcher.LastError(Block(4)).has_value());
+  EXPECT_NE(std::string(prefetcher.LastError(Block(4))->what()).find("block 4 is damaged"), std::string::npos);
+  EXPECT_FALSE(prefetcher.LastError(Block(2)).has_value());
+  EXPECT_TRUE(cache.Contains(Block(6)));
+}
+
+TEST(PrefetcherTest, AReadOfSeveralBlocksStopsOnlyWhenNoneIsWanted) {
+  CacheTestSource source;
+  source.EnableCoalescing();
+  source.SilentOnce(Block(1));  // the server sends nothing for this read
+  BlockCache cache(&source, 1 << 20);
+  Prefetcher::Options options;
+  options.workers = 1;
+  Prefetcher prefetcher(cache, options);
+  prefetcher.Submit(Blocks({1, 2, 3}));
+  ASSERT_TRUE(source.WaitForReadsStarted(3));
+  ASSERT_EQ(source.Batches().size(), 1u);
+  // Block 2 is still wanted: the read goes on.
+  prefetcher.Submit(Blocks({2}));
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(prefetcher.Stats().in_flight, 3u);
+  EXPECT_EQ(prefetcher.Stats().cancelled, 0u);
+  // None is: it stops, and all three count as cancelled.
+  prefetcher.Submit({});
+  prefetcher.Drain();
+  PrefetchStats stats = prefetcher.Stats();
+  EXPECT_EQ(stats.cancelled, 3u);
+  EXPECT_EQ(stats.completed, 0u);
+  EXPECT_FALSE(cache.Contains(Block(2)));
+  // Asked for again, they are read.
+  prefetcher.Submit(Blocks({1, 2, 3}));
+  prefetcher.Drain();
+  stats = prefetcher.Stats();
+  EXPECT_EQ(stats.completed, 3u);
+  EXPECT_TRUE(cache.Contains(Block(1)));
+}
+
 }  // namespace
 }  // namespace octocosm
