@@ -108,7 +108,7 @@ ColumnSet Dataset::columns(std::uint32_t epoch) const {
 }
 
 std::string Dataset::Where(std::uint32_t epoch, NodeKey key) const {
-  return store_.epochs().at(epoch).file + " (epoch " + std::to_string(epoch) + ") block " + key.Path();
+  return store_.directory() + "/" + store_.epochs().at(epoch).file + " (epoch " + std::to_string(epoch) + ") block " + key.Path();
 }
 
 }  // namespace octocosm

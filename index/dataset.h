@@ -85,7 +85,8 @@ class Dataset {
   bool has_id_index() const { return !id_index_.empty(); }
   // The directory of the ID index store (empty when the dataset has no IDs).
   const std::string& id_index_directory() const { return id_index_; }
-  // "file epoch N block rXXXX": how errors name a block.
+  // "STORE/FILE (epoch N) block rXXXX", the store a directory or a URL: how
+  // errors name a block.
   std::string Where(std::uint32_t epoch, NodeKey key) const;
 
  private:

@@ -11,10 +11,12 @@ namespace {
 
 // Fetches the header and every wanted column of a block with as few reads as
 // the layout allows, and hands each wanted column's bytes (unverified) to
-// `visit` in directory order. Returns the verified header.
+// `visit` in directory order. Returns the verified header. Where the caller
+// has read the `whole` block already, nothing is read.
 BlockHeader FetchColumns(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
                          ReadCounters& counters,
-                         const std::function<void(const BlockHeader&, std::size_t, std::span<const std::uint8_t>)>& visit) {
+                         const std::function<void(const BlockHeader&, std::size_t, std::span<const std::uint8_t>)>& visit,
+                         std::span<const std::uint8_t> whole = {}) {
   const PageFileReader& file = dataset.store().page_file(epoch);
   const NodeKey key = NodeKey::FromValue(entry.key);
   const std::string where = dataset.Where(epoch, key);
@@ -23,11 +25,16 @@ BlockHeader FetchColumns(const Dataset& dataset, std::uint32_t epoch, const Inde
   // The directory has at most kBlockMaxColumns entries, so this prefix holds
   // the whole header of any block. From a server the whole block comes in
   // the same request: a second round trip costs more than the columns skipped.
-  const std::uint64_t prefix_bytes = file.remote() ? entry.byte_length : kBlockMaxHeaderSize;
-  Bytes prefix(static_cast<std::size_t>(std::min<std::uint64_t>(entry.byte_length, prefix_bytes)));
-  file.ReadBlockRange(entry, 0, prefix);
-  ++counters.reads;
-  counters.bytes += prefix.size();
+  Bytes read_prefix;
+  std::span<const std::uint8_t> prefix = whole;
+  if (prefix.size() != entry.byte_length) {
+    const std::uint64_t prefix_bytes = file.remote() ? entry.byte_length : kBlockMaxHeaderSize;
+    read_prefix.resize(static_cast<std::size_t>(std::min<std::uint64_t>(entry.byte_length, prefix_bytes)));
+    file.ReadBlockRange(entry, 0, read_prefix);
+    ++counters.reads;
+    counters.bytes += read_prefix.size();
+    prefix = read_prefix;
+  }
   const BlockHeader header = DecodeBlockHeader(prefix, key, where);
   if (header.block_size != entry.byte_length) {
     throw Error::Corruption(where, "block header says " + std::to_string(header.block_size) +
@@ -59,7 +66,7 @@ BlockHeader FetchColumns(const Dataset& dataset, std::uint32_t epoch, const Inde
     // DecodeBlockHeader checked that every column lies inside block_size.
     std::span<const std::uint8_t> run;
     if (last <= prefix.size()) {
-      run = std::span<const std::uint8_t>(prefix).subspan(first, last - first);
+      run = prefix.subspan(first, last - first);
     } else {
       buffer.resize(static_cast<std::size_t>(last - first));
       file.ReadBlockRange(entry, first, buffer);
@@ -98,8 +105,11 @@ DecodedBlock ReadBlockColumns(const Dataset& dataset, std::uint32_t epoch, const
   return decoded;
 }
 
-Bytes ReadBlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
-                      ReadCounters& counters) {
+namespace {
+
+// ReadBlockSubset of the `whole` block where it is given (read already).
+Bytes BlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                  ReadCounters& counters, std::span<const std::uint8_t> whole) {
   const std::string where = dataset.Where(epoch, NodeKey::FromValue(entry.key));
   // The runs' buffers are reused between reads, so each column is copied out.
   std::vector<Bytes> kept;
@@ -114,9 +124,17 @@ Bytes ReadBlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEn
         }
         kept[c].assign(bytes.begin(), bytes.end());
         spans[c] = kept[c];
-      });
+      },
+      whole);
   spans.resize(header.columns.size());
   return AssembleColumnSubset(header, wanted, spans);
+}
+
+}  // namespace
+
+Bytes ReadBlockSubset(const Dataset& dataset, std::uint32_t epoch, const IndexEntry& entry, ColumnSet wanted,
+                      ReadCounters& counters) {
+  return BlockSubset(dataset, epoch, entry, wanted, counters, {});
 }
 
 Bytes ColumnSubsetSource::ReadBlock(const BlockId& id) const {
@@ -131,6 +149,33 @@ Bytes ColumnSubsetSource::ReadBlock(const BlockId& id) const {
   counters_.reads += counters.reads;
   counters_.bytes += counters.bytes;
   return block;
+}
+
+bool ColumnSubsetSource::CoalescesReads() const { return dataset_.store().CoalescesReads(); }
+
+std::optional<BlockExtent> ColumnSubsetSource::Locate(const BlockId& id) const { return dataset_.store().Locate(id); }
+
+void ColumnSubsetSource::ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buffers) const {
+  if (ids.size() != buffers.size()) throw Error::InvalidArgument("ReadBlocks: as many buffers as blocks, please");
+  // The whole blocks, verified, with as few requests as the store can; the
+  // wanted columns are then taken out of each.
+  std::vector<Bytes> whole(ids.size());
+  dataset_.store().ReadBlocks(ids, whole);
+  ReadCounters counters;
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    const std::optional<IndexEntry> entry = dataset_.store().Lookup(ids[i]);
+    if (!entry) {
+      throw Error::NotFound("block " + NodeKey::FromValue(ids[i].key).Path() + " of epoch " + std::to_string(ids[i].epoch));
+    }
+    buffers[i] = BlockSubset(dataset_, ids[i].epoch, *entry, wanted_, counters, whole[i]);
+    counters.bytes += whole[i].size();
+    // A read per epoch (StoreReader::ReadBlocks).
+    if (i == 0 || ids[i].epoch != ids[i - 1].epoch) ++counters.reads;
+  }
+  MutexLock lock(mutex_);
+  counters_.blocks += counters.blocks;
+  counters_.reads += counters.reads;
+  counters_.bytes += counters.bytes;
 }
 
 ReadCounters ColumnSubsetSource::counters() const {

@@ -39,6 +39,11 @@ class ColumnSubsetSource : public BlockSource {
  public:
   ColumnSubsetSource(const Dataset& dataset, ColumnSet wanted) : dataset_(dataset), wanted_(wanted) {}
   Bytes ReadBlock(const BlockId& id) const override EXCLUDES(mutex_);
+  // As the store's: a store on a server reads blocks near one another with
+  // one request, whole, and the wanted columns are taken out of them.
+  bool CoalescesReads() const override;
+  std::optional<BlockExtent> Locate(const BlockId& id) const override;
+  void ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buffers) const override EXCLUDES(mutex_);
   ColumnSet wanted() const { return wanted_; }
   ReadCounters counters() const EXCLUDES(mutex_);
 

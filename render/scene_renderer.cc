@@ -25,7 +25,7 @@ double Milliseconds(std::chrono::steady_clock::time_point since) {
 }
 
 constexpr std::size_t kLocalIoThreads = 2;
-constexpr std::size_t kRemoteIoThreads = 16;
+constexpr std::size_t kRemoteIoThreads = 32;
 
 }  // namespace
 
@@ -131,6 +131,7 @@ void SceneRenderer::UseColumns(ColumnSet columns) {
   cache_ = std::make_unique<BlockCache>(source_.get(), options_.cpu_cache_bytes);
   Prefetcher::Options prefetch;
   prefetch.workers = options_.io_threads;
+  prefetch.coalesce_reads = options_.coalesce_reads;
   prefetcher_ = std::make_unique<Prefetcher>(*cache_, prefetch);
 }
 

@@ -68,9 +68,12 @@ struct SceneOptions {
   double compute_radius = 4;  // pixels: the compute path adds larger blobs by a workgroup each
   std::size_t cpu_cache_bytes = std::size_t{1} << 30;     // blocks read from disk, in memory
   std::size_t gpu_cache_bytes = std::size_t{2} << 30;     // blocks on the GPU
-  // Blocks read at once: 0 picks 2 for a local store and 16 for one on a
+  // Blocks read at once: 0 picks 2 for a local store and 32 for one on a
   // server, where each read waits a round trip.
   std::size_t io_threads = 0;
+  // From a server, blocks near one another in a file are read with one
+  // request (storage/prefetcher.h); false reads each alone (benchmarks).
+  bool coalesce_reads = true;
   // Streaming only: most bytes uploaded to the GPU in one frame, so a frame
   // never stalls on a burst of arrivals.
   std::size_t upload_bytes_per_frame = std::size_t{64} << 20;

@@ -194,6 +194,13 @@ TEST_F(RemoteStoreTest, ADamagedBlockOnTheServerIsCorruptionNamingTheUrl) {
   EXPECT_NE(run.status, 0);
   EXPECT_NE(run.output.find(Url("/damaged/store/epoch-00000.pages")), std::string::npos) << run.output;
   EXPECT_TRUE(std::regex_search(run.output, std::regex("checksum|corrupt")));
+  // The renderer reads blocks near one another with one request: the damaged
+  // one among them is still the one named.
+  const ProgramRun render = RunOctocosm("render " + Url("/damaged/store") + " --time 0 --error 0.5 --width 320 --height 180 -o " +
+                                        Out("damaged.png").string());
+  EXPECT_NE(render.status, 0);
+  EXPECT_NE(render.output.find(Url("/damaged/store/epoch-00000.pages")), std::string::npos) << render.output;
+  EXPECT_TRUE(std::regex_search(render.output, std::regex("checksum|corrupt"))) << render.output;
 }
 
 // `octocosm serve` runs nginx on a directory until a signal ends it.
