@@ -72,6 +72,7 @@ struct Flags {
   std::string backend = "osmesa";
   int follow = 100;
   bool query = true;
+  bool each_alone = false;  // also render the remote path with every block read alone
   // Client mode (the bench starts itself so): render this URL's path `variant`.
   std::string client_url;
   int variant = 0;
@@ -101,13 +102,14 @@ struct PathRun {
   int frames = 0;
 };
 
-PathRun RenderPath(const std::string& store, const Flags& f, int variant) {
+PathRun RenderPath(const std::string& store, const Flags& f, int variant, bool coalesce_reads = true) {
   PathRun run;
   run.frames = f.frames;
   const auto start = Clock::now();
   const Dataset dataset = Dataset::Open(store);
   SceneOptions options;
   options.lod.pixel_threshold = f.error;
+  options.coalesce_reads = coalesce_reads;
   OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
   const Cube& cube = dataset.cube(0);
   const double aspect = static_cast<double>(f.width) / f.height;
@@ -135,7 +137,7 @@ std::string StoreUrl(int port, const Flags& f) {
 
 // Clients as processes of this program, all started before any is waited for.
 std::vector<PathRun> RunClients(const Flags& f, int count, NginxServer& nginx, double rate,
-                                const std::shared_ptr<PacedLink>& trunk, std::uint64_t& bytes) {
+                                const std::shared_ptr<PacedLink>& trunk, std::uint64_t& bytes, std::uint64_t& requests) {
   std::vector<std::unique_ptr<ThrottledProxy>> proxies;
   std::vector<FILE*> pipes;
   const std::string self = fs::read_symlink("/proc/self/exe").string();
@@ -160,7 +162,11 @@ std::vector<PathRun> RunClients(const Flags& f, int count, NginxServer& nginx, d
     runs.push_back(run);
   }
   bytes = 0;
-  for (const auto& proxy : proxies) bytes += proxy->bytes_to_client();
+  requests = 0;
+  for (const auto& proxy : proxies) {
+    bytes += proxy->bytes_to_client();
+    requests += proxy->requests();
+  }
   return runs;
 }
 
@@ -244,9 +250,12 @@ QueryRun QueryBox(const std::string& store) {
   return run;
 }
 
-void PrintRun(const char* what, const PathRun& r, double bytes_per_frame) {
-  std::printf("%-28s %10.2f %10.2f %10.2f %10.3f %14.0f\n", what, r.open_and_first_s, r.first_pass_fps, r.warm_fps,
-              r.new_view_s, bytes_per_frame);
+// A request and byte count of 0 prints nothing in their columns (a local run).
+void PrintRun(const char* what, const PathRun& r, double bytes_per_frame, double requests_per_frame = 0) {
+  std::printf("%-28s %10.2f %10.2f %10.2f %10.3f", what, r.open_and_first_s, r.first_pass_fps, r.warm_fps, r.new_view_s);
+  if (bytes_per_frame > 0) std::printf(" %14.0f", bytes_per_frame);
+  if (requests_per_frame > 0) std::printf(" %14.1f", requests_per_frame);
+  std::printf("\n");
 }
 
 void Coordinate(const Flags& f) {
@@ -258,20 +267,24 @@ void Coordinate(const Flags& f) {
   std::printf("store %s, %d frames a path at %dx%d, threshold %g px; link: %.0f ms round trip, %s/s a client, "
               "%s/s shared\n",
               f.store.c_str(), f.frames, f.width, f.height, f.error, f.rtt_ms, f.rate.c_str(), f.shared_rate.c_str());
-  std::printf("%-28s %10s %10s %10s %10s %14s\n", "", "open+1st s", "pass 1 f/s", "warm f/s", "new view s",
-              "bytes/frame");
+  std::printf("%-28s %10s %10s %10s %10s %14s %14s\n", "", "open+1st s", "pass 1 f/s", "warm f/s", "new view s",
+              "bytes/frame", "requests/frame");
 
   const PathRun local = RenderPath(f.store, f, 0);
   PrintRun("local directory", local, 0);
   std::fflush(stdout);
-  {
+  for (const bool coalesce : {true, false}) {
+    if (!coalesce && !f.each_alone) break;
     auto trunk = std::make_shared<PacedLink>(shared_rate);
     ThrottledProxy proxy(nginx.port(), f.rtt_ms / 1e3, rate, trunk);
-    const PathRun remote = RenderPath(StoreUrl(proxy.port(), f), f, 0);
+    const PathRun remote = RenderPath(StoreUrl(proxy.port(), f), f, 0, coalesce);
     const double frames = 2.0 * f.frames + 1;
-    PrintRun("remote, this process", remote, static_cast<double>(proxy.bytes_to_client()) / frames);
-    std::printf("remote / local: pass 1 %.2f, warm %.2f\n", remote.first_pass_fps / local.first_pass_fps,
-                remote.warm_fps / local.warm_fps);
+    PrintRun(coalesce ? "remote, this process" : "remote, each block alone", remote,
+             static_cast<double>(proxy.bytes_to_client()) / frames, static_cast<double>(proxy.requests()) / frames);
+    std::printf("remote / local: pass 1 %.2f, warm %.2f, first frame %.2f, new view %.2f\n",
+                remote.first_pass_fps / local.first_pass_fps, remote.warm_fps / local.warm_fps,
+                remote.open_and_first_s / local.open_and_first_s, remote.new_view_s / local.new_view_s);
+    std::fflush(stdout);
   }
   std::fflush(stdout);
 
@@ -305,18 +318,20 @@ void Coordinate(const Flags& f) {
 
   if (f.clients < 1) return;
   auto trunk = std::make_shared<PacedLink>(shared_rate);
-  std::uint64_t bytes = 0;
-  const std::vector<PathRun> alone = RunClients(f, 1, nginx, rate, trunk, bytes);
-  PrintRun("one client process", alone[0], static_cast<double>(bytes) / (2.0 * f.frames + 1));
+  std::uint64_t bytes = 0, requests = 0;
+  const double frames = 2.0 * f.frames + 1;
+  const std::vector<PathRun> alone = RunClients(f, 1, nginx, rate, trunk, bytes, requests);
+  PrintRun("one client process", alone[0], static_cast<double>(bytes) / frames, static_cast<double>(requests) / frames);
   const double cpu_before = NginxCpuSeconds(work / "nginx");
   const auto start = Clock::now();
-  const std::vector<PathRun> many = RunClients(f, f.clients, nginx, rate, trunk, bytes);
+  const std::vector<PathRun> many = RunClients(f, f.clients, nginx, rate, trunk, bytes, requests);
   const double wall = Seconds(start);
   const double cpu = NginxCpuSeconds(work / "nginx") - cpu_before;
   double worst = 1e300;
   for (std::size_t c = 0; c < many.size(); ++c) {
     PrintRun(("client " + std::to_string(c) + " of " + std::to_string(f.clients)).c_str(), many[c],
-             static_cast<double>(bytes) / static_cast<double>(many.size()) / (2.0 * f.frames + 1));
+             static_cast<double>(bytes) / static_cast<double>(many.size()) / frames,
+             static_cast<double>(requests) / static_cast<double>(many.size()) / frames);
     worst = std::min(worst, many[c].first_pass_fps / alone[0].first_pass_fps);
   }
   std::printf("%d clients: the slowest at %.2f of one client's pass-1 rate; nginx CPU %.3f s a client over %.1f s "
@@ -342,6 +357,8 @@ int main(int argc, char** argv) {
   app.add_option("--backend", f.backend, "osmesa or egl (a GPU)")->default_val("osmesa");
   app.add_option("--follow", f.follow, "IDs to follow through the epochs (0: none; stores with IDs)")->default_val(100);
   app.add_flag("!--no-query", f.query, "skip the box query");
+  app.add_flag("--each-alone", f.each_alone,
+               "also render the remote path reading every block alone, not blocks near one another together");
   app.add_option("--client", f.client_url, "(used by the bench itself) render this store URL's path and print figures");
   app.add_option("--variant", f.variant, "(with --client) which camera path")->default_val(0);
   CLI11_PARSE(app, argc, argv);

@@ -139,9 +139,18 @@ void ThrottledProxy::Pump(int from, int to, bool to_client) {
     ::shutdown(to, SHUT_WR);
   });
   std::vector<char> buffer(64 * 1024);
+  std::string tail;  // the last bytes towards the server, for an end of headers split between reads
   for (;;) {
     const ssize_t got = ::recv(from, buffer.data(), buffer.size(), 0);
     if (got <= 0) break;
+    if (!to_client) {
+      tail.append(buffer.data(), static_cast<std::size_t>(got));
+      for (std::size_t at = tail.find("\r\n\r\n"); at != std::string::npos; at = tail.find("\r\n\r\n")) {
+        requests_.fetch_add(1);
+        tail.erase(0, at + 4);
+      }
+      if (tail.size() > 3) tail.erase(0, tail.size() - 3);
+    }
     const Clock::time_point left = to_client ? Pace(static_cast<std::size_t>(got)) : Clock::now();
     std::lock_guard<std::mutex> lock(line.mutex);
     line.chunks.emplace_back(left + delay, std::vector<char>(buffer.begin(), buffer.begin() + got));

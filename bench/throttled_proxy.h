@@ -45,6 +45,9 @@ class ThrottledProxy {
   int port() const { return port_; }
   // Bytes delivered to the client so far.
   std::uint64_t bytes_to_client() const { return bytes_to_client_.load(); }
+  // HTTP requests forwarded to the server so far (each ends its headers with
+  // an empty line; the clients' requests have no bodies).
+  std::uint64_t requests() const { return requests_.load(); }
 
  private:
   void AcceptLoop();
@@ -59,6 +62,7 @@ class ThrottledProxy {
   int port_ = 0;
   std::atomic<bool> stopping_{false};
   std::atomic<std::uint64_t> bytes_to_client_{0};
+  std::atomic<std::uint64_t> requests_{0};
   std::thread acceptor_;
   std::mutex threads_mutex_;
   std::vector<std::thread> threads_;
