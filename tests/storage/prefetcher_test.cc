@@ -392,9 +392,12 @@ TEST(PrefetcherTest, DestructionWithAFullQueueDropsItAndJoins) {
 // Several threads replace the request list and read in the foreground at
 // once, on a cache too small for everything; the accounting must balance and
 // the cache must end within budget with nothing pinned.
-TEST(PrefetcherTest, ConcurrentSubmitsAndForegroundReadsStayConsistent) {
+// Four threads submit, add, cancel and read in the foreground at once; with
+// `coalescing`, the workers read neighbouring blocks together.
+void ConcurrentSubmitsAndForegroundReads(bool coalescing) {
   constexpr std::uint64_t kBlocks = 200;
   CacheTestSource source(1000);
+  if (coalescing) source.EnableCoalescing();
   source.FailWith(Block(13), Error::Corruption("epoch-0.pages", "block 13: checksum mismatch"));
   BlockCache cache(&source, 50 * BlockCache::ChargeFor(1000));
   Prefetcher prefetcher(cache, Workers(4));
@@ -441,7 +444,14 @@ TEST(PrefetcherTest, ConcurrentSubmitsAndForegroundReadsStayConsistent) {
   EXPECT_LE(cache_stats.resident_bytes, cache_stats.capacity_bytes) << cache_stats.ToString();
   EXPECT_EQ(cache_stats.pinned_entries, 0u);
   EXPECT_EQ(cache_stats.source_reads, source.TotalReads());
+  if (coalescing) {
+    EXPECT_GT(source.Batches().size(), 0u);
+  }
 }
+
+TEST(PrefetcherTest, ConcurrentSubmitsAndForegroundReadsStayConsistent) { ConcurrentSubmitsAndForegroundReads(false); }
+
+TEST(PrefetcherTest, ConcurrentUseWithReadsOfSeveralBlocksStaysConsistent) { ConcurrentSubmitsAndForegroundReads(true); }
 
 TEST(PrefetcherTest, NeighbouringBlocksFromAServerAreReadTogether) {
   CacheTestSource source;
