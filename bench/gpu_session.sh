@@ -2,11 +2,15 @@
 # The whole GPU measurement in one run, for a machine lent for minutes: the
 # render bench's sweep at 10^8 points (overview, mid, deep; every stage's
 # time) on the raster and the compute splat paths, the compute path's blob
-# radius, then playback through a particle-mesh series on both paths. Writes
-# its tables and logs under OUT, eight files (the most a lent machine gives
-# back). Run from the repository root on the GPU machine, after
-# ../shared/gpu/bundle.sh packed build/ (docs/BENCHMARKS.md):
+# radius, then playback through a particle-mesh series on both paths, and
+# the 10^8 store rendered by 8 clients at once through nginx (remote bench;
+# where nginx is there). Writes its tables and logs under OUT, eight files
+# (the most a lent machine gives back). Run from the repository root on the
+# GPU machine, after ../shared/gpu/bundle.sh packed build/ with the programs
+# it runs (docs/BENCHMARKS.md):
 #
+#   ../shared/gpu/bundle.sh build tools/octocosm bench/octocosm-bench-render \
+#       bench/octocosm-bench-remote ../../../usr/sbin/nginx
 #   bash .gpu/run.sh bash bench/gpu_session.sh "$OUT"
 #
 # Times only, by default: the reference rendering that gives the PSNR and
@@ -58,4 +62,12 @@ for radius in 2 8; do
     --compute-radius $radius --thresholds 4 --budgets 0 --no-full --coarse clusters 2>&1 |
     tee -a "$out/render_radius.txt"
 done
+remote=$(command -v octocosm-bench-remote || echo build/bench/octocosm-bench-remote)
+if command -v nginx >/dev/null || [ -x /usr/sbin/nginx ]; then
+  log "remote: the render bench's store through nginx, one client, then 8 at once (20 ms, 100 MiB/s each, 800 MiB/s shared)"
+  "$remote" "$work/rb/store-clusters" --backend "$backend" --frames 8 --error 8 --clients 8 --no-query --follow 0 \
+    2>&1 | tee -a "$out/session.log"
+else
+  log "remote: skipped, no nginx (bundle it: ../shared/gpu/bundle.sh build ... ../../../usr/sbin/nginx)"
+fi
 log "$(date -u +%FT%TZ) done"

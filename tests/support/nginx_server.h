@@ -26,10 +26,20 @@ namespace octocosm::testing_support {
 
 class NginxServer {
  public:
-  // The nginx program, or "" when it is not installed.
+  // The nginx program, or "" when it is not installed: where Debian puts it,
+  // else the first on PATH (a machine that has it only in a bundle of
+  // programs, ../shared/gpu/bundle.sh).
   static std::string Program() {
     for (const char* candidate : {"/usr/sbin/nginx", "/usr/local/sbin/nginx", "/usr/bin/nginx"}) {
       if (::access(candidate, X_OK) == 0) return candidate;
+    }
+    const char* path = std::getenv("PATH");
+    for (std::string rest = path != nullptr ? path : ""; !rest.empty();) {
+      const std::size_t colon = rest.find(':');
+      const std::string directory = rest.substr(0, colon);
+      rest = colon == std::string::npos ? "" : rest.substr(colon + 1);
+      const std::string candidate = directory + "/nginx";
+      if (!directory.empty() && ::access(candidate.c_str(), X_OK) == 0) return candidate;
     }
     return "";
   }
