@@ -173,6 +173,14 @@ std::uint64_t StoreReader::block_count(std::uint32_t epoch) const { return page_
 
 std::optional<IndexEntry> StoreReader::Lookup(const BlockId& id) const { return page_file(id.epoch).Lookup(id.key); }
 
+IndexEntry StoreReader::Find(const PageFileReader& file, const BlockId& id) {
+  std::optional<IndexEntry> entry = file.Lookup(id.key);
+  if (!entry) {
+    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
+  }
+  return *entry;
+}
+
 void StoreReader::Scan(std::uint32_t epoch, std::uint64_t lo, std::uint64_t hi,
                        const std::function<bool(const IndexEntry&)>& visit) const {
   page_file(epoch).Scan(lo, hi, visit);
@@ -182,22 +190,16 @@ Bytes StoreReader::ReadBlock(const BlockId& id) const { return page_file(id.epoc
 
 std::size_t StoreReader::ReadBlockInto(const BlockId& id, std::span<std::uint8_t> out) const {
   const PageFileReader& file = page_file(id.epoch);
-  std::optional<IndexEntry> entry = file.Lookup(id.key);
-  if (!entry) {
-    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
-  }
-  file.ReadBlockInto(*entry, out);
-  return static_cast<std::size_t>(entry->byte_length);
+  const IndexEntry entry = Find(file, id);
+  file.ReadBlockInto(entry, out);
+  return static_cast<std::size_t>(entry.byte_length);
 }
 
 void StoreReader::ReadBlock(const BlockId& id, Bytes& buffer) const {
   const PageFileReader& file = page_file(id.epoch);
-  std::optional<IndexEntry> entry = file.Lookup(id.key);
-  if (!entry) {
-    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
-  }
-  buffer.resize(static_cast<std::size_t>(entry->byte_length));
-  file.ReadBlockInto(*entry, buffer);
+  const IndexEntry entry = Find(file, id);
+  buffer.resize(static_cast<std::size_t>(entry.byte_length));
+  file.ReadBlockInto(entry, buffer);
 }
 
 std::optional<BlockExtent> StoreReader::Locate(const BlockId& id) const {
@@ -224,11 +226,8 @@ void StoreReader::ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buff
     std::size_t end = begin;
     for (; end < order.size() && ids[order[end]].epoch == epoch; ++end) {
       const BlockId& id = ids[order[end]];
-      std::optional<IndexEntry> entry = file.Lookup(id.key);
-      if (!entry) {
-        throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(epoch) + ") in " + file.path());
-      }
-      wanted.push_back(Wanted{*entry, order[end]});
+      const IndexEntry entry = Find(file, id);
+      wanted.push_back(Wanted{entry, order[end]});
     }
     std::sort(wanted.begin(), wanted.end(),
               [](const Wanted& a, const Wanted& b) { return a.entry.first_page < b.entry.first_page; });
@@ -247,11 +246,8 @@ void StoreReader::ReadBlocks(std::span<const BlockId> ids, std::span<Bytes> buff
 
 void StoreReader::ReadBlockRange(const BlockId& id, std::uint64_t offset, std::span<std::uint8_t> out) const {
   const PageFileReader& file = page_file(id.epoch);
-  std::optional<IndexEntry> entry = file.Lookup(id.key);
-  if (!entry) {
-    throw Error::NotFound("block " + Hex64(id.key) + " (epoch " + std::to_string(id.epoch) + ") in " + file.path());
-  }
-  file.ReadBlockRange(*entry, offset, out);
+  const IndexEntry entry = Find(file, id);
+  file.ReadBlockRange(entry, offset, out);
 }
 
 void StoreReader::DropCaches() const {

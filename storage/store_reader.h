@@ -86,6 +86,8 @@ class StoreReader : public BlockSource {
  private:
   StoreReader(std::string directory, nlohmann::json manifest_json, Manifest manifest,
               std::vector<std::unique_ptr<PageFileReader>> page_files);
+  // The block's index entry in `file`, its epoch's; kNotFound naming it.
+  static IndexEntry Find(const PageFileReader& file, const BlockId& id);
 
   std::string directory_;
   nlohmann::json manifest_json_;
