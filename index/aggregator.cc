@@ -10,23 +10,246 @@
 namespace octocosm {
 namespace {
 
+// A node is drawn where its mean point spacing projects to a few pixels: a
+// pixel is taken as this fraction of the spacing when judging which cells'
+// spread would show.
+constexpr double kPixelsPerSpacing = 8;
+
+// Mass-weighted sums over members, their offsets in node edges from a
+// reference point.
+struct Sums {
+  std::uint32_t points = 0;
+  double mass = 0;
+  double first[3] = {0, 0, 0};            // sum w d
+  double second[6] = {0, 0, 0, 0, 0, 0};  // sum w d d^T: xx, yy, zz, xy, xz, yz
+  double own = 0;                         // sum w v (own blob variance)
+
+  void Add(double w, const double d[3], double v) {
+    ++points;
+    mass += w;
+    for (int a = 0; a < 3; ++a) first[a] += w * d[a];
+    second[0] += w * d[0] * d[0];
+    second[1] += w * d[1] * d[1];
+    second[2] += w * d[2] * d[2];
+    second[3] += w * d[0] * d[1];
+    second[4] += w * d[0] * d[2];
+    second[5] += w * d[1] * d[2];
+    own += w * v;
+  }
+  void Add(const Sums& o) {
+    points += o.points;
+    mass += o.mass;
+    for (int a = 0; a < 3; ++a) first[a] += o.first[a];
+    for (int i = 0; i < 6; ++i) second[i] += o.second[i];
+    own += o.own;
+  }
+  // Summed squared distance of the members from their centre of mass.
+  double SquaredSpread() const {
+    const double centre2 = first[0] * first[0] + first[1] * first[1] + first[2] * first[2];
+    return std::max(0.0, second[0] + second[1] + second[2] - centre2 / mass);
+  }
+  double Error(double pixel2) const {
+    const double spread = SquaredSpread() / (3 * mass);  // per axis
+    const double blobs = spread + own / mass + pixel2;
+    return blobs > 0 ? mass * spread / blobs : 0;
+  }
+};
+
+// What the search for a cut needs of the members in one bin.
+struct BinSums {
+  std::uint32_t points = 0;
+  double mass = 0;
+  double first[3] = {0, 0, 0};
+  double second = 0;  // sum w |d|^2
+
+  void Add(const BinSums& o) {
+    points += o.points;
+    mass += o.mass;
+    for (int a = 0; a < 3; ++a) first[a] += o.first[a];
+    second += o.second;
+  }
+  // Summed squared distance from the centre of mass of these members, and
+  // of the others of `all`.
+  double SquaredSpread() const {
+    return std::max(0.0, second - (first[0] * first[0] + first[1] * first[1] + first[2] * first[2]) / mass);
+  }
+  double SquaredSpreadOfRest(const BinSums& all) const {
+    double centre2 = 0;
+    for (int a = 0; a < 3; ++a) centre2 += (all.first[a] - first[a]) * (all.first[a] - first[a]);
+    return std::max(0.0, all.second - second - centre2 / (all.mass - mass));
+  }
+};
+
 struct Cell {
-  std::uint32_t begin, end;  // range of `member`
-  int level;                 // the cell is a node at this level
-  double mass;
+  std::uint32_t begin, end;  // range of the cutter's members
+  double error;              // what drawing it as one blob would cost (aggregator.h)
+  double reference[3];       // the point `sums` measures offsets from, in node edges
+  Sums sums;
+};
+
+// A member as the cutter keeps it: where it lies in node edges from the
+// node's corner, its weight and own blob variance, and its population
+// index. Members are moved, not indexed, so that every pass over a cell reads
+// memory in order.
+struct Member {
+  double d[3];
+  double weight;
+  double own;
+  std::uint32_t index;
+};
+
+// Cuts cells of a population in two (aggregator.h), in place in `members`.
+class CellCutter {
+ public:
+  CellCutter(std::vector<Member>& members, std::size_t capacity)
+      : members_(members),
+        pixel2_(std::pow(1.0 / (std::cbrt(static_cast<double>(capacity)) * kPixelsPerSpacing), 2)),
+        bin_(members.size()),
+        scratch_(members.size()) {}
+
+  Cell Measure(std::uint32_t begin, std::uint32_t end) const {
+    Cell cell{begin, end, 0, {}, {}};
+    for (int a = 0; a < 3; ++a) cell.reference[a] = members_[begin].d[a];
+    for (std::uint32_t k = begin; k < end; ++k) {
+      const Member& p = members_[k];
+      const double d[3] = {p.d[0] - cell.reference[0], p.d[1] - cell.reference[1], p.d[2] - cell.reference[2]};
+      cell.sums.Add(p.weight, d, p.own);
+    }
+    cell.error = cell.sums.Error(pixel2_);
+    return cell;
+  }
+
+  // Cuts `cell` across its principal axis where the halves' summed squared
+  // spread is least; false when its members cannot be told apart along it.
+  bool Cut(const Cell& cell, Cell& low, Cell& high) {
+    // The centre and covariance from the cell's sums (about a point inside
+    // the cell, so that a small cell keeps its precision).
+    const Sums& sums = cell.sums;
+    double mean[3], c[3][3];
+    for (int a = 0; a < 3; ++a) mean[a] = sums.first[a] / sums.mass;
+    const int entry[3][3] = {{0, 3, 4}, {3, 1, 5}, {4, 5, 2}};
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b) c[a][b] = sums.second[entry[a][b]] / sums.mass - mean[a] * mean[b];
+    }
+    for (int a = 0; a < 3; ++a) mean[a] += cell.reference[a];
+    double covariance[3][3];
+    std::copy(&c[0][0], &c[0][0] + 9, &covariance[0][0]);
+    int widest = 0;
+    for (int a = 1; a < 3; ++a) widest = c[a][a] > c[widest][widest] ? a : widest;
+    if (!(c[widest][widest] > 0)) return false;
+    // C^16 (squared four times, scaled by its largest diagonal entry each
+    // time) times the axis of largest variance: the principal axis, to
+    // within (second / first eigenvalue)^16.
+    for (int squaring = 0; squaring < 4; ++squaring) {
+      double square[3][3] = {};
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) {
+          for (int k = 0; k < 3; ++k) square[a][b] += c[a][k] * c[k][b];
+        }
+      }
+      const double scale = std::max({square[0][0], square[1][1], square[2][2]});
+      if (!(scale > 0) || !std::isfinite(scale)) break;
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) c[a][b] = square[a][b] / scale;
+      }
+    }
+    double axis[3] = {c[0][widest], c[1][widest], c[2][widest]};
+    const double norm = std::sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]);
+    if (!(norm > 0) || !std::isfinite(norm)) return false;
+    for (double& x : axis) x /= norm;
+
+    // The members' projections binned over four standard deviations on
+    // either side of the centre, those beyond in the end bins (whose sums
+    // stay exact: the cut is sought only between bins).
+    double variance = 0;
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b) variance += axis[a] * covariance[a][b] * axis[b];
+    }
+    if (!(variance > 0)) return false;
+    const double lo = -4 * std::sqrt(variance), hi = -lo;
+    const auto project = [&](const Member& p, double d[3]) {
+      for (int a = 0; a < 3; ++a) d[a] = p.d[a] - mean[a];
+      return d[0] * axis[0] + d[1] * axis[1] + d[2] * axis[2];
+    };
+    // Bins enough to place a cut between any two of a small cell's members
+    // nearly where the best would be, at most kCutBins.
+    const std::uint32_t size = cell.end - cell.begin;
+    const int bin_count = static_cast<int>(std::min<std::uint32_t>(kCutBins, 4 * size));
+    const double per_bin = bin_count / (hi - lo);
+    std::fill(bins_.begin(), bins_.begin() + bin_count, BinSums{});
+    for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
+      const Member& p = members_[k];
+      double d[3];
+      const double t = project(p, d);
+      const int b = std::clamp(static_cast<int>((t - lo) * per_bin), 0, bin_count - 1);
+      bin_[k] = static_cast<std::uint16_t>(b);
+      BinSums& bin = bins_[static_cast<std::size_t>(b)];
+      ++bin.points;
+      bin.mass += p.weight;
+      for (int a = 0; a < 3; ++a) bin.first[a] += p.weight * d[a];
+      bin.second += p.weight * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    }
+
+    // The boundary between bins that leaves the least squared spread (none
+    // when every member fell into one bin).
+    BinSums all, below;
+    for (int b = 0; b < bin_count; ++b) all.Add(bins_[static_cast<std::size_t>(b)]);
+    double best = INFINITY;
+    int cut = 0;
+    for (int b = 0; b + 1 < bin_count; ++b) {
+      const BinSums& here = bins_[static_cast<std::size_t>(b)];
+      below.Add(here);
+      if (here.points == 0 || below.points == all.points) continue;
+      const double spread = below.SquaredSpread() + below.SquaredSpreadOfRest(all);
+      if (spread < best) {
+        best = spread;
+        cut = b + 1;
+      }
+    }
+    if (cut == 0) return false;
+
+    // The members below the cut first, in their order; those above after
+    // them, in reverse order. Each half's sums, about the cell's centre.
+    Sums low_sums, high_sums;
+    std::uint32_t front = cell.begin, back = cell.end;
+    for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
+      const Member& p = members_[k];
+      const double d[3] = {p.d[0] - mean[0], p.d[1] - mean[1], p.d[2] - mean[2]};
+      if (bin_[k] < cut) {
+        low_sums.Add(p.weight, d, p.own);
+        scratch_[front++] = p;
+      } else {
+        high_sums.Add(p.weight, d, p.own);
+        scratch_[--back] = p;
+      }
+    }
+    const std::uint32_t middle = front;
+    std::copy(scratch_.begin() + cell.begin, scratch_.begin() + cell.end, members_.begin() + cell.begin);
+    low = {cell.begin, middle, low_sums.Error(pixel2_), {mean[0], mean[1], mean[2]}, low_sums};
+    high = {middle, cell.end, high_sums.Error(pixel2_), {mean[0], mean[1], mean[2]}, high_sums};
+    return true;
+  }
+
+ private:
+  std::vector<Member>& members_;
+  double pixel2_;                   // a pixel where the node is drawn, squared, in node edges
+  std::vector<std::uint16_t> bin_;  // each member's bin, during a cut
+  std::vector<Member> scratch_;
+  std::vector<BinSums> bins_ = std::vector<BinSums>(kCutBins);
 };
 
 }  // namespace
 
-double KernelRadiusForVariance(double variance) {
-  return std::sqrt(std::max(variance, 0.0) / kKernelVariancePerH2);
-}
+double KernelRadiusForVariance(double variance) { return std::sqrt(std::max(variance, 0.0) / kKernelVariancePerH2); }
 
 Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const double> weight,
-                           std::span<const std::uint8_t> type, NodeKey key, std::size_t capacity) {
-  if (grid.size() != weight.size() || (!type.empty() && type.size() != grid.size())) {
+                           std::span<const double> own_variance, std::span<const std::uint8_t> type, NodeKey key,
+                           std::size_t capacity) {
+  if (grid.size() != weight.size() || (!type.empty() && type.size() != grid.size()) ||
+      (!own_variance.empty() && own_variance.size() != grid.size())) {
     throw Error::InvalidArgument("ClusterPopulation: " + std::to_string(grid.size()) + " grid points but " +
-                                 std::to_string(weight.size()) + " weights");
+                                 std::to_string(weight.size()) + " weights, " + std::to_string(own_variance.size()) +
+                                 " blob variances and " + std::to_string(type.size()) + " types");
   }
   if (capacity < 8) {
     throw Error::InvalidArgument("ClusterPopulation: a capacity of " + std::to_string(capacity) +
@@ -44,38 +267,25 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
   }
   const std::size_t m = grid.size();
   if (m > UINT32_MAX) throw Error::InvalidArgument("ClusterPopulation: more than 2^32 - 1 points");
-  std::vector<std::uint32_t> member(m), scratch(m);
-  for (std::size_t i = 0; i < m; ++i) member[i] = static_cast<std::uint32_t>(i);
+  std::vector<Member> members(m);
+  CellCutter cutter(members, capacity);
   std::vector<Cell> cells;
+  cells.reserve(8 * 256 + 2 * capacity);  // the first cells, and two for each cut
 
-  // Splits `cell` into its octants (in place in `member`, stable), returning
-  // the non-empty ones.
-  const auto split = [&](const Cell& cell) {
-    std::array<std::uint32_t, 9> count{};
-    for (std::uint32_t k = cell.begin; k < cell.end; ++k) ++count[OctantAt(grid[member[k]], cell.level) + 1];
-    for (int o = 0; o < 8; ++o) count[o + 1] += count[o];
-    std::array<std::uint32_t, 8> next{};
-    for (int o = 0; o < 8; ++o) next[o] = cell.begin + count[o];
-    for (std::uint32_t k = cell.begin; k < cell.end; ++k) scratch[next[OctantAt(grid[member[k]], cell.level)]++] = member[k];
-    std::copy(scratch.begin() + cell.begin, scratch.begin() + cell.end, member.begin() + cell.begin);
-    std::vector<Cell> children;
-    for (int o = 0; o < 8; ++o) {
-      const std::uint32_t b = cell.begin + count[o], e = cell.begin + count[o + 1];
-      if (b == e) continue;
-      double mass = 0;
-      for (std::uint32_t k = b; k < e; ++k) mass += weight[member[k]];
-      children.push_back({b, e, cell.level + 1, mass});
-    }
-    return children;
+  // The costliest cell first; among equal errors the first in member order
+  // (a cell's place there depends only on its members' positions, not on
+  // the input's order), so the result is deterministic. The queue holds
+  // what it compares, so that it never reaches into `cells`.
+  struct Queued {
+    double error;
+    std::uint32_t begin, cell;
+    bool operator<(const Queued& o) const { return error != o.error ? error < o.error : begin > o.begin; }
   };
-
-  // The heaviest cell first; among equal masses the first in member order
-  // (a cell's place there depends only on its position, not on the input's
-  // order), so the result is deterministic.
-  const auto lighter = [&](std::uint32_t a, std::uint32_t b) {
-    return cells[a].mass != cells[b].mass ? cells[a].mass < cells[b].mass : cells[a].begin > cells[b].begin;
+  std::priority_queue<Queued> costliest;
+  const auto enqueue = [&](const Cell& cell) {
+    cells.push_back(cell);
+    costliest.push({cell.error, cell.begin, static_cast<std::uint32_t>(cells.size() - 1)});
   };
-  std::priority_queue<std::uint32_t, std::vector<std::uint32_t>, decltype(lighter)> heaviest(lighter);
   std::vector<std::uint32_t> final_cells;
   std::size_t count = 0;
   if (m > 0) {
@@ -88,36 +298,39 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
     for (std::size_t i = 0; i < m; ++i) ++count_by[first_cell(static_cast<std::uint32_t>(i)) + 1];
     for (std::size_t b = 0; b < 8 * 256; ++b) count_by[b + 1] += count_by[b];
     std::vector<std::uint32_t> next(count_by.begin(), count_by.end() - 1);
-    for (std::size_t i = 0; i < m; ++i) member[next[first_cell(static_cast<std::uint32_t>(i))]++] = static_cast<std::uint32_t>(i);
+    const double edge = std::ldexp(1.0, kFinestGridBits - key.level());  // in grid units
+    double corner[3];
+    for (int a = 0; a < 3; ++a) corner[a] = static_cast<double>(GridAxisAt(grid[0], a, key.level())) * edge;
+    for (std::size_t i = 0; i < m; ++i) {
+      Member& p = members[next[first_cell(static_cast<std::uint32_t>(i))]++];
+      for (int a = 0; a < 3; ++a) p.d[a] = (static_cast<double>(grid[i][a]) - corner[a]) / edge;
+      p.weight = weight[i];
+      p.own = own_variance.empty() ? 0.0 : own_variance[i];
+      p.index = static_cast<std::uint32_t>(i);
+    }
     for (std::size_t b = 0; b < 8 * 256; ++b) {
       if (count_by[b] == count_by[b + 1]) continue;
-      double mass = 0;
-      for (std::uint32_t k = count_by[b]; k < count_by[b + 1]; ++k) mass += weight[member[k]];
-      cells.push_back({count_by[b], count_by[b + 1], key.level() + 1, mass});
-      heaviest.push(static_cast<std::uint32_t>(cells.size() - 1));
+      enqueue(cutter.Measure(count_by[b], count_by[b + 1]));
       ++count;
     }
   }
-  while (!heaviest.empty()) {
-    const std::uint32_t top = heaviest.top();
-    const Cell cell = cells[top];
-    if (cell.end - cell.begin == 1 || cell.level >= kFinestGridBits - 1) {
-      heaviest.pop();
+  while (!costliest.empty()) {
+    const std::uint32_t top = costliest.top().cell;
+    const Cell& cell = cells[top];  // stays put: `cells` has room for every cell
+    Cell low{}, high{};
+    if (cell.end - cell.begin > 1 && count + 1 > capacity) break;  // the partition left the cell's members together
+    costliest.pop();
+    if (cell.end - cell.begin == 1 || !cutter.Cut(cell, low, high)) {
       final_cells.push_back(top);
       continue;
     }
-    std::vector<Cell> children = split(cell);
-    if (count - 1 + children.size() > capacity) break;  // the partition left the cell's members together
-    heaviest.pop();
-    count += children.size() - 1;
-    for (const Cell& child : children) {
-      cells.push_back(child);
-      heaviest.push(static_cast<std::uint32_t>(cells.size() - 1));
-    }
+    ++count;
+    enqueue(low);
+    enqueue(high);
   }
-  while (!heaviest.empty()) {
-    final_cells.push_back(heaviest.top());
-    heaviest.pop();
+  while (!costliest.empty()) {
+    final_cells.push_back(costliest.top().cell);
+    costliest.pop();
   }
   // Member order groups the cells by the node's octants.
   std::sort(final_cells.begin(), final_cells.end(),
@@ -129,7 +342,7 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
   for (const std::uint32_t c : final_cells) {
     out.begin.push_back(static_cast<std::uint32_t>(out.member.size()));
     const std::size_t first = out.member.size();
-    out.member.insert(out.member.end(), member.begin() + cells[c].begin, member.begin() + cells[c].end);
+    for (std::uint32_t k = cells[c].begin; k < cells[c].end; ++k) out.member.push_back(members[k].index);
     std::sort(out.member.begin() + static_cast<std::ptrdiff_t>(first), out.member.end());
   }
   out.begin.push_back(static_cast<std::uint32_t>(out.member.size()));

@@ -360,14 +360,17 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
   // came from.
   std::vector<GridPoint> grid;
   std::vector<double> weight;
+  std::vector<double> own_variance;  // each point's own blob, per axis, in node edges squared
   std::vector<std::uint8_t> types;
   std::vector<std::pair<std::uint8_t, std::uint32_t>> from;  // (child octant, index in it)
   std::array<bool, 256> present{};
+  const double edge = cube.NodeSize(key.level());
   for (int o = 0; o < 8; ++o) {
     const NodePoints& child = children[o];
     if (child.size() == 0) continue;
     AppendGridPoints(child, cube, grid);
     weight.insert(weight.end(), child.weight.begin(), child.weight.end());
+    for (const double h : child.smoothing) own_variance.push_back(KernelVariance(h / edge));
     types.insert(types.end(), child.type.begin(), child.type.end());
     for (std::size_t k = 0; k < child.size(); ++k) from.emplace_back(static_cast<std::uint8_t>(o), static_cast<std::uint32_t>(k));
   }
@@ -375,7 +378,7 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
   if (options.capacity < 8 * static_cast<std::size_t>(std::max<std::ptrdiff_t>(1, std::count(present.begin(), present.end(), true)))) {
     return SampleParent(key, children, cube, options);  // too few points for a cluster per octant and type
   }
-  const Clusters clusters = ClusterPopulation(grid, weight, types, key, options.capacity);
+  const Clusters clusters = ClusterPopulation(grid, weight, own_variance, types, key, options.capacity);
   const std::size_t n = clusters.size();
   NodePoints node;
   node.position.resize(3 * n);

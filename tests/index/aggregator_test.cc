@@ -48,7 +48,7 @@ TEST(ClusterPopulation, EveryPointInOneClusterOfOneOctantAtMostCapacityClusters)
   std::vector<GridPoint> grid;
   for (std::size_t i = 0; i < c.size(); ++i) grid.push_back(kCube.FinestGridCoords(&c.position[3 * i]));
   for (const std::size_t capacity : {8u, 100u, 1000u, 19999u, 50000u}) {
-    const Clusters clusters = ClusterPopulation(grid, c.mass, {}, NodeKey::Root(), capacity);
+    const Clusters clusters = ClusterPopulation(grid, c.mass, {}, {}, NodeKey::Root(), capacity);
     ASSERT_LE(clusters.size(), capacity);
     if (capacity >= c.size()) {
       EXPECT_EQ(clusters.size(), c.size()) << "room for every point: each its own cluster";
@@ -68,31 +68,126 @@ TEST(ClusterPopulation, EveryPointInOneClusterOfOneOctantAtMostCapacityClusters)
     }
     EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<long>(c.size()));
   }
-  EXPECT_THROW(ClusterPopulation(grid, c.mass, {}, NodeKey::Root(), 7), Error);
-  EXPECT_THROW(ClusterPopulation(grid, c.mass, c.type, NodeKey::Root(), 23), Error) << "three types need 24";
+  EXPECT_THROW(ClusterPopulation(grid, c.mass, {}, {}, NodeKey::Root(), 7), Error);
+  EXPECT_THROW(ClusterPopulation(grid, c.mass, {}, c.type, NodeKey::Root(), 23), Error) << "three types need 24";
+  EXPECT_THROW(ClusterPopulation(grid, c.mass, std::vector<double>(3, 0.0), {}, NodeKey::Root(), 100), Error)
+      << "a blob variance for every point or none";
 }
 
-TEST(ClusterPopulation, TheHeaviestRegionsAreCutFinest) {
-  // A heavy clump and a light background of as many points: the clump gets
-  // most of the clusters.
-  std::mt19937_64 rng(2);
-  std::normal_distribution<double> clump(10, 0.5);
-  std::uniform_real_distribution<double> u(-50, 50);
+// `count` points of weight `w` around `centre`: a Gaussian of `sigma` per
+// axis, or along `direction` only when one is given (a filament).
+struct Population {
   std::vector<GridPoint> grid;
-  std::vector<double> weight;
-  std::vector<bool> in_clump;
-  for (int i = 0; i < 20000; ++i) {
-    const bool heavy = i % 2 == 0;
-    double p[3];
-    for (double& x : p) x = heavy ? clump(rng) : u(rng);
-    grid.push_back(kCube.FinestGridCoords(p));
-    weight.push_back(heavy ? 10.0 : 1.0);
-    in_clump.push_back(heavy);
+  std::vector<double> weight, own_variance;
+  std::vector<int> group;
+  std::vector<double> along;  // position along the filament's direction
+
+  void Add(int g, std::size_t count, double w, const std::array<double, 3>& centre, double sigma,
+           std::uint64_t seed, double own = 0, const std::array<double, 3>* direction = nullptr) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> normal(0, sigma);
+    for (std::size_t i = 0; i < count; ++i) {
+      double p[3];
+      const double t = normal(rng);
+      for (int a = 0; a < 3; ++a) p[a] = std::clamp(centre[a] + (direction ? t * (*direction)[a] : normal(rng)), -49.9, 49.9);
+      grid.push_back(kCube.FinestGridCoords(p));
+      weight.push_back(w);
+      own_variance.push_back(own);
+      group.push_back(g);
+      along.push_back(t);
+    }
   }
-  const Clusters clusters = ClusterPopulation(grid, weight, {}, NodeKey::Root(), 1000);
-  std::size_t clump_clusters = 0;
-  for (std::size_t k = 0; k < clusters.size(); ++k) clump_clusters += in_clump[clusters.member[clusters.begin[k]]];
-  EXPECT_GT(clump_clusters, clusters.size() * 3 / 4);
+  // Clusters of each group.
+  std::map<int, std::size_t> ClustersOf(const Clusters& clusters) const {
+    std::map<int, std::size_t> count;
+    for (std::size_t k = 0; k < clusters.size(); ++k) ++count[group[clusters.member[clusters.begin[k]]]];
+    return count;
+  }
+};
+
+TEST(ClusterPopulation, SpreadOutMassGetsTheClustersACompactClumpDoesNot) {
+  // Two clumps of equal mass and count. At capacity 1000 the root's point
+  // spacing is 100 / 10 and a pixel, where the root is drawn, an eighth of
+  // that (1.25): the clump of sigma 0.05 stays within a pixel, the one of
+  // sigma 5 spans many.
+  Population p;
+  p.Add(0, 10000, 1.0, {20, 20, 20}, 0.05, 1);
+  p.Add(1, 10000, 1.0, {-20, -20, -20}, 5, 2);
+  const Clusters clusters = ClusterPopulation(p.grid, p.weight, {}, {}, NodeKey::Root(), 1000);
+  const auto count = p.ClustersOf(clusters);
+  EXPECT_EQ(clusters.size(), 1000u);
+  EXPECT_LT(count.at(0), 50u);
+  EXPECT_GT(count.at(1), 950u);
+}
+
+TEST(ClusterPopulation, OfEqualSpreadTheHeavierIsCutFiner) {
+  Population p;
+  p.Add(0, 10000, 10.0, {20, 20, 20}, 5, 3);
+  p.Add(1, 10000, 1.0, {-20, -20, -20}, 5, 4);
+  const auto count = p.ClustersOf(ClusterPopulation(p.grid, p.weight, {}, {}, NodeKey::Root(), 1000));
+  EXPECT_GT(count.at(0), 3 * count.at(1));
+}
+
+TEST(ClusterPopulation, MembersWhoseOwnBlobsOverlapAreCutLess) {
+  // The same clump twice, once of points whose blobs (variance 25 per axis,
+  // in node edges 0.0025) are wider than the clump itself.
+  Population p;
+  p.Add(0, 10000, 1.0, {20, 20, 20}, 2, 5, 0.0);
+  p.Add(1, 10000, 1.0, {-20, -20, -20}, 2, 5, 0.0025);
+  const auto count = p.ClustersOf(ClusterPopulation(p.grid, p.weight, p.own_variance, {}, NodeKey::Root(), 1000));
+  EXPECT_GT(count.at(0), 2 * count.at(1));
+}
+
+TEST(ClusterPopulation, AFilamentIsCutAcrossItsLength) {
+  // A filament along a diagonal inside one octant, 0.3 wide, cut into
+  // pieces longer than wide: each cluster is a piece of it, so the clusters' ranges along it overlap by no more
+  // than the principal axes' tilt makes of its width (cubes would cut it
+  // obliquely, their ranges overlapping by about its width).
+  Population p;
+  const double r = 1 / std::sqrt(3.0);
+  const std::array<double, 3> direction = {r, r, -r};
+  p.Add(0, 5000, 1.0, {25, 25, 25}, 5, 6, 0.0, &direction);
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> across(0, 0.3);
+  for (std::size_t i = 0; i < p.grid.size(); ++i) {
+    double x[3];
+    for (int a = 0; a < 3; ++a) x[a] = 25 + p.along[i] * direction[a] + across(rng);
+    p.grid[i] = kCube.FinestGridCoords(x);
+    p.along[i] = (x[0] - 25) * direction[0] + (x[1] - 25) * direction[1] + (x[2] - 25) * direction[2];
+  }
+  const Clusters clusters = ClusterPopulation(p.grid, p.weight, {}, {}, NodeKey::Root(), 12);
+  ASSERT_EQ(clusters.size(), 12u);
+  std::vector<std::pair<double, double>> ranges;
+  for (std::size_t k = 0; k < clusters.size(); ++k) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (std::uint32_t m = clusters.begin[k]; m < clusters.begin[k + 1]; ++m) {
+      lo = std::min(lo, p.along[clusters.member[m]]);
+      hi = std::max(hi, p.along[clusters.member[m]]);
+    }
+    ranges.emplace_back(lo, hi);
+  }
+  std::sort(ranges.begin(), ranges.end());
+  double overlap = 0;
+  for (std::size_t k = 1; k < ranges.size(); ++k) overlap = std::max(overlap, ranges[k - 1].second - ranges[k].first);
+  EXPECT_LT(overlap, 0.05);
+}
+
+TEST(ClusterPopulation, TheSamePopulationGivesTheSameClusters) {
+  const ParticleChunk c = Clumpy(7, 20000);
+  std::vector<GridPoint> grid;
+  for (std::size_t i = 0; i < c.size(); ++i) grid.push_back(kCube.FinestGridCoords(&c.position[3 * i]));
+  std::vector<double> own;
+  for (const float h : c.smoothing) own.push_back(KernelVariance(h / kCube.size));
+  const Clusters a = ClusterPopulation(grid, c.mass, own, c.type, NodeKey::Root(), 999);
+  const Clusters b = ClusterPopulation(grid, c.mass, own, c.type, NodeKey::Root(), 999);
+  EXPECT_EQ(a.member, b.member);
+  EXPECT_EQ(a.begin, b.begin);
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    for (std::uint32_t m = a.begin[k] + 1; m < a.begin[k + 1]; ++m) {
+      ASSERT_LT(a.member[m - 1], a.member[m]) << "members in ascending order";
+      ASSERT_EQ(c.type[a.member[m]], c.type[a.member[a.begin[k]]]) << "one type a cluster";
+    }
+  }
 }
 
 struct Moments {
@@ -328,6 +423,16 @@ TEST(AggregateParent, DispersionThroughChildClustersIsTheDirectOneOverTheirParti
     regions.push_back({group_keys[g], BuildSubtree(groups[g], group_keys[g], kCube, options, sink)});
   }
   regions.push_back({r7, BuildSubtree(far, r7, kCube, options, sink)});  // a leaf beside an inner node
+  // A particle in each of the root's other octants: the root starts with
+  // as many cells as its capacity, so r0 makes one cluster there.
+  for (int octant = 1; octant < 7; ++octant) {
+    const NodeKey key = NodeKey::Root().Child(octant);
+    const NodeCube cell = kCube.NodeCubeOf(key);
+    const double h = cell.size / 2;
+    regions.push_back({key, BuildSubtree(Coincident({cell.origin[0] + h, cell.origin[1] + h, cell.origin[2] + h}, {1},
+                                                    {{0, 0, 0}}, 9000 + static_cast<std::uint64_t>(octant)),
+                                         key, kCube, options, sink)});
+  }
   const NodePoints root = BuildTopLevels(std::move(regions), kCube, options, sink);
 
   // r0: one cluster per group.
@@ -339,14 +444,14 @@ TEST(AggregateParent, DispersionThroughChildClustersIsTheDirectOneOverTheirParti
                 1e-6 * DirectDispersion({&groups[octant]}))
         << octant;
   }
-  // The root: all of r0 in one cluster (eight more would pass the capacity), r7's leaf in another.
-  ASSERT_EQ(root.size(), 2u);
+  // The root: all of r0 in one cluster, r7's leaf in another.
+  ASSERT_EQ(root.size(), 8u);
   ASSERT_EQ(root.octant_offsets[1], 1u);
   std::vector<const ParticleChunk*> all;
   for (const ParticleChunk& g : groups) all.push_back(&g);
   const double direct = DirectDispersion(all);
   EXPECT_NEAR(root.velocity_dispersion[0], direct, 1e-5 * direct);
-  EXPECT_FLOAT_EQ(root.velocity_dispersion[1], static_cast<float>(DirectDispersion({&far})));
+  EXPECT_FLOAT_EQ(root.velocity_dispersion[7], static_cast<float>(DirectDispersion({&far})));
   // The members' own dispersions matter: without them the root would see
   // the spread between the groups' means only.
   double between = 0, total_mass = 0, mean[3] = {0, 0, 0};
@@ -432,6 +537,18 @@ TEST(AggregateParent, ShapesKeepTheCovarianceThroughClustersOfClusters) {
   far.type = {0};
   far.smoothing = {0.5f};
   regions.push_back({r7, BuildSubtree(far, r7, kCube, options, sink)});
+  // A particle in each of the root's other octants: the root starts with
+  // as many cells as its capacity, so r0 makes one cluster there.
+  for (int octant = 1; octant < 7; ++octant) {
+    const NodeKey key = NodeKey::Root().Child(octant);
+    const NodeCube cell = kCube.NodeCubeOf(key);
+    ParticleChunk one;
+    for (int a = 0; a < 3; ++a) one.position.push_back(cell.origin[a] + cell.size / 2);
+    one.mass = {1};
+    one.type = {0};
+    one.smoothing = {0.5f};
+    regions.push_back({key, BuildSubtree(one, key, kCube, options, sink)});
+  }
   const NodePoints root = BuildTopLevels(std::move(regions), kCube, options, sink);
 
   const NodePoints& parent = nodes.at(r0);
@@ -447,13 +564,13 @@ TEST(AggregateParent, ShapesKeepTheCovarianceThroughClustersOfClusters) {
     EXPECT_GT(got[0], 1.5) << "stretched along x";
   }
   // The root: r0's clusters in one, r7's particle (round) in another.
-  ASSERT_EQ(root.size(), 2u);
+  ASSERT_EQ(root.size(), 8u);
   std::vector<const NodePoints*> all;
   for (const NodeKey& key : leaves) all.push_back(&nodes.at(key));
   const SymmetricMatrix want = ExpectedShape(DirectCovariance(all));
   const SymmetricMatrix got = DecodeShape(ShapeCodeAt(root.shape, 0));
   for (int k = 0; k < 6; ++k) EXPECT_NEAR(got[k], want[k], 0.03) << "entry " << k;
-  const SymmetricMatrix single = DecodeShape(ShapeCodeAt(root.shape, 1));
+  const SymmetricMatrix single = DecodeShape(ShapeCodeAt(root.shape, 7));
   for (int k = 0; k < 6; ++k) EXPECT_NEAR(single[k], k < 3 ? 1.0 : 0.0, 1e-12) << "a lone particle is round";
 }
 
