@@ -42,6 +42,7 @@
 
 #include "base/error.h"
 #include "index/node_hierarchy.h"
+#include "query/lod_frontier.h"
 #include "render/image_metrics.h"
 #include "render/offscreen_renderer.h"
 #include "tools/camera_flags.h"
@@ -498,6 +499,30 @@ void PrintTargets(const std::vector<Row>& rows, const std::vector<NamedView>& vi
   }
 }
 
+// How much of a view's full-detail frame a level of detail can leave out
+// without coarsening what a pixel shows: the share of its points in leaves
+// whose points lie at most 1, 2, 4, 8 pixels apart on the screen.
+void PrintFullDetailSpacing(const Dataset& dataset, const NamedView& named_view, const RenderView& view) {
+  const NodeHierarchy hierarchy = NodeHierarchy::Load(dataset, 0);
+  const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), 1e-9};
+  LodOptions lod;
+  lod.pixel_threshold = error_view.threshold_pixels;
+  const LodFrontier full = SelectLodFrontier(hierarchy, dataset.cube(0), error_view, lod);
+  const ScreenErrorMeter spacing(error_view);
+  const double limits[] = {1, 2, 4, 8};
+  double within[4] = {0, 0, 0, 0};
+  for (const std::int32_t n : full.selected) {
+    const NodeHierarchy::Node& node = hierarchy.node(n);
+    const double pixels = spacing(dataset.cube(0).NodeCubeOf(node.key), node.entry.point_count);
+    for (int k = 0; k < 4; ++k) within[k] += pixels <= limits[k] ? static_cast<double>(node.entry.point_count) : 0.0;
+  }
+  const double total = std::max(1.0, static_cast<double>(full.points));
+  std::printf("%s: full detail %llu points in view; in leaves whose points lie at most 1 / 2 / 4 / 8 px apart: "
+              "%.0f%% / %.0f%% / %.0f%% / %.0f%%\n",
+              named_view.name.c_str(), static_cast<unsigned long long>(full.points), 100 * within[0] / total,
+              100 * within[1] / total, 100 * within[2] / total, 100 * within[3] / total);
+}
+
 // The selection's cost: the same frame with 10^6 IDs highlighted.
 void MeasureSelection(const Dataset& dataset, const NamedView& named_view, const RenderView& view,
                       HeadlessBackend backend) {
@@ -537,6 +562,7 @@ void Run(const Flags& f) {
                 static_cast<unsigned long long>(datasets.front().points(0)), reference_seconds);
   }
   if (f.prepare_only) return;
+  for (std::size_t v = 0; v < views.size(); ++v) PrintFullDetailSpacing(datasets.front(), views[v], render_views[v]);
 
   const std::vector<Row> rows = Sweep(f, datasets, representations, views, render_views, references, backend);
   if (f.reference) PrintTargets(rows, views, representations, reference_seconds);

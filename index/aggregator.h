@@ -28,7 +28,7 @@
 //    structure: a filament is cut into pieces along it, not into cubes
 //    that straddle it, and a piece's blob (index/cluster_shape.h) has its
 //    members' moments.
-// Measured against the reference pictures, this is 1.6-4.1 dB closer than
+// Measured against the reference pictures, this is 1.6-4.2 dB closer than
 // octree cells cut heaviest first, at the same number of points
 // (docs/ACCURACY.md section 6).
 //
