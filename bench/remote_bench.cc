@@ -19,7 +19,12 @@
 //   many clients    --clients processes, each its own path and link, all at
 //                   once against one nginx; each one's rate against one
 //                   client's alone (measured the same way just before), and
-//                   nginx's CPU time per client.
+//                   nginx's CPU time per client. With --fetch-only the
+//                   clients fetch each frame's blocks as the renderer would
+//                   (the same level of detail, columns, cache and
+//                   prefetcher) without drawing them: on a machine with
+//                   fewer cores than clients, the server's and the link's
+//                   share of the rate rather than the renderers'.
 //
 // nginx (Debian's nginx-light) must be installed; the bench starts and stops
 // its own on a free port.
@@ -43,11 +48,16 @@
 #include "base/error.h"
 #include "bench/throttled_proxy.h"
 #include "index/dataset.h"
+#include "index/node_hierarchy.h"
+#include "query/column_reader.h"
+#include "query/lod_frontier.h"
 #include "query/particle_lookup.h"
 #include "query/query.h"
 #include "query/region.h"
 #include "render/gl_context.h"
 #include "render/offscreen_renderer.h"
+#include "storage/block_cache.h"
+#include "storage/prefetcher.h"
 #include "tests/support/nginx_server.h"
 #include "tools/cli_util.h"
 
@@ -73,6 +83,7 @@ struct Flags {
   int follow = 100;
   bool query = true;
   bool each_alone = false;  // also render the remote path with every block read alone
+  bool fetch_only = false;  // many clients fetch their frames' blocks without drawing them
   // Client mode (the bench starts itself so): render this URL's path `variant`.
   std::string client_url;
   int variant = 0;
@@ -131,6 +142,57 @@ PathRun RenderPath(const std::string& store, const Flags& f, int variant, bool c
   return run;
 }
 
+// RenderPath's frames without drawing: each frame's level of detail is
+// selected as the renderer selects it and its blocks fetched as the
+// renderer fetches a complete frame's (the columns a density picture of
+// clusters with shapes reads, a 1 GiB cache, 32 reads in flight from a
+// server: render/scene_renderer.cc), every one waited for.
+PathRun FetchPath(const std::string& store, const Flags& f, int variant) {
+  PathRun run;
+  run.frames = f.frames;
+  const auto start = Clock::now();
+  const Dataset dataset = Dataset::Open(store);
+  const NodeHierarchy hierarchy = NodeHierarchy::Load(dataset, 0);
+  const ColumnSet columns = (ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
+                             ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType) |
+                             (dataset.columns() & ColumnBit(ColumnId::kShape)));
+  ColumnSubsetSource source(dataset, columns);
+  BlockCache cache(&source, std::size_t{1} << 30);
+  Prefetcher::Options prefetch;
+  prefetch.workers = dataset.store().page_file(0).remote() ? 32 : 2;
+  Prefetcher prefetcher(cache, prefetch);
+  const Cube& cube = dataset.cube(0);
+  const double aspect = static_cast<double>(f.width) / f.height;
+  LodOptions lod;
+  lod.pixel_threshold = f.error;
+  const auto frame = [&](int variant_k, int k) {
+    const RenderView view(PathCamera(cube, variant_k, k, f.frames, aspect), f.width, f.height);
+    const LodFrontier frontier =
+        SelectLodFrontier(hierarchy, cube, {view.camera(), static_cast<double>(view.height()), f.error}, lod);
+    std::vector<BlockId> wanted;
+    for (const std::int32_t node : frontier.selected) wanted.push_back({0, hierarchy.node(node).key.value()});
+    prefetcher.Submit(wanted);
+    prefetcher.Drain();
+    for (const BlockId& id : wanted) {
+      if (cache.TryGet(id)) continue;
+      if (const std::optional<Error> error = prefetcher.LastError(id)) throw *error;
+      cache.Get(id);  // evicted meanwhile: read it here
+    }
+  };
+  frame(variant, 0);
+  run.open_and_first_s = Seconds(start);
+  for (int pass = 0; pass < 2; ++pass) {
+    const auto pass_start = Clock::now();
+    for (int k = 1; k < f.frames; ++k) frame(variant, k);
+    const double fps = (f.frames - 1) / std::max(1e-9, Seconds(pass_start));
+    (pass == 0 ? run.first_pass_fps : run.warm_fps) = fps;
+  }
+  const auto new_view = Clock::now();
+  frame(variant + 4, f.frames / 2);
+  run.new_view_s = Seconds(new_view);
+  return run;
+}
+
 std::string StoreUrl(int port, const Flags& f) {
   return "http://127.0.0.1:" + std::to_string(port) + "/" + fs::path(f.store).filename().string();
 }
@@ -146,7 +208,7 @@ std::vector<PathRun> RunClients(const Flags& f, int count, NginxServer& nginx, d
     std::ostringstream command;
     command << self << " --client " << StoreUrl(proxies.back()->port(), f) << " --variant " << c << " --frames "
             << f.frames << " --width " << f.width << " --height " << f.height << " --error " << f.error
-            << " --backend " << f.backend << " x";
+            << " --backend " << f.backend << (f.fetch_only ? " --fetch-only" : "") << " x";
     pipes.push_back(::popen(command.str().c_str(), "r"));
   }
   std::vector<PathRun> runs;
@@ -334,9 +396,9 @@ void Coordinate(const Flags& f) {
              static_cast<double>(requests) / static_cast<double>(many.size()) / frames);
     worst = std::min(worst, many[c].first_pass_fps / alone[0].first_pass_fps);
   }
-  std::printf("%d clients: the slowest at %.2f of one client's pass-1 rate; nginx CPU %.3f s a client over %.1f s "
+  std::printf("%d clients%s: the slowest at %.2f of one client's pass-1 rate; nginx CPU %.3f s a client over %.1f s "
               "(%.1f %% of a core a client); %.1f MB fetched in all\n",
-              f.clients, worst, cpu / f.clients, wall, 100 * cpu / f.clients / wall, static_cast<double>(bytes) / 1e6);
+              f.clients, f.fetch_only ? " (fetching, not drawing)" : "", worst, cpu / f.clients, wall, 100 * cpu / f.clients / wall, static_cast<double>(bytes) / 1e6);
 }
 
 }  // namespace
@@ -359,12 +421,16 @@ int main(int argc, char** argv) {
   app.add_flag("!--no-query", f.query, "skip the box query");
   app.add_flag("--each-alone", f.each_alone,
                "also render the remote path reading every block alone, not blocks near one another together");
+  app.add_flag("--fetch-only", f.fetch_only,
+               "many clients: fetch each frame's blocks as the renderer would, without drawing (the server's and "
+               "link's rate on a machine with fewer cores than clients)");
   app.add_option("--client", f.client_url, "(used by the bench itself) render this store URL's path and print figures");
   app.add_option("--variant", f.variant, "(with --client) which camera path")->default_val(0);
   CLI11_PARSE(app, argc, argv);
   try {
     if (!f.client_url.empty()) {
-      const octocosm::PathRun run = octocosm::RenderPath(f.client_url, f, f.variant);
+      const octocosm::PathRun run = f.fetch_only ? octocosm::FetchPath(f.client_url, f, f.variant)
+                                                 : octocosm::RenderPath(f.client_url, f, f.variant);
       std::printf("client %.4f %.4f %.4f %.4f\n", run.open_and_first_s, run.first_pass_fps, run.warm_fps,
                   run.new_view_s);
       return 0;

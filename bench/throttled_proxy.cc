@@ -105,15 +105,29 @@ void ThrottledProxy::AcceptLoop() {
 }
 
 Clock::time_point ThrottledProxy::Pace(std::size_t bytes) {
-  const auto occupy = [bytes](PacedLink& link, Clock::time_point start) {
+  const auto occupy = [bytes](const PacedLink& link, Clock::time_point start) {
     if (link.bytes_per_second_ <= 0) return start;
     return start + std::chrono::duration_cast<Clock::duration>(
                        std::chrono::duration<double>(static_cast<double>(bytes) / link.bytes_per_second_));
   };
-  std::scoped_lock lock(client_link_.mutex_, trunk_->mutex_);
-  const Clock::time_point start = std::max({Clock::now(), client_link_.free_at_, trunk_->free_at_});
-  client_link_.free_at_ = occupy(client_link_, start);
-  trunk_->free_at_ = std::max(trunk_->free_at_, occupy(*trunk_, start));
+  // Flow control: the chunk is taken from the server only once the client's
+  // link has no more than this chunk's time left to send, so no client books
+  // the trunk ahead of what its own link can carry.
+  Clock::time_point drained;
+  {
+    std::lock_guard<std::mutex> lock(client_link_.mutex_);
+    drained = client_link_.free_at_ - (occupy(client_link_, Clock::now()) - Clock::now());
+  }
+  std::this_thread::sleep_until(drained);
+  Clock::time_point through_trunk;
+  {
+    std::lock_guard<std::mutex> lock(trunk_->mutex_);
+    const Clock::time_point start = std::max(Clock::now(), trunk_->free_at_);
+    trunk_->free_at_ = occupy(*trunk_, start);
+    through_trunk = trunk_->free_at_;
+  }
+  std::lock_guard<std::mutex> lock(client_link_.mutex_);
+  client_link_.free_at_ = occupy(client_link_, std::max(through_trunk, client_link_.free_at_));
   return client_link_.free_at_;
 }
 

@@ -3,10 +3,15 @@
 // the client's bandwidth and, across all proxies sharing a trunk, to the
 // server's. One proxy per client, so each client has its own link.
 //
-// Pacing is that of a link: a chunk leaves when both the client's link and
-// the trunk are free, occupies them for its size over their rates, and
-// arrives the delay after it has left. Requests (client to server) are only
-// delayed: they are small.
+// Pacing is that of a route through two links: the trunk (the server's,
+// shared by all proxies) and then the client's own. A chunk from the server
+// crosses the trunk when it is free, then the client's link when that is
+// free, occupying each for its size over its rate, and arrives the delay
+// after it has left. The proxy takes the next chunk from the server only
+// when the client's link is about to drain (as TCP holds a sender to its
+// bottleneck), so the trunk carries what the clients' links can take, and
+// a client never waits for another's link. Requests (client to server) are
+// only delayed: they are small.
 #pragma once
 
 #include <atomic>
