@@ -3,8 +3,8 @@
 # render bench's sweep at 10^8 points (overview, mid, deep; every stage's
 # time) on the raster and the compute splat paths, the compute path's blob
 # radius, then playback through a particle-mesh series on both paths, and
-# the 10^8 store rendered by 8 clients at once through nginx (remote bench;
-# where nginx is there). Writes its tables and logs under OUT, eight files
+# the 10^8 store rendered and fetched by 8 clients at once through nginx
+# (remote bench; where nginx is there). Writes its tables and logs under OUT, eight files
 # (the most a lent machine gives back). Run from the repository root on the
 # GPU machine, after ../shared/gpu/bundle.sh packed build/ with the programs
 # it runs (docs/BENCHMARKS.md):
@@ -67,6 +67,9 @@ if command -v nginx >/dev/null || [ -x /usr/sbin/nginx ]; then
   log "remote: the render bench's store through nginx, one client, then 8 at once (20 ms, 100 MiB/s each, 800 MiB/s shared)"
   "$remote" "$work/rb/store-clusters" --backend "$backend" --frames 8 --error 8 --clients 8 --no-query --follow 0 \
     2>&1 | tee -a "$out/session.log"
+  log "remote: 8 clients fetching without drawing, on 16 cores (the 2-core machine's cores bound it)"
+  "$remote" "$work/rb/store-clusters" --backend "$backend" --frames 8 --error 8 --clients 8 --no-query --follow 0 \
+    --fetch-only 2>&1 | tee -a "$out/session.log"
 else
   log "remote: skipped, no nginx (bundle it: ../shared/gpu/bundle.sh build ... ../../../usr/sbin/nginx)"
 fi
