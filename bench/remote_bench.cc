@@ -113,21 +113,13 @@ struct PathRun {
   int frames = 0;
 };
 
-PathRun RenderPath(const std::string& store, const Flags& f, int variant, bool coalesce_reads = true) {
+// Times a camera path drawn by frame(path, k), which `start`ed by opening
+// the store: its first frame, two passes over the others (the first
+// fetching, the second warm), and a frame of another path's view.
+template <typename Frame>
+PathRun TimePath(const Flags& f, int variant, Clock::time_point start, const Frame& frame) {
   PathRun run;
   run.frames = f.frames;
-  const auto start = Clock::now();
-  const Dataset dataset = Dataset::Open(store);
-  SceneOptions options;
-  options.lod.pixel_threshold = f.error;
-  options.coalesce_reads = coalesce_reads;
-  OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
-  const Cube& cube = dataset.cube(0);
-  const double aspect = static_cast<double>(f.width) / f.height;
-  const ToneMapSettings tone;
-  const auto frame = [&](int variant_k, int k) {
-    renderer.Render(RenderView(PathCamera(cube, variant_k, k, f.frames, aspect), f.width, f.height), 0, tone, false);
-  };
   frame(variant, 0);
   run.open_and_first_s = Seconds(start);
   for (int pass = 0; pass < 2; ++pass) {
@@ -142,14 +134,28 @@ PathRun RenderPath(const std::string& store, const Flags& f, int variant, bool c
   return run;
 }
 
+PathRun RenderPath(const std::string& store, const Flags& f, int variant, bool coalesce_reads = true) {
+  const auto start = Clock::now();
+  const Dataset dataset = Dataset::Open(store);
+  SceneOptions options;
+  options.lod.pixel_threshold = f.error;
+  options.coalesce_reads = coalesce_reads;
+  OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
+  const Cube& cube = dataset.cube(0);
+  const double aspect = static_cast<double>(f.width) / f.height;
+  const ToneMapSettings tone;
+  const auto frame = [&](int variant_k, int k) {
+    renderer.Render(RenderView(PathCamera(cube, variant_k, k, f.frames, aspect), f.width, f.height), 0, tone, false);
+  };
+  return TimePath(f, variant, start, frame);
+}
+
 // RenderPath's frames without drawing: each frame's level of detail is
 // selected as the renderer selects it and its blocks fetched as the
 // renderer fetches a complete frame's (the columns a density picture of
 // clusters with shapes reads, a 1 GiB cache, 32 reads in flight from a
 // server: render/scene_renderer.cc), every one waited for.
 PathRun FetchPath(const std::string& store, const Flags& f, int variant) {
-  PathRun run;
-  run.frames = f.frames;
   const auto start = Clock::now();
   const Dataset dataset = Dataset::Open(store);
   const NodeHierarchy hierarchy = NodeHierarchy::Load(dataset, 0);
@@ -179,18 +185,7 @@ PathRun FetchPath(const std::string& store, const Flags& f, int variant) {
       cache.Get(id);  // evicted meanwhile: read it here
     }
   };
-  frame(variant, 0);
-  run.open_and_first_s = Seconds(start);
-  for (int pass = 0; pass < 2; ++pass) {
-    const auto pass_start = Clock::now();
-    for (int k = 1; k < f.frames; ++k) frame(variant, k);
-    const double fps = (f.frames - 1) / std::max(1e-9, Seconds(pass_start));
-    (pass == 0 ? run.first_pass_fps : run.warm_fps) = fps;
-  }
-  const auto new_view = Clock::now();
-  frame(variant + 4, f.frames / 2);
-  run.new_view_s = Seconds(new_view);
-  return run;
+  return TimePath(f, variant, start, frame);
 }
 
 std::string StoreUrl(int port, const Flags& f) {
