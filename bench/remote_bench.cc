@@ -28,6 +28,7 @@
 //
 // nginx (Debian's nginx-light) must be installed; the bench starts and stops
 // its own on a free port.
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -41,6 +42,7 @@
 #include <numeric>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -227,6 +229,15 @@ std::vector<PathRun> RunClients(const Flags& f, int count, NginxServer& nginx, d
   return runs;
 }
 
+// User and system CPU seconds of this process (RUSAGE_SELF) or of its
+// children waited for (RUSAGE_CHILDREN).
+double CpuSeconds(int who) {
+  rusage usage{};
+  ::getrusage(who, &usage);
+  const auto seconds = [](const timeval& t) { return static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_usec); };
+  return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
+
 // CPU seconds of nginx's processes (its master and workers) so far.
 double NginxCpuSeconds(const fs::path& work) {
   const std::string master = testing_support::ReadText(work / "nginx.pid");
@@ -319,6 +330,15 @@ void Coordinate(const Flags& f) {
   const double rate = static_cast<double>(ParseByteSize(f.rate, "--rate"));
   const double shared_rate = static_cast<double>(ParseByteSize(f.shared_rate, "--shared-rate"));
   const fs::path work = fs::temp_directory_path() / ("octocosm-bench-remote-" + std::to_string(::getpid()));
+  // nginx's configuration and logs, removed once it has stopped (declared
+  // first, destroyed last).
+  struct RemovedAtEnd {
+    fs::path path;
+    ~RemovedAtEnd() {
+      std::error_code ignored;
+      fs::remove_all(path, ignored);
+    }
+  } work_removed{work};
   NginxServer nginx(fs::absolute(f.store).parent_path(), work / "nginx");
   if (!nginx.started()) throw Error::Io("nginx", nginx.error());
   std::printf("store %s, %d frames a path at %dx%d, threshold %g px; link: %.0f ms round trip, %s/s a client, "
@@ -380,10 +400,13 @@ void Coordinate(const Flags& f) {
   const std::vector<PathRun> alone = RunClients(f, 1, nginx, rate, trunk, bytes, requests);
   PrintRun("one client process", alone[0], static_cast<double>(bytes) / frames, static_cast<double>(requests) / frames);
   const double cpu_before = NginxCpuSeconds(work / "nginx");
+  const double clients_before = CpuSeconds(RUSAGE_CHILDREN), proxies_before = CpuSeconds(RUSAGE_SELF);
   const auto start = Clock::now();
   const std::vector<PathRun> many = RunClients(f, f.clients, nginx, rate, trunk, bytes, requests);
   const double wall = Seconds(start);
   const double cpu = NginxCpuSeconds(work / "nginx") - cpu_before;
+  const double clients_cpu = CpuSeconds(RUSAGE_CHILDREN) - clients_before;
+  const double proxies_cpu = CpuSeconds(RUSAGE_SELF) - proxies_before;
   double worst = 1e300;
   for (std::size_t c = 0; c < many.size(); ++c) {
     PrintRun(("client " + std::to_string(c) + " of " + std::to_string(f.clients)).c_str(), many[c],
@@ -394,6 +417,10 @@ void Coordinate(const Flags& f) {
   std::printf("%d clients%s: the slowest at %.2f of one client's pass-1 rate; nginx CPU %.3f s a client over %.1f s "
               "(%.1f %% of a core a client); %.1f MB fetched in all\n",
               f.clients, f.fetch_only ? " (fetching, not drawing)" : "", worst, cpu / f.clients, wall, 100 * cpu / f.clients / wall, static_cast<double>(bytes) / 1e6);
+  // Whether this machine's cores, not the server or the links, bound the clients.
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  std::printf("CPU meanwhile: the clients %.1f s, the proxies %.1f s, nginx %.1f s: %.0f %% of %u cores\n", clients_cpu,
+              proxies_cpu, cpu, 100 * (clients_cpu + proxies_cpu + cpu) / (wall * cores), cores);
 }
 
 }  // namespace
