@@ -18,14 +18,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-sockaddr_in Loopback(int port) {
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  address.sin_port = htons(static_cast<std::uint16_t>(port));
-  return address;
-}
-
 bool SendAll(int fd, const std::vector<char>& bytes) {
   std::size_t done = 0;
   while (done < bytes.size()) {
@@ -46,6 +38,14 @@ struct DelayLine {
 
 }  // namespace
 
+sockaddr_in LoopbackAddress(int port) {
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  address.sin_port = htons(static_cast<std::uint16_t>(port));
+  return address;
+}
+
 ThrottledProxy::ThrottledProxy(int server_port, double round_trip_s, double client_bytes_per_second,
                                std::shared_ptr<PacedLink> trunk)
     : server_port_(server_port),
@@ -53,7 +53,7 @@ ThrottledProxy::ThrottledProxy(int server_port, double round_trip_s, double clie
       client_link_(client_bytes_per_second),
       trunk_(std::move(trunk)) {
   listener_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  sockaddr_in address = Loopback(0);
+  sockaddr_in address = LoopbackAddress(0);
   if (listener_ < 0 || ::bind(listener_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0 ||
       ::listen(listener_, 128) != 0) {
     throw Error::Io("throttled proxy", "cannot listen on 127.0.0.1");
@@ -87,7 +87,7 @@ void ThrottledProxy::AcceptLoop() {
       continue;
     }
     const int server = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_in address = Loopback(server_port_);
+    sockaddr_in address = LoopbackAddress(server_port_);
     if (::connect(server, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
       ::close(server);
       ::close(client);

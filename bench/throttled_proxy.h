@@ -14,6 +14,8 @@
 // only delayed: they are small.
 #pragma once
 
+#include <netinet/in.h>
+
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -23,6 +25,9 @@
 #include <vector>
 
 namespace octocosm {
+
+// 127.0.0.1:`port` (0: any free port, for bind).
+sockaddr_in LoopbackAddress(int port);
 
 // A link's occupancy: when it is next free.
 class PacedLink {
