@@ -110,9 +110,10 @@ Clock::time_point ThrottledProxy::Pace(std::size_t bytes) {
     return start + std::chrono::duration_cast<Clock::duration>(
                        std::chrono::duration<double>(static_cast<double>(bytes) / link.bytes_per_second_));
   };
-  // Flow control: the chunk is taken from the server only once the client's
-  // link has no more than this chunk's time left to send, so no client books
-  // the trunk ahead of what its own link can carry.
+  // Flow control: a chunk read from the server is booked only once the
+  // client's link has no more than this chunk's time left to send. Until
+  // then this connection reads nothing more, so TCP holds the server back,
+  // and no client books the trunk ahead of what its own link can carry.
   Clock::time_point drained;
   {
     std::lock_guard<std::mutex> lock(client_link_.mutex_);
