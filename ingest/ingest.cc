@@ -5,16 +5,19 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <functional>
 #include <future>
 #include <map>
 #include <memory>
 #include <optional>
+#include <span>
 #include <thread>
 #include <unordered_set>
 
@@ -34,12 +37,16 @@
 #include "ingest/chunker.h"
 #include "ingest/clipped_source.h"
 #include "ingest/dense_id_table.h"
+#include "ingest/epoch_domains.h"
 #include "ingest/epoch_join.h"
 #include "ingest/external_sorter.h"
 #include "ingest/outliers.h"
+#include "ingest/rank_group.h"
+#include "ingest/rank_messages.h"
 #include "ingest/resident_epoch.h"
 #include "ingest/smoothing_pass.h"
 #include "storage/http_file.h"
+#include "storage/page_file_reader.h"
 #include "storage/store_writer.h"
 
 namespace octocosm {
@@ -296,6 +303,59 @@ class PhaseClock {
   double last_cpu_ = ProcessCpuSeconds();
 };
 
+// The leaves' IDs that a rank other than 0 of a spread epoch builds, for
+// rank 0's ID index (IngestSpreadInto): per leaf its key, the number of its
+// IDs and the IDs. In the rank's part directory, where rank 0 reads it.
+class LeafIdsFile {
+ public:
+  explicit LeafIdsFile(std::string path) : path_(std::move(path)), file_(std::fopen(path_.c_str(), "wb")) {
+    if (file_ == nullptr) throw Error::Io(path_, std::string("cannot create: ") + std::strerror(errno));
+  }
+  ~LeafIdsFile() {
+    if (file_ != nullptr) std::fclose(file_);
+  }
+  LeafIdsFile(const LeafIdsFile&) = delete;
+  LeafIdsFile& operator=(const LeafIdsFile&) = delete;
+
+  void Add(NodeKey leaf, std::span<const std::uint64_t> ids) EXCLUDES(mutex_) {
+    const std::uint64_t head[2] = {leaf.value(), ids.size()};
+    MutexLock lock(mutex_);
+    if (std::fwrite(head, sizeof head, 1, file_) != 1 ||
+        (!ids.empty() && std::fwrite(ids.data(), sizeof(std::uint64_t), ids.size(), file_) != ids.size())) {
+      throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
+    }
+  }
+  void Close() {
+    std::FILE* file = file_;
+    file_ = nullptr;
+    if (std::fclose(file) != 0) throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
+  }
+  const std::string& path() const { return path_; }
+
+  // Every leaf of the file at `path`, in the order they were added.
+  static void ForEach(const std::string& path, const std::function<void(NodeKey, std::span<const std::uint64_t>)>& visit) {
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
+    if (!file) throw Error::Io(path, std::string("cannot open: ") + std::strerror(errno));
+    std::vector<std::uint64_t> ids;
+    for (std::uint64_t head[2]; std::fread(head, sizeof head, 1, file.get()) == 1;) {
+      if (!NodeKey::FromValue(head[0]).IsValid() || head[1] > (std::uint64_t{1} << 32)) {
+        throw Error::Corruption(path, "not a file of leaves' IDs");
+      }
+      ids.resize(static_cast<std::size_t>(head[1]));
+      if (std::fread(ids.data(), sizeof(std::uint64_t), ids.size(), file.get()) != ids.size()) {
+        throw Error::Corruption(path, "a file of leaves' IDs is cut short");
+      }
+      visit(NodeKey::FromValue(head[0]), ids);
+    }
+    if (std::ferror(file.get())) throw Error::Io(path, std::string("cannot read: ") + std::strerror(errno));
+  }
+
+ private:
+  std::string path_;
+  Mutex mutex_;
+  std::FILE* file_ GUARDED_BY(mutex_);
+};
+
 // Everything one epoch's build shares between the worker threads.
 struct EpochBuild {
   const Cube* cube = nullptr;
@@ -310,13 +370,25 @@ struct EpochBuild {
   Mutex mutex;
   EpochReport* report PT_GUARDED_BY(mutex) = nullptr;
   Progress* progress = nullptr;
+  // A spread epoch (IngestSpreadInto): the domain being built, whose root
+  // node is copied into `domain_root`. The nodes above it hold other ranks'
+  // points too, so they are left out here. Invalid for a whole epoch.
+  NodeKey domain;
+  NodePoints* domain_root = nullptr;
+  LeafIdsFile* leaf_ids = nullptr;  // where the leaves' IDs go on ranks other than 0
 
   // Encodes a finished node into `block` (the caller's buffer, reused from
   // node to node) and adds it to the store. `is_leaf` decides whether its
   // IDs go to the ID index.
   void Emit(NodeKey key, const NodePoints& points, bool is_leaf, Bytes& block) {
+    if (domain.IsValid()) {
+      if (!domain.IsAncestorOrSelf(key)) return;
+      // Once per domain; read by the thread that waits for the build.
+      if (key == domain) *domain_root = points;
+    }
     EncodeBlock(points, key, *cube, block);
     if (is_leaf && id_table != nullptr) id_table->Add(points.id, key);
+    if (is_leaf && leaf_ids != nullptr) leaf_ids->Add(key, points.id);
     std::vector<IdLeafRecord> pairs;
     if (is_leaf && id_pairs != nullptr) {
       pairs.reserve(points.id.size());
@@ -482,8 +554,11 @@ class IngestRun {
   // The whole series into options.output, or a share of it into a part's
   // directory (IngestShareInto).
   explicit IngestRun(const IngestOptions& options, const IngestShare* share = nullptr,
-                     const std::string& part_directory = "");
+                     const std::string& part_directory = "", RankGroup* group = nullptr);
   void IngestEpoch(std::size_t e);
+  // A rank other than 0 of a spread epoch, once its part is finished: tells
+  // rank 0 where its blocks and leaves' IDs are and what it built.
+  void SendSpreadSummary(const IngestPart& part);
   IngestReport Finish();
   IngestPart FinishPart();
 
@@ -500,6 +575,22 @@ class IngestRun {
   void BuildAndWrite(std::size_t e, const SnapshotHeader& header, const Cube& cube, ChunkedEpoch& chunked,
                      EpochReport& epoch_report, PhaseClock& clock);
   void WriteIdIndex(const SnapshotHeader& header, DenseIdTable* id_table, ExternalSorter<IdLeafRecord>* id_pairs);
+  // One epoch over the ranks of group_ (IngestSpreadInto), in its steps.
+  void IngestSpreadEpoch(std::size_t e);
+  struct SpreadCensus;
+  SpreadCensus CountForDomains(const std::string& label, EpochPoints& points, const PointPass& my_batches,
+                               std::uint64_t& batches);
+  struct DomainFile {
+    std::string path;
+    std::uint64_t points = 0;
+  };
+  std::vector<DomainFile> ExchangeToDomains(const std::string& label, EpochPoints& points, const PointPass& my_batches,
+                                            std::uint64_t batches, const EpochDomains& domains,
+                                            const ParticleColumns& columns);
+  void BuildDomains(const std::string& label, const Cube& cube, const std::vector<NodeKey>& mine,
+                    const std::vector<DomainFile>& files, const ParticleColumns& columns, EpochBuild& build,
+                    EpochReport& epoch_report, TopLevelMerger* top);
+  void GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report, TopLevelMerger& top);
 
   const IngestOptions& options_;
   const std::string output_;
@@ -522,6 +613,9 @@ class IngestRun {
   std::unique_ptr<SortedEpoch> sorted_current_, sorted_next_;
   std::unique_ptr<ParticleSource> next_source_;
   std::uint64_t missing_in_prev_ = 0;  // of the epoch to come, counted by the join before it
+  RankGroup* group_ = nullptr;         // the ranks an epoch is spread over, or null
+  std::unique_ptr<LeafIdsFile> leaf_ids_;  // a spread epoch's on ranks other than 0
+  EpochReport spread_report_;          // what this rank built of a spread epoch
 };
 
 std::unique_ptr<StoreWriter> MakeIdStoreWriter(const std::string& output, const StoreWriterOptions& options) {
@@ -579,7 +673,8 @@ StoreWriterOptions StoreOptions(const IngestOptions& options, const IngestShare*
   return store_options;
 }
 
-IngestRun::IngestRun(const IngestOptions& options, const IngestShare* share, const std::string& part_directory)
+IngestRun::IngestRun(const IngestOptions& options, const IngestShare* share, const std::string& part_directory,
+                     RankGroup* group)
     : options_(options),
       output_(share != nullptr ? part_directory : options.output),
       first_epoch_(share != nullptr ? share->first_epoch : 0),
@@ -605,6 +700,7 @@ IngestRun::IngestRun(const IngestOptions& options, const IngestShare* share, con
   // the store writers, which clear away an abandoned store first.
   temp_.emplace(options.temp_dir.empty() ? output_ : options.temp_dir, "octocosm-ingest");
   if (first_epoch_ > 0) source_.reset();  // opened at the share's first epoch
+  group_ = group;
 }
 
 // The leaves' smoothing lengths from neighbours (or the snapshot's own),
@@ -851,6 +947,7 @@ EpochRecord RecordOf(const SnapshotHeader& header, const Cube& cube, const Epoch
 }
 
 void IngestRun::IngestEpoch(std::size_t e) {
+  if (group_ != nullptr) return IngestSpreadEpoch(e);
   if (!source_) source_ = OpenSnapshot(options_.inputs[e], options_.read);
   EpochReport epoch_report;
   PhaseClock clock(epoch_report);
@@ -895,6 +992,356 @@ void IngestRun::IngestEpoch(std::size_t e) {
   sorted_current_ = std::move(sorted_next_);
   source_ = std::move(next_source_);
   source_smoothed_ = source_ != nullptr;
+}
+
+// ---- One epoch spread over ranks (IngestSpreadInto) ----
+//
+//   1. count   each rank reads its share of the snapshot's batches and counts
+//              them on the domains' grid; the counts are summed over the
+//              ranks, and every rank cuts the same domains from them
+//              (ingest/epoch_domains.h)
+//   2. exchange each rank reads its share again and sends every particle to
+//              the rank of its domain, a batch a rank per round, so each
+//              round holds a few batches whatever the epoch's size; each
+//              rank files what it receives by domain
+//   3. build   each rank chunks and builds its domains' subtrees one domain
+//              after the other, as a single process builds its chunks; rank
+//              0 merges the levels above every rank's domains from their roots
+//   4. gather  rank 0 copies the others' blocks and leaves' IDs into its
+//              part, which is then the epoch a single process writes
+// Every rank screens (and smooths) the whole epoch alike first, so that all
+// choose the same cube.
+
+struct IngestRun::SpreadCensus {
+  std::vector<std::uint64_t> cells;  // points in each cell of the domains' grid, summed over the ranks
+  // The epoch's IDs over all ranks, as one process's IdCensus would see them.
+  std::uint64_t id_count = 0, id_first = 0, id_last = 0;
+  bool ids_dense = true;
+};
+
+IngestRun::SpreadCensus IngestRun::CountForDomains(const std::string& label, EpochPoints& points,
+                                                   const PointPass& my_batches, std::uint64_t& batches) {
+  RankGroup& group = *group_;
+  const int level = DomainGridLevel(options_.tree.max_level);
+  SpreadCensus census;
+  census.cells.assign(std::size_t{1} << (3 * level), 0);
+  IdCensus ids(shares_.id_table_slots);
+  {
+    Progress progress(label + ": count", points.source->header().total_count / static_cast<std::uint64_t>(group.size()),
+                      "points");
+    std::uint64_t seen = 0;
+    my_batches([&](const ParticleChunk& chunk) {
+      for (std::size_t i = 0; i < chunk.size(); ++i) {
+        ++census.cells[EpochDomains::CellIndex(points.cube, &chunk.position[3 * i], level)];
+      }
+      ids.Add(chunk.id);
+      progress.Add(chunk.size());
+      ++seen;
+    });
+    progress.Finish();
+    batches = seen;
+  }
+  group.Sum(census.cells);
+  // batches: this rank's; every rank needs rank 0's, the most.
+  std::uint64_t counts[2] = {ids.count(), 0};
+  std::uint64_t most[6] = {ids.dense() ? 0u : 1u, ids.count() > 0 ? ~ids.first() : 0, ids.count() > 0 ? ids.first() + ids.span() - 1 : 0,
+                           ids.repeated_id() ? 1u : 0u, ids.repeated_id() ? *ids.repeated_id() : 0, batches};
+  group.Sum(counts);
+  group.Max(most);
+  if (most[3] != 0) RefuseDuplicateIds(points.source->header(), most[4], 0);
+  batches = most[5];
+  census.id_count = counts[0];
+  if (census.id_count > 0) {
+    census.id_first = ~most[1];
+    census.id_last = most[2];
+  }
+  census.ids_dense = most[0] == 0 && (census.id_count == 0 || census.id_last - census.id_first < shares_.id_table_slots);
+  return census;
+}
+
+// Step 2; returns the files of this rank's domains, in the order of
+// domains.DomainsOf(rank).
+std::vector<IngestRun::DomainFile> IngestRun::ExchangeToDomains(const std::string& label, EpochPoints& points,
+                                                                const PointPass& my_batches, std::uint64_t rounds,
+                                                                const EpochDomains& domains,
+                                                                const ParticleColumns& columns) {
+  RankGroup& group = *group_;
+  const int rank = group.rank();
+  std::size_t first_mine = 0;
+  while (first_mine < domains.owner.size() && domains.owner[first_mine] < rank) ++first_mine;
+  const std::size_t mine = domains.DomainsOf(rank).size();
+  std::vector<ParticleFileWriter> writers;
+  for (std::size_t k = 0; k < mine; ++k) {
+    writers.emplace_back(temp_->path() + "/domain-" + std::to_string(k), columns);
+  }
+  Progress progress(label + ": exchange", points.source->header().total_count / static_cast<std::uint64_t>(group.size()),
+                    "points");
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> by_domain;  // (domain, point)
+  std::vector<std::uint32_t> indices;
+  auto exchange = [&](const ParticleChunk* chunk) {
+    std::vector<Bytes> outgoing(static_cast<std::size_t>(group.size()));
+    if (chunk != nullptr) {
+      by_domain.clear();
+      for (std::size_t i = 0; i < chunk->size(); ++i) {
+        const std::uint64_t cell = EpochDomains::CellIndex(points.cube, &chunk->position[3 * i], domains.level);
+        by_domain.push_back({domains.cell_domain[cell], static_cast<std::uint32_t>(i)});
+      }
+      std::sort(by_domain.begin(), by_domain.end());
+      for (std::size_t a = 0; a < by_domain.size();) {
+        std::size_t b = a;
+        indices.clear();
+        for (; b < by_domain.size() && by_domain[b].first == by_domain[a].first; ++b) indices.push_back(by_domain[b].second);
+        const std::uint32_t d = by_domain[a].first;
+        AppendPointSegment(d, *chunk, indices, columns, outgoing[static_cast<std::size_t>(domains.owner[d])]);
+        a = b;
+      }
+    }
+    const std::vector<Bytes> incoming = group.Exchange(outgoing);
+    for (const Bytes& message : incoming) {
+      ForEachPointSegment(message, columns, label.c_str(), [&](std::uint32_t d, const ParticleChunk& received) {
+        if (d < first_mine || d >= first_mine + mine) {
+          throw Error::Corruption(label, "particles for domain " + std::to_string(d) + " reached rank " +
+                                             std::to_string(rank) + ", which does not hold it");
+        }
+        writers[d - first_mine].Append(received);
+        progress.Add(received.size());
+      });
+    }
+  };
+  std::uint64_t round = 0;
+  my_batches([&](const ParticleChunk& chunk) {
+    exchange(&chunk);
+    ++round;
+  });
+  // Every rank takes part in every round, with nothing to send once its share is sent.
+  for (; round < rounds; ++round) exchange(nullptr);
+  std::vector<DomainFile> files;
+  for (ParticleFileWriter& writer : writers) {
+    writer.Close();
+    files.push_back({writer.path(), writer.point_count()});
+  }
+  return files;
+}
+
+// Step 3: this rank's domains, each chunked and built as a single process
+// builds an epoch; their roots go to rank 0's merger `top` (on rank 0) or are
+// sent to rank 0 once all are built (elsewhere: rank 0 merges them after
+// its own).
+void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const std::vector<NodeKey>& mine,
+                             const std::vector<DomainFile>& files, const ParticleColumns& columns, EpochBuild& build,
+                             EpochReport& epoch_report, TopLevelMerger* top) {
+  std::uint64_t total = 0;
+  std::vector<std::uint64_t> counts;
+  for (const DomainFile& file : files) {
+    counts.push_back(file.points);
+    total += file.points;
+  }
+  Progress progress(label + ": build", total, "points");
+  build.progress = &progress;
+  std::vector<Bytes> roots;
+  const ResidentEpoch none;
+  for (std::size_t k = 0; k < mine.size(); ++k) {
+    const std::uint64_t max_chunk =
+        options_.max_chunk_points
+            ? options_.max_chunk_points
+            : std::min(shares_.build_points, std::max<std::uint64_t>(std::min(counts[k] / (4 * threads_), kMaxChunkPoints),
+                                                                     4 * options_.tree.capacity));
+    report_.max_chunk_points = std::max(report_.max_chunk_points, max_chunk);
+    ChunkerOptions chunker_options;
+    chunker_options.max_chunk_points = max_chunk;
+    chunker_options.split_levels = SplitLevelsFor(counts[k], max_chunk);
+    chunker_options.max_level = options_.tree.max_level;
+    chunker_options.leaf_capacity = options_.tree.capacity;
+    chunker_options.memory_bytes = shares_.chunk_buffer_bytes;
+    chunker_options.temp_dir = temp_->path();
+    chunker_options.threads = static_cast<int>(threads_);
+    chunker_options.columns = columns;
+    Chunker chunker(cube, chunker_options);
+    const std::string& file = files[k].path;
+    std::vector<Chunk> chunks = chunker.Split(mine[k], [&file](const std::function<void(const ParticleChunk&)>& consume) {
+      ParticleFileReader reader(file);
+      ParticleChunk batch;
+      while (reader.Next(batch)) consume(batch);
+    });
+    std::remove(file.c_str());
+    epoch_report.chunks += chunks.size();
+    epoch_report.spilled_points += chunker.spilled_points();
+    for (const Chunk& c : chunks) epoch_report.points += c.point_count;
+    NodePoints root;
+    build.domain = mine[k];
+    build.domain_root = &root;
+    BuildChunks(std::move(chunks), none, build, threads_, [] {});
+    build.domain = NodeKey();
+    build.domain_root = nullptr;
+    if (top != nullptr) {
+      top->Add(mine[k], std::move(root));
+    } else {
+      roots.push_back(PackNode(mine[k], root));
+    }
+  }
+  progress.Finish();
+  if (top != nullptr) return;
+  const std::uint64_t count = roots.size();
+  group_->Send(0, Bytes(reinterpret_cast<const std::uint8_t*>(&count), reinterpret_cast<const std::uint8_t*>(&count + 1)));
+  for (const Bytes& root : roots) group_->Send(0, root);
+}
+
+// Step 4, on rank 0: the other ranks' domain roots into `top`, in rank
+// order (depth-first order: ranks hold consecutive runs of domains), then
+// their blocks and leaves' IDs.
+void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report,
+                                 TopLevelMerger& top) {
+  RankGroup& group = *group_;
+  for (int r = 1; r < group.size(); ++r) {
+    const std::string what = label + ": rank " + std::to_string(r);
+    const Bytes count_message = group.Receive(r);
+    std::uint64_t count = 0;
+    if (count_message.size() != sizeof count) throw Error::Corruption(what, "a malformed count of domains");
+    std::memcpy(&count, count_message.data(), sizeof count);
+    for (std::uint64_t k = 0; k < count; ++k) {
+      NodeKey key;
+      NodePoints root = UnpackNode(group.Receive(r), key, what.c_str());
+      top.Add(key, std::move(root));
+    }
+  }
+  const NodePoints root = top.Finish();
+  for (double w : root.weight) epoch_report.mass += w;
+  for (int r = 1; r < group.size(); ++r) {
+    const std::string what = label + ": rank " + std::to_string(r);
+    const Bytes message = group.Receive(r);
+    nlohmann::json summary;
+    try {
+      summary = nlohmann::json::parse(message.begin(), message.end());
+      const EpochReport built = IngestPart::FromJson(summary.at("part"), what).report.epochs.at(0);
+      epoch_report.points += built.points;
+      epoch_report.chunks += built.chunks;
+      epoch_report.spilled_points += built.spilled_points;
+      epoch_report.nodes += built.nodes;
+      epoch_report.leaves += built.leaves;
+      epoch_report.depth = std::max(epoch_report.depth, built.depth);
+    } catch (const nlohmann::json::exception& e) {
+      throw Error::Corruption(what, std::string("not a summary of a rank's part: ") + e.what());
+    } catch (const std::out_of_range&) {
+      throw Error::Corruption(what, "a summary of a rank's part without its epoch");
+    }
+    // Its blocks, as they are, into this rank's epoch.
+    const std::string pages = (fs::path(summary.at("part").at("directory").get<std::string>()) /
+                               summary.at("part").at("epochs").at(0).at("file").get<std::string>())
+                                  .string();
+    const std::unique_ptr<PageFileReader> reader = PageFileReader::Open(pages);
+    reader->AdviseSequential();
+    reader->Scan(0, ~std::uint64_t{0}, [&](const IndexEntry& entry) {
+      const Bytes block = reader->ReadBlock(entry);
+      store_.AddBlock(entry.key, block, entry.point_count);
+      return true;
+    });
+    if (has_id_) {
+      LeafIdsFile::ForEach(summary.at("leaf_ids").get<std::string>(),
+                           [&](NodeKey leaf, std::span<const std::uint64_t> ids) {
+                             if (build.id_table != nullptr) build.id_table->Add(ids, leaf);
+                             if (build.id_pairs != nullptr) {
+                               std::vector<IdLeafRecord> pairs;
+                               pairs.reserve(ids.size());
+                               for (std::uint64_t id : ids) pairs.push_back({id, leaf.value()});
+                               build.id_pairs->Add(pairs);
+                             }
+                           });
+    }
+  }
+}
+
+void IngestRun::IngestSpreadEpoch(std::size_t e) {
+  RankGroup& group = *group_;
+  const int rank = group.rank(), ranks = group.size();
+  const std::string label = "epoch " + std::to_string(e);
+  if (!source_) source_ = OpenSnapshot(options_.inputs[e], options_.read);
+  EpochReport epoch_report;
+  PhaseClock clock(epoch_report);
+  source_ = Prepare(std::move(source_), e, &clock);
+  if (options_.neighbours > 0) clock.Lap("smoothing");
+  const SnapshotHeader header = source_->header();
+  EpochPoints points;
+  points.source = source_.get();
+  points.cube = ChooseCube(header, screened_[e].bounds.value_or(Bounds{}));
+  points.chunk_particles = options_.read.chunk_particles;
+  // This rank's share of the snapshot: every ranks-th batch, from the rank-th.
+  const PointPass my_batches = [&](const std::function<void(const ParticleChunk&)>& consume) {
+    std::uint64_t batch = 0;
+    points.Pass([&](const ParticleChunk& chunk) {
+      if (batch++ % static_cast<std::uint64_t>(ranks) == static_cast<std::uint64_t>(rank)) consume(chunk);
+    });
+  };
+
+  std::uint64_t rounds = 0;
+  const SpreadCensus census = CountForDomains(label, points, my_batches, rounds);
+  const EpochDomains domains = ShareDomains(census.cells, DomainGridLevel(options_.tree.max_level),
+                                            options_.tree.capacity, ranks);
+  clock.Lap("count");
+
+  ParticleColumns columns;
+  columns.id = has_id_;
+  columns.smoothing = header.has_smoothing;
+  columns.vector(VectorColumn::kVelocity) = has_velocity_;
+  const std::vector<NodeKey> mine = domains.DomainsOf(rank);
+  const std::vector<DomainFile> files = ExchangeToDomains(label, points, my_batches, rounds, domains, columns);
+  clock.Lap("exchange");
+
+  store_.BeginEpoch(header.time, header.redshift);
+  std::unique_ptr<DenseIdTable> id_table;
+  std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
+  if (has_id_ && rank != 0) {
+    leaf_ids_ = std::make_unique<LeafIdsFile>((fs::path(output_) / "leaf-ids").string());
+  } else if (has_id_ && census.ids_dense && census.id_count > 0) {
+    id_table = std::make_unique<DenseIdTable>(census.id_first, census.id_last - census.id_first + 1);
+  } else if (has_id_) {
+    epoch_report.ids_sorted = true;
+    id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp_->path() + "/ids-" + std::to_string(e),
+                                                             shares_.id_run_records);
+  }
+  EpochBuild build;
+  build.cube = &points.cube;
+  build.tree = &options_.tree;
+  build.store = &store_;
+  build.id_table = id_table.get();
+  build.id_pairs = id_pairs.get();
+  build.leaf_ids = leaf_ids_.get();
+  build.report = &epoch_report;
+  Bytes top_block;
+  std::optional<TopLevelMerger> top;
+  if (rank == 0) {
+    top.emplace(points.cube, options_.tree, [&build, &top_block](NodeKey key, const NodePoints& node) {
+      build.Emit(key, node, /*is_leaf=*/false, top_block);
+    });
+  }
+  BuildDomains(label, points.cube, mine, files, columns, build, epoch_report, top ? &*top : nullptr);
+  clock.Lap("build");
+  if (rank != 0) {
+    if (leaf_ids_) leaf_ids_->Close();
+    store_.EndEpoch();
+    spread_report_ = epoch_report;
+    manifest_.epochs.push_back(RecordOf(header, points.cube, epoch_report));
+    report_.epochs.push_back(epoch_report);
+    return;
+  }
+  GatherOtherRanks(label, build, epoch_report, *top);
+  clock.Lap("gather");
+  if (has_id_) WriteIdIndex(header, id_table.get(), id_pairs.get());
+  store_.EndEpoch();
+  clock.Lap("write");
+  epoch_report.read_points = screened_[e].read;
+  epoch_report.dropped_points = screened_[e].dropped;
+  manifest_.epochs.push_back(RecordOf(header, points.cube, epoch_report));
+  report_.input_points += epoch_report.points;
+  report_.read_points += epoch_report.read_points;
+  report_.dropped_points += epoch_report.dropped_points;
+  report_.epochs.push_back(epoch_report);
+  source_.reset();
+}
+
+void IngestRun::SendSpreadSummary(const IngestPart& part) {
+  nlohmann::json summary = {{"part", part.ToJson()}, {"leaf_ids", leaf_ids_ ? leaf_ids_->path() : std::string()}};
+  const std::string text = summary.dump();
+  group_->Send(0, Bytes(text.begin(), text.end()));
 }
 
 IngestPart IngestRun::FinishPart() {
@@ -951,6 +1398,24 @@ IngestPart IngestShareInto(const IngestOptions& options, const IngestShare& shar
   IngestRun run(options, &share, part_directory);
   for (std::size_t e = share.first_epoch; e < share.end_epoch; ++e) run.IngestEpoch(e);
   return run.FinishPart();
+}
+
+IngestPart IngestSpreadInto(const IngestOptions& options, const IngestShare& share, RankGroup& group,
+                            const std::string& part_directory) {
+  if (options.inputs.size() != 1 || share.first_epoch != 0 || share.end_epoch != 1) {
+    throw Error::InvalidArgument("ingest: only a single epoch is spread over ranks (" +
+                                 std::to_string(options.inputs.size()) + " given)");
+  }
+  IngestRun run(options, &share, part_directory, &group);
+  run.IngestEpoch(0);
+  IngestPart part = run.FinishPart();
+  if (group.rank() == 0) return part;
+  run.SendSpreadSummary(part);
+  part.epochs.clear();
+  part.id_epochs.clear();
+  part.records.clear();
+  part.report.epochs.clear();
+  return part;
 }
 
 namespace {

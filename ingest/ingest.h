@@ -42,6 +42,7 @@
 #include "index/neighbour_radius.h"
 #include "index/subtree_builder.h"
 #include "ingest/outliers.h"
+#include "ingest/rank_group.h"
 #include "ingest/snapshot/snapshot_source.h"
 #include "storage/manifest.h"
 #include "storage/page_file_format.h"
@@ -141,6 +142,20 @@ struct IngestPart {
 // Ingests the epochs of `share` into `part_directory` (created; removed
 // again on failure). Nothing of it is a store until adopted.
 IngestPart IngestShareInto(const IngestOptions& options, const IngestShare& share, const std::string& part_directory);
+
+// One epoch spread over the processes of `group` (tools/ingest_ranks.h):
+// each rank reads a share of the snapshot's batches, sends each particle to
+// the rank whose domains hold it (ingest/epoch_domains.h), in rounds of a
+// batch a rank, and builds its domains' subtrees into its part; rank 0
+// merges the levels above the domains and copies the other ranks' blocks
+// and leaves' IDs into its own part, which is then the part IngestShareInto
+// writes for the same share. Every rank screens and smooths the whole epoch
+// (the neighbour pass is not spread). For a series of one epoch, `share`
+// its only one; every rank calls it. Returns the part on rank 0; on the
+// others an empty one (no epochs), whose directory rank 0 reads from until
+// it returns.
+IngestPart IngestSpreadInto(const IngestOptions& options, const IngestShare& share, RankGroup& group,
+                            const std::string& part_directory);
 
 // The output of an ingest by several processes: takes the output directory
 // as Ingest() does (a store's lock, removed on failure where this made it),

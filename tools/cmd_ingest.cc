@@ -33,8 +33,9 @@ void AddIngestCommand(CLI::App& app) {
       "(--format raw --raw-layout), CSV (docs/INPUT_FORMATS.md). Runs with glibc's huge-page malloc\n"
       "(GLIBC_TUNABLES=glibc.malloc.hugetlb=1) unless GLIBC_TUNABLES already sets it (docs/INGEST.md).\n"
       "Under mpirun (mpirun -n P octocosm ingest ...) the epochs of a series are shared among the P ranks,\n"
-      "each with --memory and --threads of its own (default: its share of its node's); the store is the one\n"
-      "a single process writes (docs/INGEST.md, \"Over MPI ranks\").");
+      "and a single snapshot's particles are spread over them by key range; each rank has --memory and\n"
+      "--threads of its own (default: its share of its node's); the store is the one a single process\n"
+      "writes (docs/INGEST.md, \"Over MPI ranks\").");
   cmd->add_option("inputs", o.inputs, "snapshots, one per epoch")->required();
   cmd->add_option("-o,--output", o.output, "store directory to create (must not hold a store)")->required();
   cmd->add_option("-n,--capacity", o.tree.capacity, "most points per node")->default_val(16000)->check(CLI::Range(1, 100000000));

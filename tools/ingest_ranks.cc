@@ -2,6 +2,8 @@
 
 #include <cstdio>
 #include <algorithm>
+#include <climits>
+#include <span>
 #include <cstdlib>
 #include <string>
 #include <thread>
@@ -10,6 +12,7 @@
 #include "base/error.h"
 #include "base/parallel_for.h"
 #include "base/progress.h"
+#include "ingest/rank_group.h"
 
 #if OCTOCOSM_WITH_MPI
 #include <mpi.h>
@@ -96,6 +99,76 @@ std::vector<std::string> GatherText(const std::string& text, int ranks) {
   return texts;
 }
 
+// The ranks of MPI_COMM_WORLD as an epoch spread over them sees them.
+class WorldGroup final : public RankGroup {
+ public:
+  int rank() const override { return CommRank(MPI_COMM_WORLD); }
+  int size() const override { return CommSize(MPI_COMM_WORLD); }
+  void Sum(std::span<std::uint64_t> values) override { Reduce(values, MPI_SUM); }
+  void Max(std::span<std::uint64_t> values) override { Reduce(values, MPI_MAX); }
+
+  std::vector<Bytes> Exchange(const std::vector<Bytes>& outgoing) override {
+    const std::size_t ranks = static_cast<std::size_t>(size());
+    std::vector<long long> send_sizes(ranks), receive_sizes(ranks);
+    for (std::size_t q = 0; q < ranks; ++q) send_sizes[q] = static_cast<long long>(outgoing[q].size());
+    MPI_Alltoall(send_sizes.data(), 1, MPI_LONG_LONG, receive_sizes.data(), 1, MPI_LONG_LONG, MPI_COMM_WORLD);
+    // MPI_Alltoallv counts in int: a round's batch stays far below 2 GiB.
+    std::vector<int> send_counts(ranks), send_offsets(ranks), receive_counts(ranks), receive_offsets(ranks);
+    Bytes send;
+    std::size_t received = 0;
+    for (std::size_t q = 0; q < ranks; ++q) {
+      if (send_sizes[q] > INT_MAX || receive_sizes[q] > INT_MAX || send.size() > INT_MAX || received > INT_MAX) {
+        throw Error::InvalidArgument("ingest: a round of the exchange between ranks exceeds 2 GiB; read smaller batches");
+      }
+      send_offsets[q] = static_cast<int>(send.size());
+      send_counts[q] = static_cast<int>(send_sizes[q]);
+      send.insert(send.end(), outgoing[q].begin(), outgoing[q].end());
+      receive_offsets[q] = static_cast<int>(received);
+      receive_counts[q] = static_cast<int>(receive_sizes[q]);
+      received += static_cast<std::size_t>(receive_sizes[q]);
+    }
+    Bytes all(received);
+    MPI_Alltoallv(send.data(), send_counts.data(), send_offsets.data(), MPI_BYTE, all.data(), receive_counts.data(),
+                  receive_offsets.data(), MPI_BYTE, MPI_COMM_WORLD);
+    std::vector<Bytes> incoming(ranks);
+    for (std::size_t q = 0; q < ranks; ++q) {
+      const auto* begin = all.data() + receive_offsets[q];
+      incoming[q].assign(begin, begin + receive_counts[q]);
+    }
+    return incoming;
+  }
+
+  void Send(int to, const Bytes& message) override {
+    const unsigned long long length = message.size();
+    MPI_Send(&length, 1, MPI_UNSIGNED_LONG_LONG, to, kLengthTag, MPI_COMM_WORLD);
+    for (std::size_t done = 0; done < message.size();) {
+      const int piece = static_cast<int>(std::min<std::size_t>(message.size() - done, kMostPiece));
+      MPI_Send(message.data() + done, piece, MPI_BYTE, to, kPieceTag, MPI_COMM_WORLD);
+      done += static_cast<std::size_t>(piece);
+    }
+  }
+
+  Bytes Receive(int from) override {
+    unsigned long long length = 0;
+    MPI_Recv(&length, 1, MPI_UNSIGNED_LONG_LONG, from, kLengthTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    Bytes message(static_cast<std::size_t>(length));
+    for (std::size_t done = 0; done < message.size();) {
+      const int piece = static_cast<int>(std::min<std::size_t>(message.size() - done, kMostPiece));
+      MPI_Recv(message.data() + done, piece, MPI_BYTE, from, kPieceTag, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+      done += static_cast<std::size_t>(piece);
+    }
+    return message;
+  }
+
+ private:
+  static constexpr int kLengthTag = 1, kPieceTag = 2;
+  static constexpr std::size_t kMostPiece = std::size_t{1} << 30;
+
+  static void Reduce(std::span<std::uint64_t> values, MPI_Op op) {
+    MPI_Allreduce(MPI_IN_PLACE, values.data(), static_cast<int>(values.size()), MPI_UINT64_T, op, MPI_COMM_WORLD);
+  }
+};
+
 }  // namespace
 
 std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
@@ -120,7 +193,9 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
   }
   // One progress display: rank 0's.
   if (rank != 0) options.quiet = true;
-  if (rank == 0 && static_cast<std::size_t>(ranks) > options.inputs.size()) {
+  // A single epoch is spread over the ranks; a series' epochs are shared out.
+  const bool spread = options.inputs.size() == 1 && ranks > 1;
+  if (rank == 0 && !spread && static_cast<std::size_t>(ranks) > options.inputs.size()) {
     std::fprintf(stderr,
                  "octocosm: ingest: %d ranks for %zu epoch(s): an epoch is one rank's work, so %zu rank(s) have none\n",
                  ranks, options.inputs.size(), static_cast<std::size_t>(ranks) - options.inputs.size());
@@ -143,12 +218,18 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
 
   IngestShare share = IngestAssembly::Share(options.inputs.size(), static_cast<std::size_t>(rank),
                                             static_cast<std::size_t>(ranks));
+  if (spread) {
+    share.first_epoch = 0;
+    share.end_epoch = 1;
+  }
   share.store_id = ids[0];
   share.id_store_id = ids[1];
   std::string part_json;
   try {
-    const IngestPart part = IngestShareInto(options, share, IngestAssembly::PartDirectory(options.output,
-                                                                                           static_cast<std::size_t>(rank)));
+    const std::string part_directory = IngestAssembly::PartDirectory(options.output, static_cast<std::size_t>(rank));
+    WorldGroup world;
+    const IngestPart part = spread ? IngestSpreadInto(options, share, world, part_directory)
+                                   : IngestShareInto(options, share, part_directory);
     part_json = part.ToJson().dump();
   } catch (const std::exception& e) {
     AbortWith(rank, e.what());
@@ -157,7 +238,8 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
   const std::vector<std::string> texts = GatherText(part_json, ranks);
   if (rank != 0) return std::nullopt;
   std::vector<IngestPart> parts;
-  for (int r = 0; r < ranks; ++r) {
+  // A spread epoch is all in rank 0's part; the others' are removed with it.
+  for (int r = 0; r < (spread ? 1 : ranks); ++r) {
     parts.push_back(IngestPart::FromJson(nlohmann::json::parse(texts[static_cast<std::size_t>(r)]),
                                          "rank " + std::to_string(r) + "'s part"));
   }

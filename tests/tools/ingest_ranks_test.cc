@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -123,6 +124,71 @@ TEST_F(IngestRanksTest, TwoAndFourRanksWriteTheStoreOneProcessWrites) {
       EXPECT_TRUE(name == "manifest.json" || name == "ids" || name.rfind("epoch-", 0) == 0) << name;
     }
   }
+}
+
+// The blocks of a store's epoch, by key.
+std::map<std::uint64_t, Bytes> EpochBlocks(const Dataset& store, std::uint32_t epoch) {
+  std::map<std::uint64_t, Bytes> blocks;
+  store.store().Scan(epoch, 0, ~std::uint64_t{0}, [&](const IndexEntry& entry) {
+    blocks[entry.key] = store.store().ReadBlock({epoch, entry.key});
+    return true;
+  });
+  return blocks;
+}
+
+// One epoch is spread over the ranks (ingest/epoch_domains.h): small
+// batches give every rank a share to read, small nodes many domains.
+TEST_F(IngestRanksTest, OneEpochSpreadOverTwoAndFourRanksIsTheStoreOneProcessWrites) {
+  const std::string snapshot = inputs_.back();
+  for (const std::string neighbours : {"0", "8"}) {
+    SCOPED_TRACE("--neighbours " + neighbours);
+    auto ingest = [&](const std::string& store, int ranks) {
+      std::string command = ranks > 0 ? std::string(MPIEXEC) + " -n " + std::to_string(ranks) + " " : std::string();
+      command += std::string(OCTOCOSM_BINARY) + " ingest -q -n 200 --chunk-particles 700 --memory 64M --neighbours " +
+                 neighbours + " -o " + store + " " + snapshot;
+      return Run(command, ranks > 0 ? kMpiEnvironment : "");
+    };
+    const std::string single = (dir_.path() / ("single-" + neighbours)).string();
+    const ProgramRun one = ingest(single, 0);
+    ASSERT_EQ(one.status, 0) << one.Describe();
+    const Dataset expected = Dataset::Open(single);
+    const std::map<std::uint64_t, Bytes> want = EpochBlocks(expected, 0);
+    ASSERT_GT(want.size(), 20u);
+    for (int ranks : {2, 4}) {
+      SCOPED_TRACE(std::to_string(ranks) + " ranks");
+      const std::string store = (dir_.path() / ("spread-" + neighbours + "-" + std::to_string(ranks))).string();
+      const ProgramRun run = ingest(store, ranks);
+      ASSERT_EQ(run.status, 0) << run.Describe();
+      const Dataset got = Dataset::Open(store);
+      ASSERT_EQ(got.epoch_count(), 1u);
+      EXPECT_EQ(got.store().dataset(), expected.store().dataset());
+      const testing_support::TreeCheck tree = CheckTree(expected, 0);
+      EXPECT_EQ(FirstDifference(CheckTree(got, 0), tree), "");
+      EXPECT_EQ(FirstIdIndexDifference(got, tree, 0), "");
+      EXPECT_TRUE(IdIndexBlocks(store) == IdIndexBlocks(single)) << "the ID index's blocks differ";
+      const std::map<std::uint64_t, Bytes> blocks = EpochBlocks(got, 0);
+      EXPECT_EQ(blocks.size(), want.size());
+      EXPECT_TRUE(blocks == want) << "the blocks differ";
+      const ProgramRun verify = Run(std::string(OCTOCOSM_BINARY) + " verify " + store);
+      EXPECT_EQ(verify.status, 0) << verify.Describe();
+      for (const auto& entry : fs::directory_iterator(store)) {
+        const std::string name = entry.path().filename();
+        EXPECT_TRUE(name == "manifest.json" || name == "ids" || name.rfind("epoch-", 0) == 0) << name;
+      }
+    }
+  }
+}
+
+TEST_F(IngestRanksTest, AFailedRankOfASpreadEpochEndsTheIngestAndLeavesNoStore) {
+  fs::resize_file(inputs_[0], fs::file_size(inputs_[0]) / 2);
+  const std::string store = (dir_.path() / "store").string();
+  const ProgramRun run = Run(std::string(MPIEXEC) + " -n 2 " + OCTOCOSM_BINARY + " ingest -q --neighbours 0 -o " +
+                                 store + " " + inputs_[0],
+                             kMpiEnvironment);
+  EXPECT_NE(run.status, 0) << run.Describe();
+  EXPECT_NE(run.output.find(fs::path(inputs_[0]).filename().string()), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("ingest rank"), std::string::npos) << run.output;
+  EXPECT_FALSE(fs::exists(store)) << "left behind: " << store;
 }
 
 TEST_F(IngestRanksTest, AFailedRankEndsTheIngestWithItsErrorAndLeavesNoStore) {
