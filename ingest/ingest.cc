@@ -522,6 +522,25 @@ struct EpochPoints {
   std::size_t chunk_particles = 0;
   JoinStats join_stats;  // of the latest joined pass
 
+  // Every `every`-th batch from the `first`-th, the others skipped (read
+  // only where the source cannot seek); returns how many batches the epoch
+  // has. Not for a joined pass, which has no batches of the source's.
+  std::uint64_t PassShare(std::uint64_t every, std::uint64_t first, const std::function<void(const ParticleChunk&)>& consume) {
+    source->Rewind();
+    ParticleChunk chunk;
+    std::uint64_t batch = 0;
+    for (;; ++batch) {
+      if (batch % every != first) {
+        if (source->Skip() == 0) break;
+        continue;
+      }
+      if (!source->Next(chunk)) break;
+      if (cube.periodic && !InsideBox(chunk, cube)) WrapIntoBox(chunk, cube);
+      consume(chunk);
+    }
+    return batch;
+  }
+
   void Pass(const std::function<void(const ParticleChunk&)>& consume) {
     auto forward = [&](const ParticleChunk& chunk) {
       if (!cube.periodic || InsideBox(chunk, cube)) return consume(chunk);
@@ -1266,10 +1285,7 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
   points.chunk_particles = options_.read.chunk_particles;
   // This rank's share of the snapshot: every ranks-th batch, from the rank-th.
   const PointPass my_batches = [&](const std::function<void(const ParticleChunk&)>& consume) {
-    std::uint64_t batch = 0;
-    points.Pass([&](const ParticleChunk& chunk) {
-      if (batch++ % static_cast<std::uint64_t>(ranks) == static_cast<std::uint64_t>(rank)) consume(chunk);
-    });
+    points.PassShare(static_cast<std::uint64_t>(ranks), static_cast<std::uint64_t>(rank), consume);
   };
 
   std::uint64_t rounds = 0;

@@ -830,6 +830,12 @@ class SmoothedSource : public ParticleSource {
     next_ = 0;
   }
 
+  std::uint64_t Skip() override {
+    const std::uint64_t skipped = inner_->Skip();
+    next_ += skipped;
+    return skipped;
+  }
+
  private:
   std::unique_ptr<ParticleSource> inner_;
   std::shared_ptr<const SmoothingLengthTable> table_;

@@ -93,6 +93,8 @@ class CsvSource final : public SegmentedSource {
     }
   }
 
+  bool SeeksRanges() const override { return false; }  // rows are found by reading the lines before them
+
   void OnRewind() override {
     stream_.clear();
     stream_.seekg(data_start_);

@@ -39,6 +39,24 @@ bool SegmentedSource::Next(ParticleChunk& chunk) {
   return chunk.size() > 0;
 }
 
+// The same steps as Next(), without reading.
+std::uint64_t SegmentedSource::Skip() {
+  if (!SeeksRanges()) return ParticleSource::Skip();
+  std::uint64_t skipped = 0;
+  while (skipped < chunk_particles_ && segment_index_ < segments_.size()) {
+    const std::uint64_t left = segments_[segment_index_].count - segment_offset_;
+    if (left == 0) {
+      ++segment_index_;
+      segment_offset_ = 0;
+      continue;
+    }
+    const std::uint64_t count = std::min<std::uint64_t>(left, chunk_particles_ - skipped);
+    segment_offset_ += count;
+    skipped += count;
+  }
+  return skipped;
+}
+
 void SegmentedSource::Rewind() {
   segment_index_ = 0;
   segment_offset_ = 0;

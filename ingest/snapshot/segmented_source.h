@@ -28,6 +28,7 @@ class SegmentedSource : public ParticleSource {
   const SnapshotHeader& header() const override { return header_; }
   bool Next(ParticleChunk& chunk) override;
   void Rewind() override;
+  std::uint64_t Skip() override;
 
  protected:
   explicit SegmentedSource(std::size_t chunk_particles);
@@ -40,6 +41,9 @@ class SegmentedSource : public ParticleSource {
                            ParticleChunk& chunk) = 0;
   // Called by Rewind() so that a format can reset its own stream position.
   virtual void OnRewind() {}
+  // Whether AppendRange may skip particles (its `begin` jump ahead): false
+  // for a format read as one stream, which Skip() then reads through.
+  virtual bool SeeksRanges() const { return true; }
   // Names particle `index` of `segment` in messages, e.g. "PartType1 particle 7".
   virtual std::string DescribeParticle(const Segment& segment, std::uint64_t index) const;
   // Names where `segment`'s smoothing lengths come from in messages, e.g.

@@ -153,6 +153,13 @@ class ParticleSource {
   virtual bool Next(ParticleChunk& chunk) = 0;
   // Starts again from the first particle.
   virtual void Rewind() = 0;
+  // Passes over the batch Next() would hand out next, and returns how many
+  // particles it holds (0 at the end). A reader that can seek there does
+  // not read it (nor check its values); this default reads it.
+  virtual std::uint64_t Skip() {
+    ParticleChunk batch;
+    return Next(batch) ? batch.size() : 0;
+  }
   // The particles Next() hands out, in the same order, as segments a reader
   // may map (MappableSegment), when the format stores every column so; else
   // empty. The values are not checked: a reader of the segments must check

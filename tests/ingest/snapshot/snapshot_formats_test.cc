@@ -156,6 +156,22 @@ TEST(Hdf5Reader, MultiFileByBaseNameAndHighWordJunk) {
   }
 }
 
+TEST(Hdf5Reader, SkipPassesOverABatchAcrossTypesAndFiles) {
+  ScratchDir dir;
+  Hdf5Spec first;
+  first.num_files = 2;
+  first.total = {5, 9};
+  Hdf5Spec second = first;
+  first.n0 = 2;
+  first.n1 = 4;
+  second.first_id = 7;
+  WriteHdf5(dir.File("snap.0.hdf5"), first);
+  WriteHdf5(dir.File("snap.1.hdf5"), second);
+  ReadOptions options;
+  options.chunk_particles = 3;
+  ExpectSkipPassesOverNextsBatches([&] { return OpenSnapshot(dir.File("snap"), options); });
+}
+
 TEST(Hdf5Reader, SwiftStyleHeader) {
   ScratchDir dir;
   {
@@ -868,6 +884,16 @@ TEST(CsvReader, CommaSeparatedWithOptionalColumns) {
     EXPECT_EQ(all.id, (std::vector<std::uint64_t>{7, 8}));
     source->Rewind();
   }
+}
+
+TEST(CsvReader, SkipReadsThroughTheRowsItPassesOver) {
+  ScratchDir dir;
+  std::string text = "x,y,z\n";
+  for (int i = 0; i < 10; ++i) text += std::to_string(i) + ",0.5," + std::to_string(2 * i) + "\n";
+  WriteFile(dir.File("p.csv"), text);
+  ReadOptions options;
+  options.chunk_particles = 2;
+  ExpectSkipPassesOverNextsBatches([&] { return OpenSnapshot(dir.File("p.csv"), options); });
 }
 
 TEST(CsvReader, WhitespaceSeparatedNeedsExplicitFormatWithoutCsvSuffix) {

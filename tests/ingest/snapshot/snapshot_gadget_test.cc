@@ -324,6 +324,20 @@ TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
   EXPECT_EQ(all.id.back(), 1106u);
 }
 
+TEST(GadgetReader, SkipPassesOverABatchAcrossTypesAndFiles) {
+  ScratchDir dir;
+  GadgetSpec a = SmallSpec();
+  GadgetSpec b = SmallSpec();
+  for (auto& id : b.ids) id += 1000;
+  a.total = b.total = std::array<std::uint32_t, 6>{6, 8, 0, 0, 0, 0};
+  a.num_files = b.num_files = 2;
+  WriteBytes(dir.File("out.0"), EncodeGadget(a));
+  WriteBytes(dir.File("out.1"), EncodeGadget(b));
+  ReadOptions options;
+  options.chunk_particles = 3;
+  ExpectSkipPassesOverNextsBatches([&] { return OpenSnapshot(dir.File("out"), options); });
+}
+
 TEST(GadgetReader, DeclaredFileMissingIsNotFound) {
   ScratchDir dir;
   GadgetSpec spec = SmallSpec();

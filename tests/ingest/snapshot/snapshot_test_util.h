@@ -63,6 +63,37 @@ inline void ExpectBadInput(const std::string& path, const std::string& problem, 
   }
 }
 
+// Skip() passes over exactly the batch Next() would hand out: a pass that
+// skips every other batch reads the others as a pass of Next() alone does.
+// `open` opens the same snapshot afresh.
+template <typename Open>
+void ExpectSkipPassesOverNextsBatches(const Open& open) {
+  auto plain = open();
+  std::vector<ParticleChunk> batches;
+  for (ParticleChunk chunk; plain->Next(chunk);) batches.push_back(chunk);
+  ASSERT_GT(batches.size(), 3u) << "too few batches to tell";
+  for (std::size_t first : {0, 1}) {
+    auto skipping = open();
+    std::size_t b = 0;
+    for (;; ++b) {
+      if (b % 2 != first) {
+        const std::uint64_t skipped = skipping->Skip();
+        if (skipped == 0) break;
+        ASSERT_LT(b, batches.size());
+        EXPECT_EQ(skipped, batches[b].size()) << "batch " << b;
+        continue;
+      }
+      ParticleChunk chunk;
+      if (!skipping->Next(chunk)) break;
+      ASSERT_LT(b, batches.size());
+      EXPECT_EQ(chunk.position, batches[b].position) << "batch " << b;
+      EXPECT_EQ(chunk.id, batches[b].id) << "batch " << b;
+      EXPECT_EQ(chunk.mass, batches[b].mass) << "batch " << b;
+    }
+    EXPECT_EQ(b, batches.size());
+  }
+}
+
 inline bool SameParticles(const ParticleChunk& a, const ParticleChunk& b) {
   return a.position == b.position && a.velocity == b.velocity && a.mass == b.mass && a.id == b.id &&
          a.type == b.type && a.smoothing == b.smoothing;
