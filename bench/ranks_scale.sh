@@ -13,7 +13,10 @@
 #
 # NEIGHBOURS (default 32, ingest's default) passes --neighbours; REPEAT
 # (default 2) the number of rounds. The snapshots stay in WORK/snapshots and
-# are reused. SIDE=32 EPOCHS=4 is a dry run of a few seconds.
+# are reused. SIDE=32 EPOCHS=4 is a dry run of a few seconds. EPOCHS=1 is a
+# single snapshot, whose particles mpirun spreads over the ranks; SNAPSHOT=
+# PATH ingests that snapshot instead of a particle-mesh run (SIDE and EPOCHS
+# are then ignored), e.g. one of octocosm synth scale.
 set -euo pipefail
 work=${1:?usage: ranks_scale.sh WORK [SIDE] [EPOCHS] [MEMORY] [RANKS]}
 side=${2:-128}
@@ -32,15 +35,19 @@ cores=$(nproc)
 mkdir -p "$work"
 
 snapshots="$work/snapshots"
-if [ ! -e "$snapshots/complete-$epochs" ]; then
+if [ -n "${SNAPSHOT:-}" ]; then
+  paths=("$SNAPSHOT")
+elif [ ! -e "$snapshots/complete-$epochs" ]; then
   rm -rf "$snapshots"
   "$octocosm" synth pm -q -o "$snapshots" -N "$side" --grid-factor 1 --steps 10 --z-start 9 --outputs "$epochs" \
     --files 2 >"$work/synth.log" 2>&1
   touch "$snapshots/complete-$epochs"
 fi
-mapfile -t inputs < <(ls "$snapshots" | sed -n 's/^\(snap_[0-9]*\)\.0$/\1/p' | sort)
-paths=()
-for name in "${inputs[@]}"; do paths+=("$snapshots/$name"); done
+if [ -z "${SNAPSHOT:-}" ]; then
+  mapfile -t inputs < <(ls "$snapshots" | sed -n 's/^\(snap_[0-9]*\)\.0$/\1/p' | sort)
+  paths=()
+  for name in "${inputs[@]}"; do paths+=("$snapshots/$name"); done
+fi
 
 # One ingest: "1" is one process without mpirun, "mpi P" P ranks. Prints
 # "wall_seconds peak_rss_kib".
@@ -77,8 +84,9 @@ for ((round = 0; round < repeat; ++round)); do
   done
 done
 
-particles=$(( side * side * side ))
-echo "$side^3 = $particles particles x ${#paths[@]} epochs, --neighbours $neighbours, --memory $memory in all, $cores cores, best of $repeat"
+# Particles an epoch, from the last store's manifest (its first epoch).
+particles=$(grep -o '"points": *[0-9]*' "$work/store/manifest.json" | head -1 | grep -o '[0-9]*$')
+echo "${SNAPSHOT:-$side^3 particle mesh}: $particles particles x ${#paths[@]} epochs, --neighbours $neighbours, --memory $memory in all, $cores cores, best of $repeat"
 printf "%-22s %10s %14s %12s %10s\n" "run" "wall (s)" "M particle-epochs/s" "peak RSS" "speed-up"
 one=${best_wall[one]}
 for setting in "${settings[@]}"; do

@@ -356,6 +356,46 @@ class LeafIdsFile {
   std::FILE* file_ GUARDED_BY(mutex_);
 };
 
+// Messages kept in a file until they are sent: a rank's domain roots, each
+// up to a node's capacity of points, which it may hold dozens of.
+class MessageFile {
+ public:
+  explicit MessageFile(std::string path) : path_(std::move(path)), file_(std::fopen(path_.c_str(), "w+b"), &std::fclose) {
+    if (!file_) throw Error::Io(path_, std::string("cannot create: ") + std::strerror(errno));
+    std::remove(path_.c_str());  // open still; gone whatever happens to the process
+  }
+  void Add(const Bytes& message) {
+    const std::uint64_t size = message.size();
+    if (std::fwrite(&size, sizeof size, 1, file_.get()) != 1 ||
+        (size > 0 && std::fwrite(message.data(), 1, message.size(), file_.get()) != message.size())) {
+      throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
+    }
+    ++count_;
+  }
+  std::uint64_t count() const { return count_; }
+  // Every message, in the order added.
+  void ForEach(const std::function<void(const Bytes&)>& visit) {
+    if (std::fflush(file_.get()) != 0 || std::fseek(file_.get(), 0, SEEK_SET) != 0) {
+      throw Error::Io(path_, std::string("cannot read back: ") + std::strerror(errno));
+    }
+    Bytes message;
+    for (std::uint64_t k = 0; k < count_; ++k) {
+      std::uint64_t size = 0;
+      if (std::fread(&size, sizeof size, 1, file_.get()) != 1) throw Error::Io(path_, "cut short");
+      message.resize(static_cast<std::size_t>(size));
+      if (size > 0 && std::fread(message.data(), 1, message.size(), file_.get()) != message.size()) {
+        throw Error::Io(path_, "cut short");
+      }
+      visit(message);
+    }
+  }
+
+ private:
+  std::string path_;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_;
+  std::uint64_t count_ = 0;
+};
+
 // Everything one epoch's build shares between the worker threads.
 struct EpochBuild {
   const Cube* cube = nullptr;
@@ -1157,7 +1197,7 @@ void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const s
   }
   Progress progress(label + ": build", total, "points");
   build.progress = &progress;
-  std::vector<Bytes> roots;
+  MessageFile roots(temp_->path() + "/domain-roots");
   const ResidentEpoch none;
   for (std::size_t k = 0; k < mine.size(); ++k) {
     const std::uint64_t max_chunk =
@@ -1195,14 +1235,14 @@ void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const s
     if (top != nullptr) {
       top->Add(mine[k], std::move(root));
     } else {
-      roots.push_back(PackNode(mine[k], root));
+      roots.Add(PackNode(mine[k], root));
     }
   }
   progress.Finish();
   if (top != nullptr) return;
-  const std::uint64_t count = roots.size();
+  const std::uint64_t count = roots.count();
   group_->Send(0, Bytes(reinterpret_cast<const std::uint8_t*>(&count), reinterpret_cast<const std::uint8_t*>(&count + 1)));
-  for (const Bytes& root : roots) group_->Send(0, root);
+  roots.ForEach([this](const Bytes& root) { group_->Send(0, root); });
 }
 
 // Step 4, on rank 0: the other ranks' domain roots into `top`, in rank
