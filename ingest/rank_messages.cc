@@ -11,8 +11,10 @@ namespace octocosm {
 namespace {
 
 void AppendRaw(const void* data, std::size_t size, Bytes& out) {
-  const auto* bytes = static_cast<const std::uint8_t*>(data);
-  out.insert(out.end(), bytes, bytes + size);
+  if (size == 0) return;
+  const std::size_t start = out.size();
+  out.resize(start + size);
+  std::memcpy(out.data() + start, data, size);
 }
 
 template <typename T>

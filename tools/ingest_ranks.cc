@@ -197,7 +197,8 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
   const bool spread = options.inputs.size() == 1 && ranks > 1;
   if (rank == 0 && !spread && static_cast<std::size_t>(ranks) > options.inputs.size()) {
     std::fprintf(stderr,
-                 "octocosm: ingest: %d ranks for %zu epoch(s): an epoch is one rank's work, so %zu rank(s) have none\n",
+                 "octocosm: ingest: %d ranks for %zu epochs: the epochs of a series are shared out, not spread, so %zu "
+                 "rank(s) have none\n",
                  ranks, options.inputs.size(), static_cast<std::size_t>(ranks) - options.inputs.size());
   }
 

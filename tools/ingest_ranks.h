@@ -2,7 +2,9 @@
 // (ranks). The epochs of the series are shared out in consecutive runs
 // (IngestAssembly::Share); each rank ingests its share into a part inside
 // the output, rank 0 adopts the parts' page files and writes the manifests.
-// The store is the one a single process writes (ingest/ingest.h). The output
+// A single snapshot is spread over the ranks instead (IngestSpreadInto,
+// through a RankGroup over MPI_COMM_WORLD). Either way the store is the one
+// a single process writes (ingest/ingest.h). The output
 // must be on a file system every rank sees at the same path.
 //
 // A rank that fails prints its error and ends the whole job (MPI_Abort);
