@@ -325,7 +325,8 @@ class LeafIdsFile {
       throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
     }
   }
-  void Close() {
+  void Close() EXCLUDES(mutex_) {
+    MutexLock lock(mutex_);
     std::FILE* file = file_;
     file_ = nullptr;
     if (std::fclose(file) != 0) throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
