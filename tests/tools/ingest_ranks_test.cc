@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <map>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -176,6 +178,45 @@ TEST_F(IngestRanksTest, OneEpochSpreadOverTwoAndFourRanksIsTheStoreOneProcessWri
         EXPECT_TRUE(name == "manifest.json" || name == "ids" || name.rfind("epoch-", 0) == 0) << name;
       }
     }
+  }
+}
+
+// Without a periodic box every rank finds the same bounding cube; a CSV
+// file, which cannot seek to a batch, is read through by every rank.
+TEST_F(IngestRanksTest, ASpreadSnapshotWithoutABoxIsTheStoreOneProcessWrites) {
+  const std::string csv = (dir_.path() / "points.csv").string();
+  {
+    std::mt19937_64 random(5);
+    std::normal_distribution<double> clump(0, 0.3);
+    std::uniform_real_distribution<double> background(-20, 35);
+    std::ofstream out(csv);
+    out << "x,y,z,mass,id\n";
+    for (int i = 0; i < 12000; ++i) {
+      const bool in_clump = i % 3 != 0;
+      const double c = in_clump ? (i % 2 ? 4.0 : -7.0) : 0;
+      for (int k = 0; k < 3; ++k) out << (in_clump ? c + clump(random) : background(random)) << ",";
+      out << 1 + (i % 5) << "," << 100 + 3 * i << "\n";
+    }
+  }
+  auto ingest = [&](const std::string& store, int ranks) {
+    std::string command = ranks > 0 ? std::string(MPIEXEC) + " -n " + std::to_string(ranks) + " " : std::string();
+    command += std::string(OCTOCOSM_BINARY) + " ingest -q -n 150 --chunk-particles 500 --memory 64M --neighbours 0 -o " +
+               store + " " + csv;
+    return Run(command, ranks > 0 ? kMpiEnvironment : "");
+  };
+  const std::string single = (dir_.path() / "single").string();
+  const ProgramRun one = ingest(single, 0);
+  ASSERT_EQ(one.status, 0) << one.Describe();
+  const Dataset expected = Dataset::Open(single);
+  for (int ranks : {2, 3}) {
+    SCOPED_TRACE(std::to_string(ranks) + " ranks");
+    const std::string store = (dir_.path() / ("spread-" + std::to_string(ranks))).string();
+    const ProgramRun run = ingest(store, ranks);
+    ASSERT_EQ(run.status, 0) << run.Describe();
+    const Dataset got = Dataset::Open(store);
+    EXPECT_EQ(got.store().dataset(), expected.store().dataset());
+    EXPECT_TRUE(EpochBlocks(got, 0) == EpochBlocks(expected, 0)) << "the blocks differ";
+    EXPECT_TRUE(IdIndexBlocks(store) == IdIndexBlocks(single)) << "the ID index's blocks differ";
   }
 }
 
