@@ -26,10 +26,13 @@ void AppendValue(T value, Bytes& out) {
 template <typename T>
 void AppendPicked(const std::vector<T>& column, std::size_t width, std::span<const std::uint32_t> indices, Bytes& out) {
   const std::size_t start = out.size();
-  out.resize(start + indices.size() * width * sizeof(T));
-  T* to = reinterpret_cast<T*>(out.data() + start);
+  const std::size_t point_bytes = width * sizeof(T);
+  out.resize(start + indices.size() * point_bytes);
+  // Byte by byte: a segment's columns need not lie at their type's alignment.
+  std::uint8_t* to = out.data() + start;
   for (std::uint32_t i : indices) {
-    for (std::size_t k = 0; k < width; ++k) *to++ = column[std::size_t{i} * width + k];
+    std::memcpy(to, column.data() + std::size_t{i} * width, point_bytes);
+    to += point_bytes;
   }
 }
 
