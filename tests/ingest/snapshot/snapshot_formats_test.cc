@@ -131,18 +131,23 @@ TEST(Hdf5Reader, DoubleCoordinatesU64IdsFloatMassesRoundTrip) {
   }
 }
 
-TEST(Hdf5Reader, MultiFileByBaseNameAndHighWordJunk) {
-  ScratchDir dir;
+// snap.0.hdf5 and snap.1.hdf5: 5 gas and 9 dark-matter particles in all, IDs 1 to 14.
+void WriteTwoFiles(const ScratchDir& dir, const std::vector<std::uint32_t>& total_high) {
   Hdf5Spec first;
   first.num_files = 2;
   first.total = {5, 9};
-  first.total_high = {0, 12};  // junk: the low words alone match the file sums
+  first.total_high = total_high;
   Hdf5Spec second = first;
   first.n0 = 2;
   first.n1 = 4;
   second.first_id = 7;
   WriteHdf5(dir.File("snap.0.hdf5"), first);
   WriteHdf5(dir.File("snap.1.hdf5"), second);
+}
+
+TEST(Hdf5Reader, MultiFileByBaseNameAndHighWordJunk) {
+  ScratchDir dir;
+  WriteTwoFiles(dir, {0, 12});  // junk: the low words alone match the file sums
   for (const char* name : {"snap", "snap.1.hdf5"}) {
     auto source = OpenSnapshot(dir.File(name), {});
     EXPECT_EQ(source->header().files,
@@ -158,15 +163,7 @@ TEST(Hdf5Reader, MultiFileByBaseNameAndHighWordJunk) {
 
 TEST(Hdf5Reader, SkipPassesOverABatchAcrossTypesAndFiles) {
   ScratchDir dir;
-  Hdf5Spec first;
-  first.num_files = 2;
-  first.total = {5, 9};
-  Hdf5Spec second = first;
-  first.n0 = 2;
-  first.n1 = 4;
-  second.first_id = 7;
-  WriteHdf5(dir.File("snap.0.hdf5"), first);
-  WriteHdf5(dir.File("snap.1.hdf5"), second);
+  WriteTwoFiles(dir, {});
   ReadOptions options;
   options.chunk_particles = 3;
   ExpectSkipPassesOverNextsBatches([&] { return OpenSnapshot(dir.File("snap"), options); });

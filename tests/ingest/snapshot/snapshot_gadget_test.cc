@@ -306,16 +306,21 @@ TEST(GadgetReader, NoMappableSegmentsWhereTheChunksCarrySmoothingLengths) {
   EXPECT_EQ(OpenSnapshot(dir.File("snap"), dark_matter)->MappableSegments().size(), 1u) << "no gas, no smoothing";
 }
 
-TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
-  ScratchDir dir;
+// out.0 and out.1: two small files of 6 gas and 8 dark-matter particles in all.
+void WriteTwoFiles(const ScratchDir& dir, std::int32_t num_files, int format) {
   GadgetSpec a = SmallSpec();
   GadgetSpec b = SmallSpec();
   for (auto& id : b.ids) id += 1000;
   a.total = b.total = std::array<std::uint32_t, 6>{6, 8, 0, 0, 0, 0};
-  a.num_files = b.num_files = 0;
-  a.format = b.format = 2;
+  a.num_files = b.num_files = num_files;
+  a.format = b.format = format;
   WriteBytes(dir.File("out.0"), EncodeGadget(a));
   WriteBytes(dir.File("out.1"), EncodeGadget(b));
+}
+
+TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
+  ScratchDir dir;
+  WriteTwoFiles(dir, 0, 2);
   auto source = OpenSnapshot(dir.File("out"), {});
   EXPECT_EQ(source->header().files.size(), 2u);
   EXPECT_EQ(source->header().total_count, 14u);
@@ -326,13 +331,7 @@ TEST(GadgetReader, MultiFileWithZeroNumFilesFindsConsecutiveFiles) {
 
 TEST(GadgetReader, SkipPassesOverABatchAcrossTypesAndFiles) {
   ScratchDir dir;
-  GadgetSpec a = SmallSpec();
-  GadgetSpec b = SmallSpec();
-  for (auto& id : b.ids) id += 1000;
-  a.total = b.total = std::array<std::uint32_t, 6>{6, 8, 0, 0, 0, 0};
-  a.num_files = b.num_files = 2;
-  WriteBytes(dir.File("out.0"), EncodeGadget(a));
-  WriteBytes(dir.File("out.1"), EncodeGadget(b));
+  WriteTwoFiles(dir, 2, SmallSpec().format);
   ReadOptions options;
   options.chunk_particles = 3;
   ExpectSkipPassesOverNextsBatches([&] { return OpenSnapshot(dir.File("out"), options); });
