@@ -111,11 +111,12 @@ void DenseIdTable::Widen() {
 namespace {
 
 template <typename Slot>
-void RecordLeaf(Slot* slots, std::uint64_t first, std::uint64_t span, std::span<const std::uint64_t> ids,
-                Slot slot_value) {
+std::optional<std::uint64_t> RecordLeaf(Slot* slots, std::uint64_t first, std::uint64_t span,
+                                        std::span<const std::uint64_t> ids, Slot slot_value) {
   // A leaf's IDs lie scattered over the table, so each slot is a cache miss;
   // asking for the slots this many IDs ahead lets the misses overlap.
   constexpr std::size_t kAhead = 16;
+  std::optional<std::uint64_t> repeated;
   for (std::size_t k = 0; k < ids.size(); ++k) {
     if (k + kAhead < ids.size()) {
       const std::uint64_t ahead = ids[k + kAhead] - first;
@@ -127,14 +128,18 @@ void RecordLeaf(Slot* slots, std::uint64_t first, std::uint64_t span, std::span<
       throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " lies outside the table's " +
                                    std::to_string(first) + " .. " + std::to_string(first + span - 1));
     }
-    if (slots[slot] != 0) throw Error::InvalidArgument("DenseIdTable: ID " + std::to_string(id) + " recorded twice");
+    if (slots[slot] != 0) {
+      if (!repeated) repeated = id;
+      continue;
+    }
     slots[slot] = slot_value;
   }
+  return repeated;
 }
 
 }  // namespace
 
-void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
+std::optional<std::uint64_t> DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
   std::uint32_t slot_value = 0;
   {
     WriterLock lock(mutex_);
@@ -147,10 +152,10 @@ void DenseIdTable::Add(std::span<const std::uint64_t> ids, NodeKey leaf) {
   }
   ReaderLock lock(mutex_);
   if (narrow_) {
-    RecordLeaf(static_cast<std::uint16_t*>(slots_.get()), first_, span_, ids, static_cast<std::uint16_t>(slot_value));
-  } else {
-    RecordLeaf(static_cast<std::uint32_t*>(slots_.get()), first_, span_, ids, slot_value);
+    return RecordLeaf(static_cast<std::uint16_t*>(slots_.get()), first_, span_, ids,
+                      static_cast<std::uint16_t>(slot_value));
   }
+  return RecordLeaf(static_cast<std::uint32_t*>(slots_.get()), first_, span_, ids, slot_value);
 }
 
 void DenseIdTable::SortLeaves(int threads) {

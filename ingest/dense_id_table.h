@@ -74,11 +74,14 @@ class DenseIdTable {
   // cost no memory until a leaf writes them), with room to widen them.
   DenseIdTable(std::uint64_t first, std::uint64_t span);
 
-  // Records that `leaf` holds the particles `ids`. Several threads may call
-  // it at once, as long as no ID comes twice (which IdCensus checked); an ID
-  // outside the range or already recorded throws InvalidArgument, and so do
-  // more than 2^32 - 2 leaves.
-  void Add(std::span<const std::uint64_t> ids, NodeKey leaf) EXCLUDES(mutex_);
+  // Records that `leaf` holds the particles `ids`, and returns the first of
+  // them that was recorded already (its slot keeps the leaf it had): two
+  // particles with one ID, which the caller refuses naming its input. Calls
+  // one after another find every repeat; several threads may call it at
+  // once only for IDs that are unique (as IdCensus found them), since two
+  // threads writing one slot could both miss the other. An ID outside the
+  // range throws InvalidArgument, and so do more than 2^32 - 2 leaves.
+  [[nodiscard]] std::optional<std::uint64_t> Add(std::span<const std::uint64_t> ids, NodeKey leaf) EXCLUDES(mutex_);
 
   // What IdIndexEpochWriter::AddTable writes, once no Add runs: slot i is 0
   // where no leaf recorded ID first() + i, else 1 + the leaf's index in

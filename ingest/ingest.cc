@@ -406,6 +406,7 @@ struct EpochBuild {
   // unique and compact, else the sorter; both null without IDs.
   DenseIdTable* id_table = nullptr;
   ExternalSorter<IdLeafRecord>* id_pairs = nullptr;
+  const SnapshotHeader* header = nullptr;  // the epoch's files, named when its IDs repeat
   // The store, the table and the sorter take blocks and pairs from several
   // threads; the report takes this lock.
   Mutex mutex;
@@ -428,7 +429,7 @@ struct EpochBuild {
       if (key == domain) *domain_root = points;
     }
     EncodeBlock(points, key, *cube, block);
-    if (is_leaf && id_table != nullptr) id_table->Add(points.id, key);
+    if (is_leaf && id_table != nullptr) RecordLeafIds(points.id, key);
     if (is_leaf && leaf_ids != nullptr) leaf_ids->Add(key, points.id);
     std::vector<IdLeafRecord> pairs;
     if (is_leaf && id_pairs != nullptr) {
@@ -444,6 +445,14 @@ struct EpochBuild {
     ++report->nodes;
     report->depth = std::max(report->depth, key.level());
     if (is_leaf) ++report->leaves;
+  }
+
+  // Adds a leaf's IDs to the table, refusing the snapshot for an ID it
+  // gives twice.
+  void RecordLeafIds(std::span<const std::uint64_t> ids, NodeKey leaf) const {
+    if (const std::optional<std::uint64_t> repeated = id_table->Add(ids, leaf)) {
+      RefuseDuplicateIds(*header, *repeated, 0);
+    }
   }
 };
 
@@ -964,6 +973,7 @@ void IngestRun::BuildAndWrite(std::size_t e, const SnapshotHeader& header, const
   build.cube = &cube;
   build.tree = &options_.tree;
   build.store = &store_;
+  build.header = &header;
   build.id_table = id_table.get();
   build.id_pairs = id_pairs.get();
   build.report = &epoch_report;
@@ -1298,7 +1308,7 @@ void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, Ep
     if (has_id_) {
       LeafIdsFile::ForEach(summary.at("leaf_ids").get<std::string>(),
                            [&](NodeKey leaf, std::span<const std::uint64_t> ids) {
-                             if (build.id_table != nullptr) build.id_table->Add(ids, leaf);
+                             if (build.id_table != nullptr) build.RecordLeafIds(ids, leaf);
                              if (build.id_pairs != nullptr) {
                                std::vector<IdLeafRecord> pairs;
                                pairs.reserve(ids.size());
@@ -1349,7 +1359,12 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
   if (has_id_ && rank != 0) {
     leaf_ids_ = std::make_unique<LeafIdsFile>((fs::path(output_) / "leaf-ids").string());
   } else if (has_id_ && census.ids_dense && census.id_count > 0) {
+    // Two particles with one ID read by different ranks may meet in this
+    // rank's domains, built on several threads at once, which the table
+    // cannot be trusted to see: its own leaves' IDs wait in a file too, and
+    // every rank's go into the table one leaf after another.
     id_table = std::make_unique<DenseIdTable>(census.id_first, census.id_last - census.id_first + 1);
+    leaf_ids_ = std::make_unique<LeafIdsFile>(temp_->path() + "/leaf-ids-" + std::to_string(e));
   } else if (has_id_) {
     epoch_report.ids_sorted = true;
     id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp_->path() + "/ids-" + std::to_string(e),
@@ -1359,7 +1374,7 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
   build.cube = &points.cube;
   build.tree = &options_.tree;
   build.store = &store_;
-  build.id_table = id_table.get();
+  build.header = &header;
   build.id_pairs = id_pairs.get();
   build.leaf_ids = leaf_ids_.get();
   build.report = &epoch_report;
@@ -1379,6 +1394,14 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
     manifest_.epochs.push_back(RecordOf(header, points.cube, epoch_report));
     report_.epochs.push_back(epoch_report);
     return;
+  }
+  if (id_table) {
+    leaf_ids_->Close();
+    build.id_table = id_table.get();
+    LeafIdsFile::ForEach(leaf_ids_->path(),
+                         [&build](NodeKey leaf, std::span<const std::uint64_t> ids) { build.RecordLeafIds(ids, leaf); });
+    fs::remove(leaf_ids_->path());
+    leaf_ids_.reset();
   }
   GatherOtherRanks(label, build, epoch_report, *top);
   clock.Lap("gather");

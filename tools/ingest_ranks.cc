@@ -233,7 +233,11 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
                                    : IngestShareInto(options, share, part_directory);
     part_json = part.ToJson().dump();
   } catch (const std::exception& e) {
-    AbortWith(rank, e.what());
+    // MPI_Abort runs no destructors: rank 0 removes the output, and the
+    // parts other ranks may have finished in it, before it ends the job.
+    const std::string message = e.what();
+    assembly.reset();
+    AbortWith(rank, message);
   }
 
   const std::vector<std::string> texts = GatherText(part_json, ranks);

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <numeric>
+#include <optional>
 #include <random>
 #include <set>
 #include <thread>
@@ -113,8 +114,8 @@ TEST(DenseIdTable, GivesEveryIdItsLeaf) {
   std::vector<std::uint64_t> a, b;
   for (std::uint64_t id = first; id < first + 3000; id += 3) (id % 2 == 0 ? a : b).push_back(id);
   const NodeKey leaf_a = NodeKey::Root().Child(1).Child(5), leaf_b = NodeKey::Root().Child(6);
-  std::thread other([&] { table.Add(b, leaf_b); });
-  table.Add(a, leaf_a);
+  std::thread other([&] { EXPECT_FALSE(table.Add(b, leaf_b)); });
+  EXPECT_FALSE(table.Add(a, leaf_a));
   other.join();
   ASSERT_TRUE(table.narrow());
   ASSERT_EQ(table.narrow_slots().size(), 3000u);
@@ -145,7 +146,7 @@ TEST(DenseIdTable, WidensItsSlotsPastTheMostNarrowLeaves) {
   const auto add_leaves = [&](std::uint64_t parity) {
     for (std::uint64_t j = parity; j < leaves; j += 2) {
       const std::vector<std::uint64_t> ids = {first + 2 * j, first + 2 * j + 1};
-      table.Add(ids, NodeKey::FromValue(NodeKey::Root().DescendantRange(8).first + j));
+      EXPECT_FALSE(table.Add(ids, NodeKey::FromValue(NodeKey::Root().DescendantRange(8).first + j)));
     }
   };
   std::thread other(add_leaves, 1);
@@ -173,7 +174,7 @@ TEST(DenseIdTable, StaysNarrowUpToTheMostNarrowLeaves) {
   DenseIdTable table(0, leaves);
   for (std::uint64_t j = 0; j < leaves; ++j) {
     const std::vector<std::uint64_t> ids = {j};
-    table.Add(ids, NodeKey::Root());
+    EXPECT_FALSE(table.Add(ids, NodeKey::Root()));
   }
   ASSERT_TRUE(table.narrow());
   for (std::uint64_t i = 0; i < leaves; ++i) ASSERT_EQ(table.narrow_slots()[i], i + 1) << i;
@@ -191,7 +192,7 @@ TEST(DenseIdTable, SortedLeavesMakeTheSameTableInAnyOrderOfAdding) {
       DenseIdTable table(10, 3 * leaves + 4);  // three IDs a leaf, the last of each absent
       for (const std::uint64_t j : order) {
         const std::vector<std::uint64_t> ids = {10 + 3 * j, 11 + 3 * j};
-        table.Add(ids, NodeKey::FromValue(NodeKey::Root().DescendantRange(8).first + (j * 7919) % leaves));
+        EXPECT_FALSE(table.Add(ids, NodeKey::FromValue(NodeKey::Root().DescendantRange(8).first + (j * 7919) % leaves)));
       }
       table.SortLeaves(2);
       ASSERT_TRUE(std::is_sorted(table.leaves().begin(), table.leaves().end()));
@@ -214,13 +215,27 @@ TEST(DenseIdTable, SortedLeavesMakeTheSameTableInAnyOrderOfAdding) {
   }
 }
 
-TEST(DenseIdTable, RefusesIdsOutsideItsRangeAndIdsRecordedTwice) {
+TEST(DenseIdTable, RefusesIdsOutsideItsRange) {
   DenseIdTable table(50, 10);
   const NodeKey leaf = NodeKey::Root().Child(2);
-  const std::vector<std::uint64_t> below = {49}, above = {60}, twice = {55, 55};
-  EXPECT_THROW(table.Add(below, leaf), Error);
-  EXPECT_THROW(table.Add(above, leaf), Error);
-  EXPECT_THROW(table.Add(twice, leaf), Error);
+  const std::vector<std::uint64_t> below = {49}, above = {60};
+  EXPECT_THROW((void)table.Add(below, leaf), Error);
+  EXPECT_THROW((void)table.Add(above, leaf), Error);
+}
+
+// A repeated ID, within one leaf or in a later one, is returned (the first
+// in the leaf's list), and its slot keeps the leaf that recorded it first.
+TEST(DenseIdTable, ReturnsTheFirstIdRecordedBefore) {
+  DenseIdTable table(50, 10);
+  const NodeKey a = NodeKey::Root().Child(2), b = NodeKey::Root().Child(5);
+  const std::vector<std::uint64_t> first = {50, 51, 52}, within = {53, 54, 53}, later = {56, 57, 52, 51};
+  EXPECT_EQ(table.Add(first, a), std::nullopt);
+  EXPECT_EQ(table.Add(within, a), std::optional<std::uint64_t>(53));
+  EXPECT_EQ(table.Add(later, b), std::optional<std::uint64_t>(52));
+  ASSERT_TRUE(table.narrow());
+  EXPECT_EQ(table.narrow_slots()[2], 1u) << "ID 52 keeps the first leaf";
+  EXPECT_EQ(table.narrow_slots()[1], 1u);
+  EXPECT_EQ(table.narrow_slots()[6], 3u) << "the later leaf's other IDs are recorded";
 }
 
 }  // namespace

@@ -183,26 +183,39 @@ TEST_F(IngestRanksTest, OneEpochSpreadOverTwoAndFourRanksIsTheStoreOneProcessWri
 
 // Without a periodic box every rank finds the same bounding cube; a CSV
 // file, which cannot seek to a batch, is read through by every rank.
+// 12,000 particles in two clumps and a background, without a box, as CSV;
+// particle `repeat_to` (if any) is given the ID of particle `repeat_from`.
+struct Repeat {
+  int from = -1, to = -1;
+};
+std::uint64_t ClumpsId(int i) { return 100 + 3 * static_cast<std::uint64_t>(i); }
+void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}) {
+  std::mt19937_64 random(5);
+  std::normal_distribution<double> clump(0, 0.3);
+  std::uniform_real_distribution<double> background(-20, 35);
+  std::ofstream out(csv);
+  out << "x,y,z,mass,id\n";
+  for (int i = 0; i < 12000; ++i) {
+    const bool in_clump = i % 3 != 0;
+    const double c = in_clump ? (i % 2 ? 4.0 : -7.0) : 0;
+    for (int k = 0; k < 3; ++k) out << (in_clump ? c + clump(random) : background(random)) << ",";
+    out << 1 + (i % 5) << "," << ClumpsId(i == repeat.to ? repeat.from : i) << "\n";
+  }
+}
+
+// octocosm ingest of a CSV file in batches of 500 particles, on `ranks` MPI
+// ranks (0: no mpirun).
+std::string SpreadCsvCommand(const std::string& csv, const std::string& store, int ranks) {
+  std::string command = ranks > 0 ? std::string(MPIEXEC) + " -n " + std::to_string(ranks) + " " : std::string();
+  return command + OCTOCOSM_BINARY + " ingest -q -n 150 --chunk-particles 500 --memory 64M --neighbours 0 -o " +
+         store + " " + csv;
+}
+
 TEST_F(IngestRanksTest, ASpreadSnapshotWithoutABoxIsTheStoreOneProcessWrites) {
   const std::string csv = (dir_.path() / "points.csv").string();
-  {
-    std::mt19937_64 random(5);
-    std::normal_distribution<double> clump(0, 0.3);
-    std::uniform_real_distribution<double> background(-20, 35);
-    std::ofstream out(csv);
-    out << "x,y,z,mass,id\n";
-    for (int i = 0; i < 12000; ++i) {
-      const bool in_clump = i % 3 != 0;
-      const double c = in_clump ? (i % 2 ? 4.0 : -7.0) : 0;
-      for (int k = 0; k < 3; ++k) out << (in_clump ? c + clump(random) : background(random)) << ",";
-      out << 1 + (i % 5) << "," << 100 + 3 * i << "\n";
-    }
-  }
+  WriteClumpsCsv(csv);
   auto ingest = [&](const std::string& store, int ranks) {
-    std::string command = ranks > 0 ? std::string(MPIEXEC) + " -n " + std::to_string(ranks) + " " : std::string();
-    command += std::string(OCTOCOSM_BINARY) + " ingest -q -n 150 --chunk-particles 500 --memory 64M --neighbours 0 -o " +
-               store + " " + csv;
-    return Run(command, ranks > 0 ? kMpiEnvironment : "");
+    return Run(SpreadCsvCommand(csv, store, ranks), ranks > 0 ? kMpiEnvironment : "");
   };
   const std::string single = (dir_.path() / "single").string();
   const ProgramRun one = ingest(single, 0);
@@ -217,6 +230,34 @@ TEST_F(IngestRanksTest, ASpreadSnapshotWithoutABoxIsTheStoreOneProcessWrites) {
     EXPECT_EQ(got.store().dataset(), expected.store().dataset());
     EXPECT_TRUE(EpochBlocks(got, 0) == EpochBlocks(expected, 0)) << "the blocks differ";
     EXPECT_TRUE(IdIndexBlocks(store) == IdIndexBlocks(single)) << "the ID index's blocks differ";
+  }
+}
+
+// Two particles with one ID that different ranks read (each rank reads
+// every P-th batch of 500), whether they then meet in one rank's domains or
+// lie in two ranks' domains, end the ingest as one process's does: an error
+// naming the snapshot and the ID, and no store.
+TEST_F(IngestRanksTest, AnIdGivenTwiceAcrossRanksIsRefusedNamingTheSnapshot) {
+  struct Case {
+    int ranks;
+    Repeat repeat;
+  };
+  // Particles 11 and 515 lie in the same clump, 10 and 511 in different
+  // ones; 1015 is read by the third rank of three.
+  const Case cases[] = {{2, {11, 515}}, {2, {10, 511}}, {3, {11, 1015}}, {3, {10, 1015}}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(std::to_string(c.ranks) + " ranks, particle " + std::to_string(c.repeat.to) + " given the ID of " +
+                 std::to_string(c.repeat.from));
+    const std::string csv = (dir_.path() / "repeated.csv").string();
+    WriteClumpsCsv(csv, c.repeat);
+    const std::string store = (dir_.path() / "store").string();
+    const ProgramRun run = Run(SpreadCsvCommand(csv, store, c.ranks), kMpiEnvironment);
+    EXPECT_NE(run.status, 0) << run.Describe();
+    EXPECT_NE(run.output.find("repeated.csv"), std::string::npos) << run.output;
+    EXPECT_NE(run.output.find("ID " + std::to_string(ClumpsId(c.repeat.from)) + " is given to more than one particle"),
+              std::string::npos)
+        << run.output;
+    EXPECT_FALSE(fs::exists(store)) << "left behind: " << store;
   }
 }
 
