@@ -70,6 +70,7 @@ struct Flags {
   std::string splat = "auto";  // splat paths to time (render/compute_splatter.h), the first also cold
   double compute_radius = 4;   // the compute path's largest blob, pixels
   bool full = true, selection = false, prepare_only = false;
+  bool save_pictures = false;  // each swept frame's accumulation as PFM, beside the references
   bool reference = true;  // false: times only (no reference rendering, no PSNR or SSIM)
   unsigned threads = 0;
   std::string playback;  // a multi-epoch store: measure playback instead
@@ -162,7 +163,7 @@ struct Row {
 // path (the others' cold time and bytes are the first's).
 std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const RenderView& view, HeadlessBackend backend,
                          const ToneMapParameters& tone, const DisplayImage& reference, const std::vector<SplatPath>& paths,
-                         double compute_radius) {
+                         double compute_radius, const fs::path& save_as) {
   dataset.store().DropCaches();
   options.splat_path = paths.front();
   options.compute_radius = compute_radius;
@@ -177,6 +178,7 @@ std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const Ren
     renderer.scene().SetSplatPath(path);
     renderer.Render(view, 0, settings, false);  // builds the path's programs
     const Picture warm = renderer.Render(view, 0, settings, true);
+    if (!save_as.empty() && path == paths.front()) WritePfm(save_as.string(), *warm.hdr);
     Row row;
     row.path = SplatPathName(renderer.splat().frame_path());
     row.points = warm.stats.points_drawn;
@@ -431,7 +433,9 @@ std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, con
       SceneOptions options;
       options.lod.pixel_threshold = 1e-9;
       options.gpu_cache_bytes = std::size_t{64} << 30;
-      for (Row& row : Measure(datasets.front(), options, render_views[v], backend, tone, reference, paths, f.compute_radius)) {
+      const fs::path save_as = f.save_pictures ? fs::path(f.dir) / ("picture-" + views[v].name + "-full.pfm") : fs::path();
+      for (Row& row : Measure(datasets.front(), options, render_views[v], backend, tone, reference, paths, f.compute_radius,
+                              save_as)) {
         row.view = views[v].name;
         row.mode = "full";
         rows.push_back(row);
@@ -445,7 +449,11 @@ std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, con
           options.lod.pixel_threshold = std::stod(t);
           options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
           options.cluster_shapes = representations[r] != "round";
-          for (Row& row : Measure(datasets[r], options, render_views[v], backend, tone, reference, paths, f.compute_radius)) {
+          const fs::path save_as = f.save_pictures ? fs::path(f.dir) / ("picture-" + views[v].name + "-" + representations[r] +
+                                                                        "-t" + t + "-b" + b + ".pfm")
+                                                   : fs::path();
+          for (Row& row : Measure(datasets[r], options, render_views[v], backend, tone, reference, paths, f.compute_radius,
+                                  save_as)) {
             row.view = views[v].name;
             row.mode = representations[r];
             row.threshold = options.lod.pixel_threshold;
@@ -601,6 +609,9 @@ int main(int argc, char** argv) {
   app.add_flag("!--no-reference", f.reference,
                "time only: no reference rendering (minutes on the CPU at 10^8 points), no PSNR or SSIM columns (0)");
   app.add_flag("!--no-full", f.full, "skip the full-detail GPU rendering");
+  app.add_flag("--save-pictures", f.save_pictures,
+               "write each frame's accumulation (mass per pixel) into --dir as picture-VIEW-MODE-tT-bB.pfm, "
+               "to compare with reference-VIEW.pfm");
   app.add_flag("--selection", f.selection, "also time a frame with 10^6 selected IDs");
   app.add_option("--playback", f.playback, "measure playback through the epochs of this store instead (frames per second)");
   app.add_option("--playback-threshold", f.playback_threshold, "pixel threshold of --playback")->default_val(1);
