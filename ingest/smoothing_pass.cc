@@ -46,6 +46,9 @@ constexpr std::uint64_t kDefaultBudget = std::uint64_t{1} << 30;
 // side, 8 MiB of counts.
 constexpr int kCountGridBits = 7;
 constexpr int kCountGridSide = 1 << kCountGridBits;
+// A search shared by several parts cuts at least this many regions a part,
+// so that the parts' shares of the particles come out about even.
+constexpr std::uint64_t kRegionsPerPart = 8;
 // A sphere is inside a load if it is with this relative room to spare, so
 // that rounding in the distances never keeps a radius a missing particle
 // could have shortened.
@@ -111,6 +114,7 @@ struct Task {
   Box load;                      // what the pieces cover, in the task's frame
   std::vector<Piece> pieces;
   std::uint64_t estimate = 0;    // particles the load is expected to hold
+  std::uint64_t count = 0;       // particles in the region (first round)
   std::vector<double> positions;  // the loaded particles, in the task's frame
   // Where NeighbourRadii's blocks start in `positions`, and the block whose
   // key range holds each query (SortSpatially).
@@ -243,7 +247,12 @@ class SmoothingPass {
         report_(report),
         budget_(options.memory_budget ? options.memory_budget : kDefaultBudget),
         capacity_(std::max<std::uint64_t>(budget_ / kBytesPerLoadedPoint, 1)),
+        region_most_(std::max<std::uint64_t>(capacity_ / 4, 1)),
         threads_(ResolveThreadCount(static_cast<int>(options.threads))) {
+    if (options.parts < 1 || options.part >= options.parts) {
+      throw Error::InvalidArgument("smoothing lengths: no part " + std::to_string(options.part) + " of " +
+                                   std::to_string(options.parts));
+    }
     if (options.neighbours < 1) {
       throw Error::InvalidArgument("the number of neighbours must be at least 1, not " +
                                    std::to_string(options.neighbours));
@@ -269,10 +278,12 @@ class SmoothingPass {
     table_ = std::make_unique<SmoothingLengthTable>(total, budget_, options_.temp_dir);
     report_.particles = total;
     neighbours_ = static_cast<int>(std::min<std::uint64_t>(static_cast<std::uint64_t>(options_.neighbours), total));
-    if (!options_.quiet) progress_ = std::make_unique<Progress>("smoothing", total, "points");
+    if (!options_.quiet && options_.parts == 1) progress_ = std::make_unique<Progress>("smoothing", total, "points");
 
     std::vector<Unresolved> unresolved;
-    if (total * kBytesPerLoadedPoint <= budget_) {
+    if (options_.parts > 1) {
+      SearchShare(total, unresolved);
+    } else if (total * kBytesPerLoadedPoint <= budget_) {
       Task whole;
       if (domain_.periodic) {
         whole.region = domain_.box;
@@ -569,6 +580,44 @@ class SmoothingPass {
     SearchSpilled(tasks, unresolved);
   }
 
+  // Steps 1 to 3 of one part of several: the regions cut as out of core
+  // but at least kRegionsPerPart a part, and only this part's searched,
+  // from memory where their loads fit the capacity together.
+  void SearchShare(std::uint64_t total, std::vector<Unresolved>& unresolved) {
+    if (!domain_.periodic) FindBounds();
+    pyramid_ = std::make_unique<CountPyramid>(domain_);
+    CountPyramid& counts = *pyramid_;
+    ReadSource(/*first_read=*/true, [&](std::uint64_t, const double* p, bool) { counts.Add(p); });
+    counts.Finish();
+    region_most_ = std::max<std::uint64_t>(
+        1, std::min(region_most_, total / (std::uint64_t{options_.parts} * kRegionsPerPart)));
+    std::vector<Task> tasks;
+    CutRegions(counts, 0, 0, 0, 0, tasks);
+    report_.regions = tasks.size();
+    // Regions come in depth-first order: a part takes those whose middle
+    // particle falls in its share of the particles.
+    std::vector<Task> mine;
+    std::uint64_t before = 0, own = 0;
+    for (Task& task : tasks) {
+      const std::uint64_t middle = before + task.count / 2;
+      before += task.count;
+      const std::uint64_t part = std::min<std::uint64_t>(middle * options_.parts / total, options_.parts - 1);
+      if (part != options_.part) continue;
+      own += task.count;
+      mine.push_back(std::move(task));
+    }
+    if (!options_.quiet) progress_ = std::make_unique<Progress>("smoothing (this rank's share)", own, "points");
+    std::uint64_t load = 0;
+    for (const Task& task : mine) load += task.estimate;
+    if (load <= capacity_) {
+      LoadInMemory(mine, /*first_read=*/false);
+      for (Task& task : mine) Search(task, unresolved);
+    } else {
+      report_.spilled = true;
+      SearchSpilled(mine, unresolved);
+    }
+  }
+
   void FindBounds() {
     Vec3 lo{kInfinity, kInfinity, kInfinity}, hi{-kInfinity, -kInfinity, -kInfinity};
     ReadSource(/*first_read=*/false, [&](std::uint64_t, const double* p, bool) {
@@ -584,13 +633,13 @@ class SmoothingPass {
     }
   }
 
-  // Cuts the count octree into regions of at most a quarter of the
-  // capacity each (a single count cell may hold more: it is not cut).
+  // Cuts the count octree into regions of at most region_most_ particles
+  // each (a single count cell may hold more: it is not cut).
   void CutRegions(const CountPyramid& counts, int level, std::size_t x, std::size_t y, std::size_t z,
                   std::vector<Task>& tasks) {
     const std::uint64_t count = counts.Count(level, x, y, z);
     if (count == 0) return;
-    if (count > capacity_ / 4 && level < kCountGridBits) {
+    if (count > region_most_ && level < kCountGridBits) {
       for (int octant = 0; octant < 8; ++octant) {
         CutRegions(counts, level + 1, 2 * x + (octant & 1), 2 * y + ((octant >> 1) & 1), 2 * z + ((octant >> 2) & 1),
                    tasks);
@@ -599,6 +648,7 @@ class SmoothingPass {
     }
     const double edge = domain_.edge() / static_cast<double>(std::size_t{1} << level);
     Task task;
+    task.count = count;
     const std::array<std::size_t, 3> cell{x, y, z};
     for (int a = 0; a < 3; ++a) {
       task.region.lo[a] = domain_.cube.origin[a] + edge * static_cast<double>(cell[static_cast<std::size_t>(a)]);
@@ -794,6 +844,7 @@ class SmoothingPass {
   SmoothingPassReport& report_;
   std::uint64_t budget_;
   std::uint64_t capacity_;  // particles held at once
+  std::uint64_t region_most_;  // particles a region of the out-of-core search holds at most: a quarter of the capacity
   int threads_;
   int neighbours_ = kDefaultNeighbours;
   Domain domain_;

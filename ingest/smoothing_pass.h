@@ -28,6 +28,8 @@
 //      against everything inside their spheres, which hold their true k
 //      nearest neighbours; one more read of the snapshot for as many of them
 //      as fit.
+// Processes that share the pass (SmoothingPassOptions::parts) each read the
+// whole snapshot but search only their own regions' particles.
 // With fewer than k particles in all, the radius is the one that holds all
 // of them.
 #pragma once
@@ -53,6 +55,14 @@ struct SmoothingPassOptions {
   std::string temp_dir;                // parent of the temporary files; "" = $TMPDIR or /tmp
   unsigned threads = 0;                // 0 = all cores
   bool quiet = false;                  // no progress bars
+  // A share of the search, for processes that split it (ingest over MPI
+  // ranks): this one searches only the regions of part `part` of `parts`
+  // (consecutive in space, about equal in particles; with more than one
+  // part the domain is always cut into regions) and leaves 0 in the table
+  // for the particles of the others. The snapshot's own lengths are kept
+  // for every particle. The element-wise largest of all the parts' tables
+  // is the table of one process.
+  unsigned part = 0, parts = 1;
 };
 
 struct SmoothingPassReport {

@@ -234,6 +234,64 @@ TEST(SmoothingPass, SeveralThreadsGiveTheLengthsOfOne) {
   }
 }
 
+// Parts of a shared search each fill only their own regions' particles,
+// and together, element by element the largest, give one search's lengths
+// exactly: in memory and through files, with and without a periodic box,
+// with part of the snapshot's own lengths given.
+TEST(SmoothingPass, PartsTogetherGiveTheLengthsOfOneSearch) {
+  const std::size_t n = 6000;
+  struct Setting {
+    const char* name;
+    double box;
+    std::uint64_t budget;
+  };
+  for (const Setting& setting : {Setting{"open", 0, 0}, Setting{"periodic", 100, 0}, Setting{"open-files", 0, 60000},
+                                 Setting{"periodic-files", 100, 60000}}) {
+    const std::vector<double> points = ClusteredPoints(n, 100, 17);
+    std::vector<float> given(n, 0);
+    for (std::size_t i = 0; i < n; i += 10) given[i] = 0.5f + static_cast<float>(i % 7);
+    testing_support::TempDir temp("smoothing-pass-parts");
+    SmoothingPassOptions options;
+    options.neighbours = 16;
+    options.box_size = setting.box;
+    options.memory_budget = setting.budget;
+    options.temp_dir = temp.path().string();
+    options.quiet = true;
+    VectorSource whole_source(points, given, setting.box);
+    const auto whole = ComputeSmoothingLengths(whole_source, options);
+    for (unsigned parts : {2u, 3u, 5u}) {
+      SCOPED_TRACE(std::string(setting.name) + ", " + std::to_string(parts) + " parts");
+      std::vector<float> combined(n, 0);
+      std::vector<std::size_t> filled(parts, 0);
+      for (unsigned part = 0; part < parts; ++part) {
+        options.part = part;
+        options.parts = parts;
+        VectorSource source(points, given, setting.box);
+        SmoothingPassReport report;
+        const auto table = ComputeSmoothingLengths(source, options, &report);
+        EXPECT_GE(report.regions, std::uint64_t{8} * parts);
+        for (std::size_t i = 0; i < n; ++i) {
+          if (given[i] > 0) {
+            ASSERT_EQ((*table)[i], given[i]) << "a given length, particle " << i;
+          } else if ((*table)[i] > 0) {
+            ASSERT_EQ(combined[i], 0.0f) << "particle " << i << " searched by two parts";
+            ++filled[part];
+          }
+          combined[i] = std::max(combined[i], (*table)[i]);
+        }
+      }
+      for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(combined[i], (*whole)[i]) << "particle " << i;
+      // The shares come out about even.
+      for (unsigned part = 0; part < parts; ++part) {
+        EXPECT_GT(filled[part], n * 9 / 10 / parts / 2) << "part " << part;
+      }
+      EXPECT_TRUE(std::filesystem::is_empty(temp.path()));
+    }
+    options.part = 0;
+    options.parts = 1;
+  }
+}
+
 TEST(SmoothingPass, FewerParticlesThanNeighboursTakeThemAll) { ExpectExact({"few", 0, 0}, 10, 32); }
 
 TEST(SmoothingPass, KeepsTheSnapshotsOwnSmoothingLengths) {
@@ -292,6 +350,13 @@ TEST(SmoothingPass, RefusesBadOptionsAndEmptySnapshots) {
   EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
   options.neighbours = 32;
   options.box_size = std::nan("");
+  EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
+  options.box_size = 0;
+  options.parts = 2;
+  options.part = 2;
+  EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
+  options.parts = 0;
+  options.part = 0;
   EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
 }
 
