@@ -638,6 +638,7 @@ class IngestRun {
   Bounds SortOrBound(std::size_t e, PhaseClock& clock, EpochReport& epoch_report);
   void LinkFromPrevious(std::size_t e);
   Cube ChooseCube(const SnapshotHeader& header, const Bounds& bounds) const;
+  ChunkerOptions ChunkerOptionsFor(std::uint64_t expected, const ParticleColumns& columns);
   ChunkedEpoch ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
                           EpochPoints& points, EpochReport& epoch_report);
   void RecordLinks(const EpochPoints& points, EpochReport& epoch_report);
@@ -862,32 +863,41 @@ Cube IngestRun::ChooseCube(const SnapshotHeader& header, const Bounds& bounds) c
   return {};
 }
 
-// Step 2: chunks small enough for memory and the caches, and numerous
-// enough (four per thread) that every core has work until the end.
-ChunkedEpoch IngestRun::ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
-                                   EpochPoints& points, EpochReport& epoch_report) {
-  const std::uint64_t max_chunk =
+// Chunks small enough for memory and the caches, and numerous enough (four
+// per thread) that every core has work until the end, for `expected` points
+// of `columns` (an epoch, or a spread epoch's domain).
+ChunkerOptions IngestRun::ChunkerOptionsFor(std::uint64_t expected, const ParticleColumns& columns) {
+  ChunkerOptions o;
+  o.max_chunk_points =
       options_.max_chunk_points
           ? options_.max_chunk_points
           : std::min(shares_.build_points, std::max<std::uint64_t>(std::min(expected / (4 * threads_), kMaxChunkPoints),
                                                                    4 * options_.tree.capacity));
-  report_.max_chunk_points = std::max(report_.max_chunk_points, max_chunk);
-  ChunkerOptions chunker_options;
-  chunker_options.max_chunk_points = max_chunk;
-  chunker_options.split_levels = SplitLevelsFor(expected, max_chunk);
-  chunker_options.max_level = options_.tree.max_level;
-  chunker_options.leaf_capacity = options_.tree.capacity;
-  chunker_options.memory_bytes = shares_.chunk_buffer_bytes;
-  chunker_options.temp_dir = temp_->path();
-  chunker_options.threads = static_cast<int>(threads_);
-  chunker_options.columns.id = has_id_;
+  report_.max_chunk_points = std::max(report_.max_chunk_points, o.max_chunk_points);
+  o.split_levels = SplitLevelsFor(expected, o.max_chunk_points);
+  o.max_level = options_.tree.max_level;
+  o.leaf_capacity = options_.tree.capacity;
+  o.memory_bytes = shares_.chunk_buffer_bytes;
+  o.temp_dir = temp_->path();
+  o.threads = static_cast<int>(threads_);
+  o.columns = columns;
+  return o;
+}
+
+// Step 2: the epoch read and cut into chunks (ChunkerOptionsFor).
+ChunkedEpoch IngestRun::ChunkEpoch(const std::string& label, const SnapshotHeader& header, std::uint64_t expected,
+                                   EpochPoints& points, EpochReport& epoch_report) {
+  ParticleColumns columns;
+  columns.id = has_id_;
   // Epoch by epoch: a series may give smoothing lengths in some snapshots only.
-  chunker_options.columns.smoothing = header.has_smoothing;
-  chunker_options.columns.vector(VectorColumn::kVelocity) = has_velocity_;
-  chunker_options.columns.vector(VectorColumn::kDisplacement) = points.next != nullptr;
-  chunker_options.columns.vector(VectorColumn::kNextVelocity) = points.next != nullptr && has_velocity_;
-  chunker_options.columns.vector(VectorColumn::kPrevDisplacement) = !points.links_from_previous.empty();
-  chunker_options.columns.vector(VectorColumn::kPrevVelocity) = !points.links_from_previous.empty() && has_velocity_;
+  columns.smoothing = header.has_smoothing;
+  columns.vector(VectorColumn::kVelocity) = has_velocity_;
+  columns.vector(VectorColumn::kDisplacement) = points.next != nullptr;
+  columns.vector(VectorColumn::kNextVelocity) = points.next != nullptr && has_velocity_;
+  columns.vector(VectorColumn::kPrevDisplacement) = !points.links_from_previous.empty();
+  columns.vector(VectorColumn::kPrevVelocity) = !points.links_from_previous.empty() && has_velocity_;
+  const ChunkerOptions chunker_options = ChunkerOptionsFor(expected, columns);
+  const std::uint64_t max_chunk = chunker_options.max_chunk_points;
   const bool resident = !options_.stream_chunks && expected < UINT32_MAX &&
                         expected * chunker_options.columns.BytesPerPoint() <= shares_.ResidentBytes(join_epochs_) &&
                         expected * Chunker::kResidentScratchBytesPerPoint <= shares_.ResidentScratchBytes();
@@ -1218,22 +1228,7 @@ void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const s
   MessageFile roots(temp_->path() + "/domain-roots");
   const ResidentEpoch none;
   for (std::size_t k = 0; k < mine.size(); ++k) {
-    const std::uint64_t max_chunk =
-        options_.max_chunk_points
-            ? options_.max_chunk_points
-            : std::min(shares_.build_points, std::max<std::uint64_t>(std::min(counts[k] / (4 * threads_), kMaxChunkPoints),
-                                                                     4 * options_.tree.capacity));
-    report_.max_chunk_points = std::max(report_.max_chunk_points, max_chunk);
-    ChunkerOptions chunker_options;
-    chunker_options.max_chunk_points = max_chunk;
-    chunker_options.split_levels = SplitLevelsFor(counts[k], max_chunk);
-    chunker_options.max_level = options_.tree.max_level;
-    chunker_options.leaf_capacity = options_.tree.capacity;
-    chunker_options.memory_bytes = shares_.chunk_buffer_bytes;
-    chunker_options.temp_dir = temp_->path();
-    chunker_options.threads = static_cast<int>(threads_);
-    chunker_options.columns = columns;
-    Chunker chunker(cube, chunker_options);
+    Chunker chunker(cube, ChunkerOptionsFor(counts[k], columns));
     const std::string& file = files[k].path;
     std::vector<Chunk> chunks = chunker.Split(mine[k], [&file](const std::function<void(const ParticleChunk&)>& consume) {
       ParticleFileReader reader(file);
