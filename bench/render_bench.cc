@@ -531,6 +531,55 @@ void PrintFullDetailSpacing(const Dataset& dataset, const NamedView& named_view,
               100 * within[1] / total, 100 * within[2] / total, 100 * within[3] / total);
 }
 
+// The reference's mass per pixel blurred by a Gaussian of `sigma` pixels
+// (separable, to 4 sigma; mass beyond the image's edges is lost).
+HdrImage BlurMass(const HdrImage& image, double sigma) {
+  const int radius = static_cast<int>(std::ceil(4 * sigma));
+  std::vector<double> weights(static_cast<std::size_t>(2 * radius + 1));
+  double sum = 0;
+  for (int k = -radius; k <= radius; ++k) {
+    sum += weights[static_cast<std::size_t>(k + radius)] = std::exp(-0.5 * k * k / (sigma * sigma));
+  }
+  for (double& w : weights) w /= sum;
+  const int width = image.width, height = image.height;
+  const auto pixel = [width](int i, int j) { return static_cast<std::size_t>(j) * static_cast<std::size_t>(width) + i; };
+  std::vector<double> along_rows(pixel(0, height), 0.0);
+  for (int j = 0; j < height; ++j) {
+    for (int i = 0; i < width; ++i) {
+      double m = 0;
+      for (int k = std::max(-radius, -i); k <= radius && i + k < width; ++k) {
+        m += weights[static_cast<std::size_t>(k + radius)] * image.at(i + k, j, 0);
+      }
+      along_rows[pixel(i, j)] = m;
+    }
+  }
+  HdrImage out = image;
+  for (int j = 0; j < height; ++j) {
+    for (int i = 0; i < width; ++i) {
+      double m = 0;
+      for (int k = std::max(-radius, -j); k <= radius && j + k < height; ++k) {
+        m += weights[static_cast<std::size_t>(k + radius)] * along_rows[pixel(i, j + k)];
+      }
+      out.rgba[4 * pixel(i, j)] = m;
+    }
+  }
+  return out;
+}
+
+// How sharp a level of detail must be to meet the target in this view: the
+// PSNR and SSIM of the reference itself, blurred by a Gaussian of 0.5 to 2
+// pixels, against the reference. Blobs that move or spread mass by about a
+// pixel cannot do better than the column of that width.
+void PrintSharpnessScale(const NamedView& named_view, const HdrImage& reference) {
+  const ToneMapParameters tone = ResolveToneMap({}, MeasureImage(reference, ColorMode::kDensity));
+  const DisplayImage sharp = ToneMap(reference, tone);
+  std::printf("%s: the reference blurred by sigma = 0.5 / 0.75 / 1 / 1.5 / 2 px:", named_view.name.c_str());
+  for (double sigma : {0.5, 0.75, 1.0, 1.5, 2.0}) {
+    const DisplayImage blurred = ToneMap(BlurMass(reference, sigma), tone);
+    std::printf(" %.1f dB / %.4f%s", Psnr(blurred, sharp), Ssim(blurred, sharp), sigma < 2 ? "," : "\n");
+  }
+}
+
 // The selection's cost: the same frame with 10^6 IDs highlighted.
 void MeasureSelection(const Dataset& dataset, const NamedView& named_view, const RenderView& view,
                       HeadlessBackend backend) {
@@ -570,7 +619,10 @@ void Run(const Flags& f) {
                 static_cast<unsigned long long>(datasets.front().points(0)), reference_seconds);
   }
   if (f.prepare_only) return;
-  for (std::size_t v = 0; v < views.size(); ++v) PrintFullDetailSpacing(datasets.front(), views[v], render_views[v]);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    PrintFullDetailSpacing(datasets.front(), views[v], render_views[v]);
+    if (f.reference) PrintSharpnessScale(views[v], references[v]);
+  }
 
   const std::vector<Row> rows = Sweep(f, datasets, representations, views, render_views, references, backend);
   if (f.reference) PrintTargets(rows, views, representations, reference_seconds);
