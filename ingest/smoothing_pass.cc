@@ -567,33 +567,32 @@ class SmoothingPass {
 
   // Step 1 to 3 when the particles do not fit in the budget together.
   void SearchOutOfCore(std::vector<Unresolved>& unresolved) {
+    std::vector<Task> tasks = CountAndCutRegions(region_most_);
+    report_.spilled = true;
+    SearchSpilled(tasks, unresolved);
+  }
+
+  // Steps 1 and 2's regions: the bounds found (in a non-periodic snapshot),
+  // the particles counted on the grid, and its octree cut into regions of at
+  // most `most` particles, in depth-first order.
+  std::vector<Task> CountAndCutRegions(std::uint64_t most) {
     if (!domain_.periodic) FindBounds();
     pyramid_ = std::make_unique<CountPyramid>(domain_);
     CountPyramid& counts = *pyramid_;
     ReadSource(/*first_read=*/true, [&](std::uint64_t, const double* p, bool) { counts.Add(p); });
     counts.Finish();
-
     std::vector<Task> tasks;
-    CutRegions(counts, 0, 0, 0, 0, tasks);
+    CutRegions(counts, most, 0, 0, 0, 0, tasks);
     report_.regions = tasks.size();
-    report_.spilled = true;
-    SearchSpilled(tasks, unresolved);
+    return tasks;
   }
 
   // Steps 1 to 3 of one part of several: the regions cut as out of core
   // but at least kRegionsPerPart a part, and only this part's searched,
   // from memory where their loads fit the capacity together.
   void SearchShare(std::uint64_t total, std::vector<Unresolved>& unresolved) {
-    if (!domain_.periodic) FindBounds();
-    pyramid_ = std::make_unique<CountPyramid>(domain_);
-    CountPyramid& counts = *pyramid_;
-    ReadSource(/*first_read=*/true, [&](std::uint64_t, const double* p, bool) { counts.Add(p); });
-    counts.Finish();
-    region_most_ = std::max<std::uint64_t>(
-        1, std::min(region_most_, total / (std::uint64_t{options_.parts} * kRegionsPerPart)));
-    std::vector<Task> tasks;
-    CutRegions(counts, 0, 0, 0, 0, tasks);
-    report_.regions = tasks.size();
+    std::vector<Task> tasks = CountAndCutRegions(
+        std::max<std::uint64_t>(1, std::min(region_most_, total / (std::uint64_t{options_.parts} * kRegionsPerPart))));
     // Regions come in depth-first order: a part takes those whose middle
     // particle falls in its share of the particles.
     std::vector<Task> mine;
@@ -633,16 +632,16 @@ class SmoothingPass {
     }
   }
 
-  // Cuts the count octree into regions of at most region_most_ particles
-  // each (a single count cell may hold more: it is not cut).
-  void CutRegions(const CountPyramid& counts, int level, std::size_t x, std::size_t y, std::size_t z,
-                  std::vector<Task>& tasks) {
+  // Cuts the count octree into regions of at most `most` particles each (a
+  // single count cell may hold more: it is not cut).
+  void CutRegions(const CountPyramid& counts, std::uint64_t most, int level, std::size_t x, std::size_t y,
+                  std::size_t z, std::vector<Task>& tasks) {
     const std::uint64_t count = counts.Count(level, x, y, z);
     if (count == 0) return;
-    if (count > region_most_ && level < kCountGridBits) {
+    if (count > most && level < kCountGridBits) {
       for (int octant = 0; octant < 8; ++octant) {
-        CutRegions(counts, level + 1, 2 * x + (octant & 1), 2 * y + ((octant >> 1) & 1), 2 * z + ((octant >> 2) & 1),
-                   tasks);
+        CutRegions(counts, most, level + 1, 2 * x + (octant & 1), 2 * y + ((octant >> 1) & 1),
+                   2 * z + ((octant >> 2) & 1), tasks);
       }
       return;
     }
@@ -844,7 +843,7 @@ class SmoothingPass {
   SmoothingPassReport& report_;
   std::uint64_t budget_;
   std::uint64_t capacity_;  // particles held at once
-  std::uint64_t region_most_;  // particles a region of the out-of-core search holds at most: a quarter of the capacity
+  const std::uint64_t region_most_;  // particles an out-of-core region holds at most: a quarter of the capacity
   int threads_;
   int neighbours_ = kDefaultNeighbours;
   Domain domain_;
