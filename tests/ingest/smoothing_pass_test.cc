@@ -287,8 +287,6 @@ TEST(SmoothingPass, PartsTogetherGiveTheLengthsOfOneSearch) {
       }
       EXPECT_TRUE(std::filesystem::is_empty(temp.path()));
     }
-    options.part = 0;
-    options.parts = 1;
   }
 }
 

@@ -181,10 +181,8 @@ TEST_F(IngestRanksTest, OneEpochSpreadOverTwoAndFourRanksIsTheStoreOneProcessWri
   }
 }
 
-// Without a periodic box every rank finds the same bounding cube; a CSV
-// file, which cannot seek to a batch, is read through by every rank.
 // 12,000 particles in two clumps and a background, without a box, as CSV;
-// particle `repeat_to` (if any) is given the ID of particle `repeat_from`.
+// particle `repeat.to` (if any) is given the ID of particle `repeat.from`.
 struct Repeat {
   int from = -1, to = -1;
 };
@@ -211,6 +209,8 @@ std::string SpreadCsvCommand(const std::string& csv, const std::string& store, i
          store + " " + csv;
 }
 
+// Without a periodic box every rank finds the same bounding cube; a CSV
+// file, which cannot seek to a batch, is read through by every rank.
 TEST_F(IngestRanksTest, ASpreadSnapshotWithoutABoxIsTheStoreOneProcessWrites) {
   const std::string csv = (dir_.path() / "points.csv").string();
   WriteClumpsCsv(csv);
