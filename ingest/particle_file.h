@@ -1,7 +1,9 @@
 // Temporary particle files of the ingest pipeline: chunk files (the points of
 // one region) and sorted runs (points ordered by ID). A file is a sequence of
 // batches, each a ParticleChunk serialised column by column, so a batch is
-// written and read with a few large I/O calls and no per-point work.
+// written and read with a few large I/O calls; positions, masses, types and
+// IDs are stored as narrow as the batch's values allow (floats, one value,
+// 32 bits), exactly.
 //
 // These files live only for the duration of one ingest, in its temporary
 // directory, so the format is private; it still carries a magic number and
@@ -26,8 +28,10 @@ struct ParticleColumns {
 
   bool& vector(VectorColumn column) { return vectors[static_cast<std::size_t>(column)]; }
   bool vector(VectorColumn column) const { return vectors[static_cast<std::size_t>(column)]; }
-  // Bytes one point takes in a file: position 24, mass 8, type 1 + options
-  // (ID 8, smoothing 4, each vector 12).
+  // Bytes one point takes in memory, and at most in a file: position 24,
+  // mass 8, type 1 + options (ID 8, smoothing 4, each vector 12). A file's
+  // batch keeps positions as floats, the mass and type once, and IDs in 32
+  // bits where all of its values allow.
   std::size_t BytesPerPoint() const;
 };
 
@@ -52,6 +56,8 @@ class ParticleFileWriter {
 
  private:
   void Write(const void* data, std::size_t size);
+  template <typename Narrow, typename Wide>
+  void WriteNarrow(const Wide* values, std::size_t count);
 
   std::string path_;
   ParticleColumns columns_;
@@ -77,6 +83,8 @@ class ParticleFileReader {
 
  private:
   void Read(void* data, std::size_t size, const char* what);
+  template <typename Narrow, typename Wide>
+  void ReadNarrow(Wide* values, std::size_t count, const char* what);
   bool ReadBatch(ParticleChunk& chunk, bool append);
 
   std::string path_;

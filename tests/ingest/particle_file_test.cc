@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -68,7 +69,7 @@ TEST(ParticleFile, BatchesOfEverySizeComeBackExactly) {
   for (std::size_t b = 0; b < sizes.size(); ++b) {
     batches.push_back(RandomChunk(sizes[b], b + 1));
     writer.Append(batches.back());
-    bytes += 8 + sizes[b] * AllColumnsOf(all).BytesPerPoint();
+    bytes += 9 + sizes[b] * AllColumnsOf(all).BytesPerPoint();  // random values: nothing narrows
   }
   writer.Close();
   EXPECT_EQ(std::filesystem::file_size(path), bytes);  // no padding left behind
@@ -89,6 +90,68 @@ TEST(ParticleFile, BatchesOfEverySizeComeBackExactly) {
   again.ReadAll(whole);
   EXPECT_EQ(whole.size(), 40000u + 123457u + 12u);
   EXPECT_EQ(whole.id.back(), batches.back().id.back());
+}
+
+// A snapshot's dark matter: float positions, one mass, one type, IDs below
+// 2^32 in a batch of 50000.
+ParticleChunk DarkMatterChunk() {
+  std::mt19937_64 random(5);
+  std::uniform_real_distribution<float> uniform(0.0f, 1e5f);
+  ParticleChunk chunk;
+  for (std::size_t i = 0; i < 50000; ++i) {
+    for (int a = 0; a < 3; ++a) chunk.position.push_back(uniform(random));
+    chunk.mass.push_back(0.0123);
+    chunk.id.push_back(random() >> 32);
+    chunk.type.push_back(1);
+  }
+  return chunk;
+}
+
+TEST(ParticleFile, BatchesAsNarrowAsTheirValuesAllowComeBackExactly) {
+  testing_support::TempDir dir("particle-file");
+  const std::string path = (dir.path() / "chunk.particles").string();
+  ParticleColumns columns;
+  columns.id = true;
+  const std::size_t n = DarkMatterChunk().size();
+  // Each change breaks one narrowing, at the batch's last point.
+  struct Case {
+    const char* what;
+    bool float_positions, one_mass, one_type, narrow_ids;
+    void (*change)(ParticleChunk&);
+  };
+  const Case cases[] = {
+      {"all narrow", true, true, true, true, [](ParticleChunk&) {}},
+      {"a coordinate that is no float", false, true, true, true, [](ParticleChunk& c) { c.position.back() += 1e-9; }},
+      {"a mass of -0", true, false, true, true,
+       [](ParticleChunk& c) {
+         c.mass.assign(c.mass.size(), 0.0);
+         c.mass.back() = -0.0;
+       }},
+      {"another type", true, true, false, true, [](ParticleChunk& c) { c.type.back() = 4; }},
+      {"an ID of 2^32", true, true, true, false, [](ParticleChunk& c) { c.id.back() = std::uint64_t{1} << 32; }},
+  };
+  for (const Case& c : cases) {
+    ParticleChunk chunk = DarkMatterChunk();
+    c.change(chunk);
+    ParticleFileWriter writer(path, columns);
+    writer.Append(chunk);
+    writer.Append(chunk, 7, 8);  // a batch of one point is narrow in every way
+    writer.Close();
+    const std::uint64_t batch = 8 + 1 + n * (c.float_positions ? 12 : 24) + (c.one_mass ? 8 : 8 * n) +
+                                (c.one_type ? 1 : n) + n * (c.narrow_ids ? 4 : 8);
+    const std::uint64_t one_point_batch = 8 + 1 + 12 + 8 + 1 + 4;
+    EXPECT_EQ(std::filesystem::file_size(path), 16 + batch + one_point_batch) << c.what;
+    ParticleFileReader reader(path);
+    ParticleChunk got;
+    ASSERT_TRUE(reader.Next(got)) << c.what;
+    ExpectSame(got, chunk);
+    EXPECT_TRUE(std::signbit(got.mass.back()) == std::signbit(chunk.mass.back())) << c.what;
+    ASSERT_TRUE(reader.Next(got)) << c.what;
+    ASSERT_EQ(got.size(), 1u);
+    EXPECT_EQ(got.id[0], chunk.id[7]);
+    EXPECT_EQ(got.position[2], chunk.position[23]);
+    EXPECT_FALSE(reader.Next(got));
+  }
 }
 
 TEST(ParticleFile, WritersTakingTurnsOnThreadsKeepTheirOwnBytes) {
