@@ -24,8 +24,7 @@ epochs=${3:-5}
 memory=${4:-2G}
 neighbours=${NEIGHBOURS:-0}
 octocosm=$(command -v octocosm || echo build/tools/octocosm)
-now() { date +%s.%N; }
-since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
+source "$(dirname "$0")/scale_measure.sh"
 mkdir -p "$work"
 df -h "$work" | tail -1
 
@@ -44,21 +43,7 @@ paths=()
 for name in "${inputs[@]}"; do paths+=("$snapshots/$name"); done
 
 store="$work/store"
-rm -rf "$store"
-# The store's directory holds the ingest's temporary files too: its peak size
-# is the disk the ingest needs besides its input.
-/usr/bin/time -v "$octocosm" ingest "${paths[@]}" -o "$store" --memory "$memory" --neighbours "$neighbours" \
-  >"$work/ingest.log" 2>"$work/ingest.time" &
-ingest=$!
-peak_disk=0
-while kill -0 "$ingest" 2>/dev/null; do
-  used=$( (du -sb "$store" 2>/dev/null || true) | cut -f1 | head -n 1)  # files come and go while du reads
-  if [ "${used:-0}" -gt "$peak_disk" ]; then peak_disk=$used; fi
-  sleep 1
-done
-wait "$ingest" || { tail -3 "$work/ingest.time" >&2; grep -m1 octocosm: "$work/ingest.time" >&2; exit 1; }
-wall=$(sed -n 's/.*Elapsed (wall clock) time (h:mm:ss or m:ss): //p' "$work/ingest.time")
-peak_kib=$(sed -n 's/.*Maximum resident set size (kbytes): //p' "$work/ingest.time")
+measured_ingest "$work" "$store" "${paths[@]}" --memory "$memory" --neighbours "$neighbours"
 bytes=$(du -sb "$store" | cut -f1)
 particles=$((side * side * side * epochs))
 
@@ -72,7 +57,7 @@ render_s=$(since "$start")
 
 echo "series: $side^3 = $((side * side * side)) particles x $epochs epochs, --memory $memory, --neighbours $neighbours, $(nproc) cores"
 echo "ingest: $wall wall, peak RSS $((peak_kib / 1024)) MiB"
-echo "disk:   $(awk -v b="$peak_disk" 'BEGIN { printf "%.1f", b / 2^30 }') GiB at most while ingesting (store and temporary files; sampled each second)"
+echo "disk:   $(gib "$peak_disk") GiB at most while ingesting (store and temporary files; sampled each second)"
 echo "store:  $(awk -v b="$bytes" 'BEGIN { printf "%.2f", b / 2^30 }') GiB, $(awk -v b="$bytes" -v n="$particles" 'BEGIN { printf "%.1f", b / n }') bytes a particle and epoch"
 echo "verify: $verify_s s ($(tail -1 "$work/verify.log"))"
 echo "render: a frame between two epochs in $render_s s ($work/between.png; $(tail -1 "$work/render.log"))"
