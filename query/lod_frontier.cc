@@ -53,28 +53,6 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     }
     return false;
   };
-  // The octants of a node's cube that meet the view. A cube wholly inside
-  // needs no test per octant, and most of a frame's nodes are.
-  const auto octants_in_view = [&](const NodeCube& c) -> std::uint8_t {
-    const double m = options.cull_margin;
-    if (!wrapped && frustum.ContainsBox({c.origin[0] - m, c.origin[1] - m, c.origin[2] - m},
-                                        {c.origin[0] + c.size + m, c.origin[1] + c.size + m, c.origin[2] + c.size + m})) {
-      return 0xFF;
-    }
-    std::uint8_t mask = 0;
-    const double half = c.size / 2;
-    for (int o = 0; o < 8; ++o) {
-      NodeCube octant = c;
-      octant.size = half;
-      for (int a = 0; a < 3; ++a) octant.origin[a] += ((o >> a) & 1) ? half : 0;
-      if (visible(octant)) mask |= static_cast<std::uint8_t>(1u << o);
-    }
-    return mask;
-  };
-  const auto select = [&](std::int32_t index, const NodeCube& c) {
-    f.selected.push_back(index);
-    f.selected_octants.push_back(octants_in_view(c));
-  };
   const ScreenErrorMeter error(view);
 
   using Candidate = std::pair<double, std::int32_t>;  // (error, node): largest error first
@@ -99,7 +77,7 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
     const NodeHierarchy::Node& node = hierarchy.node(index);
     f.load_order.push_back(index);
     if (!(node_error > options.pixel_threshold) || node.is_leaf()) {
-      select(index, cube.NodeCubeOf(node.key));
+      f.selected.push_back(index);
       continue;
     }
     children.clear();
@@ -121,7 +99,7 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
       // Drawn as it is; a node further down the queue whose children cost
       // less may still fit.
       f.budget_reached = true;
-      select(index, cube.NodeCubeOf(node.key));
+      f.selected.push_back(index);
       continue;
     }
     f.points = refined_points;

@@ -15,9 +15,7 @@
 //
 // The selection is a frontier: no selected node is an ancestor of another,
 // and (for nodes in view) every leaf below a refined node has exactly one
-// selected ancestor-or-self. A selected node that reaches out of view is
-// drawn only in its octants in view (`selected_octants`), as a refined one
-// would be. `load_order` lists refined and selected nodes in
+// selected ancestor-or-self. `load_order` lists refined and selected nodes in
 // the order they were taken: coarse before fine, the order in which a
 // streaming renderer should fetch blocks so that a parent can stand in for
 // children that have not arrived.
@@ -45,11 +43,6 @@ struct LodOptions {
 
 struct LodFrontier {
   std::vector<std::int32_t> selected;    // nodes to draw
-  // For each selected node, a bit per child octant (bit o: octant o) whose
-  // cube, grown by the culling margin, meets the view: a renderer draws only
-  // those octants' points (their blocks keep them contiguous). Empty: every
-  // octant of every selected node.
-  std::vector<std::uint8_t> selected_octants;
   std::vector<std::int32_t> refined;     // nodes replaced by their children
   std::vector<std::int32_t> load_order;  // refined and selected nodes, most important first
   std::uint64_t points = 0;              // points in the selected nodes

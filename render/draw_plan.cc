@@ -15,25 +15,14 @@ class Planner {
         loaded_(loaded),
         octant_offsets_(octant_offsets),
         roles_(hierarchy.nodes().size(), Role::kNone),
-        octants_(hierarchy.nodes().size(), kEveryOctant),
         covered_(hierarchy.nodes().size(), kUnknown) {}
 
   void SetRole(std::int32_t node, Role role) { roles_[static_cast<std::size_t>(node)] = role; }
-  void SetOctantsInView(std::int32_t node, std::uint8_t octants) { octants_[static_cast<std::size_t>(node)] = octants; }
 
   void Draw(std::int32_t node, DrawPlan& plan) {
     const Role role = RoleOf(node);
     if (role == Role::kSelected) {
-      if (!loaded_(node)) return;
-      const std::uint8_t octants = octants_[static_cast<std::size_t>(node)];
-      if (octants == kEveryOctant) {
-        Add(plan, node, 0, static_cast<std::uint32_t>(hierarchy_.node(node).entry.point_count));
-        return;
-      }
-      const std::array<std::uint32_t, 9> offsets = octant_offsets_(node);
-      for (int o = 0; o < 8; ++o) {
-        if (((octants >> o) & 1) && offsets[o + 1] > offsets[o]) Add(plan, node, offsets[o], offsets[o + 1] - offsets[o]);
-      }
+      if (loaded_(node)) Add(plan, node, 0, static_cast<std::uint32_t>(hierarchy_.node(node).entry.point_count));
       return;
     }
     if (role != Role::kRefined) return;
@@ -89,9 +78,7 @@ class Planner {
   // By node index: compact arrays, not maps (a frame's frontier may hold
   // tens of thousands of nodes).
   static constexpr std::uint8_t kUnknown = 2;
-  static constexpr std::uint8_t kEveryOctant = 0xFF;
   std::vector<Role> roles_;
-  std::vector<std::uint8_t> octants_;  // of selected nodes: those in view
   std::vector<std::uint8_t> covered_;
 };
 
@@ -103,10 +90,7 @@ DrawPlan PlanDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
   DrawPlan plan;
   if (frontier.selected.empty()) return plan;
   Planner planner(hierarchy, loaded, octant_offsets);
-  for (std::size_t i = 0; i < frontier.selected.size(); ++i) {
-    planner.SetRole(frontier.selected[i], Role::kSelected);
-    if (i < frontier.selected_octants.size()) planner.SetOctantsInView(frontier.selected[i], frontier.selected_octants[i]);
-  }
+  for (std::int32_t n : frontier.selected) planner.SetRole(n, Role::kSelected);
   for (std::int32_t n : frontier.refined) planner.SetRole(n, Role::kRefined);
   planner.Draw(0, plan);
   return plan;

@@ -2,8 +2,7 @@
 // arriving: never a hole where an ancestor is loaded, never a region drawn
 // twice.
 //
-// A selected node that is loaded is drawn whole, or only its octants in view
-// where the frontier says which (LodFrontier::selected_octants). A refined node (one the
+// A selected node that is loaded is drawn whole. A refined node (one the
 // frontier replaced by its children) is "covered" when it is loaded or when
 // every one of its children in view is covered; an unloaded selected node is
 // not covered. Drawing a covered refined node means, octant by octant: the
@@ -14,8 +13,7 @@
 // skipped. Nodes that are not covered draw what they can of their children,
 // leaving holes only where no ancestor is loaded (at start-up).
 //
-// When every selected node is loaded the plan is exactly the selected nodes'
-// octants in view.
+// When every selected node is loaded the plan is exactly the selected nodes.
 #pragma once
 
 #include <array>

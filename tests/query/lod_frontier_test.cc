@@ -149,36 +149,6 @@ TEST(LodFrontierTest, NodesOutOfViewAreCulled) {
   EXPECT_LT(part.points, h.total_points_in_leaves());
 }
 
-// A selected node reaching out of view names its octants in view: each bit
-// is the frustum test of that octant's cube, and a node wholly in view has
-// all eight.
-TEST(LodFrontierTest, SelectedNodesNameTheirOctantsInView) {
-  const NodeHierarchy h = RandomTree(7, 3, 0.8);
-  const Cube cube{{0, 0, 0}, 1, false};
-  ScreenErrorView inside = ViewFrom({0.5, 0.5, 0.5}, 1e9);  // coarse: large nodes straddle the edges
-  inside.camera.look_at = {0.9, 0.8, 0.7};
-  for (const double threshold : {1e9, 0.5, 0.05}) {
-    const LodFrontier f = SelectLodFrontier(h, cube, inside, {threshold, 0, 0});
-    ASSERT_EQ(f.selected_octants.size(), f.selected.size());
-    const Frustum frustum = Frustum::FromCamera(inside.camera);
-    int partial = 0;
-    for (std::size_t i = 0; i < f.selected.size(); ++i) {
-      const NodeCube c = cube.NodeCubeOf(h.node(f.selected[i]).key);
-      std::uint8_t want = 0;
-      for (int o = 0; o < 8; ++o) {
-        const double half = c.size / 2;
-        const std::array<double, 3> lo = {c.origin[0] + (o & 1) * half, c.origin[1] + ((o >> 1) & 1) * half,
-                                          c.origin[2] + ((o >> 2) & 1) * half};
-        if (frustum.MayIntersectBox(lo, {lo[0] + half, lo[1] + half, lo[2] + half})) want |= 1u << o;
-      }
-      EXPECT_EQ(f.selected_octants[i], want) << h.node(f.selected[i]).key.Path();
-      EXPECT_NE(f.selected_octants[i], 0) << "a selected node is in view";
-      partial += want != 0xFF;
-    }
-    EXPECT_GT(partial, 0) << "threshold " << threshold;
-  }
-}
-
 // In a periodic cube, points that interpolation moves past the upper x face
 // are drawn near the lower one: a camera that sees only a thin slab inside
 // the lower face must keep the nodes at the upper face that the margin

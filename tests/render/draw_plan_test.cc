@@ -3,7 +3,6 @@
 // region drawn twice.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <map>
 #include <random>
 
@@ -63,27 +62,6 @@ TEST(DrawPlanTest, EverythingLoadedDrawsExactlyTheSelection) {
   EXPECT_EQ(plan.points, f.points);
   EXPECT_EQ(plan.stand_ins, 0u);
   EXPECT_EQ(plan.ranges.size(), f.selected.size());
-}
-
-TEST(DrawPlanTest, SelectedNodesDrawOnlyTheirOctantsInView) {
-  const NodeHierarchy h = FullTree(3);
-  std::mt19937_64 rng(3);
-  LodFrontier f = FrontierOf(h, rng);
-  std::uint64_t want = 0;
-  for (std::size_t i = 0; i < f.selected.size(); ++i) {
-    const auto octants = static_cast<std::uint8_t>(i % 3 == 0 ? 0xFF : rng() | 1);
-    f.selected_octants.push_back(octants);
-    want += 100 * static_cast<std::uint64_t>(__builtin_popcount(octants));
-  }
-  const DrawPlan plan = PlanDraws(h, f, [](std::int32_t) { return true; }, Offsets);
-  EXPECT_EQ(plan.points, want);
-  for (const DrawRange& r : plan.ranges) {
-    const std::size_t i = static_cast<std::size_t>(std::find(f.selected.begin(), f.selected.end(), r.node) - f.selected.begin());
-    ASSERT_LT(i, f.selected.size());
-    for (std::uint32_t o = r.first / 100; o < (r.first + r.count) / 100; ++o) {
-      EXPECT_TRUE((f.selected_octants[i] >> o) & 1) << "octant " << o << " of a node is out of view";
-    }
-  }
 }
 
 TEST(DrawPlanTest, ParentsStandInForMissingChildrenWithoutHolesOrOverlap) {
