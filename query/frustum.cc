@@ -130,4 +130,13 @@ bool Frustum::MayIntersectBox(const std::array<double, 3>& lo, const std::array<
   return true;
 }
 
+bool Frustum::ContainsBox(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const {
+  for (const Plane& plane : planes_) {
+    double nearest[3];
+    for (int a = 0; a < 3; ++a) nearest[a] = plane.normal[a] >= 0 ? lo[a] : hi[a];
+    if (!(plane.SignedDistance(nearest) >= 0)) return false;
+  }
+  return true;
+}
+
 }  // namespace octocosm

@@ -59,6 +59,8 @@ class Frustum {
   // classic "positive vertex" test): it may answer true for a box outside the
   // frustum near an edge, never false for a box that meets it.
   bool MayIntersectBox(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const;
+  // True only when the box [lo, hi] lies entirely inside every plane.
+  bool ContainsBox(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const;
 
  private:
   std::array<Plane, 6> planes_{};

@@ -1,6 +1,5 @@
 #include "query/lod_frontier.h"
 
-#include <array>
 #include <cmath>
 #include <queue>
 #include <utility>
@@ -17,42 +16,10 @@ LodFrontier SelectLodFrontier(const NodeHierarchy& hierarchy, const Cube& cube, 
   if (!(options.cull_margin >= 0) || !std::isfinite(options.cull_margin)) {
     throw Error::InvalidArgument("the culling margin must be >= 0");
   }
-  const Frustum frustum = Frustum::FromCamera(view.camera);
   LodFrontier f;
+  f.culler = ViewCuller(view.camera, cube, options.cull_margin);
   if (hierarchy.empty()) return f;
-
-  // In a periodic cube a moved point past a face is drawn at its image
-  // inside, near the opposite face: the part of a grown node cube beyond a
-  // face is tested there too, a box length away (each axis on its own, so a
-  // corner's images are all tried).
-  const bool wrapped = cube.periodic && options.cull_margin > 0;
-  const auto visible = [&](const NodeCube& c) {
-    const double m = options.cull_margin;
-    const std::array<double, 3> lo = {c.origin[0] - m, c.origin[1] - m, c.origin[2] - m};
-    const std::array<double, 3> hi = {c.origin[0] + c.size + m, c.origin[1] + c.size + m, c.origin[2] + c.size + m};
-    if (!wrapped) return frustum.MayIntersectBox(lo, hi);
-    // Per axis, the shifts worth trying: none, and one box length towards
-    // the inside for each face the grown cube crosses.
-    std::array<std::array<double, 3>, 3> shifts{};
-    std::array<std::size_t, 3> count{};
-    for (std::size_t a = 0; a < 3; ++a) {
-      shifts[a][count[a]++] = 0;
-      if (lo[a] < cube.origin[a]) shifts[a][count[a]++] = cube.size;
-      if (hi[a] > cube.origin[a] + cube.size) shifts[a][count[a]++] = -cube.size;
-    }
-    for (std::size_t x = 0; x < count[0]; ++x) {
-      for (std::size_t y = 0; y < count[1]; ++y) {
-        for (std::size_t z = 0; z < count[2]; ++z) {
-          const std::array<double, 3> shift = {shifts[0][x], shifts[1][y], shifts[2][z]};
-          if (frustum.MayIntersectBox({lo[0] + shift[0], lo[1] + shift[1], lo[2] + shift[2]},
-                                      {hi[0] + shift[0], hi[1] + shift[1], hi[2] + shift[2]})) {
-            return true;
-          }
-        }
-      }
-    }
-    return false;
-  };
+  const auto visible = [&f](const NodeCube& c) { return f.culler.MayMeet(c); };
   const ScreenErrorMeter error(view);
 
   using Candidate = std::pair<double, std::int32_t>;  // (error, node): largest error first

@@ -28,6 +28,7 @@
 #include "index/node_hierarchy.h"
 #include "query/frustum.h"
 #include "query/node_selection.h"
+#include "query/view_culler.h"
 
 namespace octocosm {
 
@@ -35,9 +36,8 @@ struct LodOptions {
   double pixel_threshold = 1;    // refine while the projected point spacing exceeds this (pixels, > 0)
   std::uint64_t point_budget = 0;  // most points to select; 0: no limit
   // World units by which node cubes grow before the frustum test: points
-  // moved by time interpolation may leave their node's cube. In a periodic
-  // cube such points are drawn wrapped into the cube, so where a grown node
-  // cube crosses a face, its part beyond is also tested at the opposite face.
+  // moved by time interpolation may leave their node's cube
+  // (query/view_culler.h).
   double cull_margin = 0;
 };
 
@@ -49,6 +49,9 @@ struct LodFrontier {
   std::uint64_t nodes_visited = 0;
   std::uint64_t nodes_culled = 0;
   bool budget_reached = false;           // some node was left unrefined for the budget
+  // The test nodes were culled by: a renderer culls the octants of selected
+  // nodes with it, once their blocks tell how far their blobs reach.
+  ViewCuller culler;
 };
 
 // Throws Error::InvalidArgument for a threshold that is not > 0 or a negative

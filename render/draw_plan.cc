@@ -10,10 +10,12 @@ enum class Role : std::uint8_t { kNone, kSelected, kRefined };
 class Planner {
  public:
   Planner(const NodeHierarchy& hierarchy, const std::function<bool(std::int32_t)>& loaded,
-          const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets)
+          const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets,
+          const std::function<std::uint8_t(std::int32_t)>& octants_in_view)
       : hierarchy_(hierarchy),
         loaded_(loaded),
         octant_offsets_(octant_offsets),
+        octants_in_view_(octants_in_view),
         roles_(hierarchy.nodes().size(), Role::kNone),
         covered_(hierarchy.nodes().size(), kUnknown) {}
 
@@ -22,7 +24,16 @@ class Planner {
   void Draw(std::int32_t node, DrawPlan& plan) {
     const Role role = RoleOf(node);
     if (role == Role::kSelected) {
-      if (loaded_(node)) Add(plan, node, 0, static_cast<std::uint32_t>(hierarchy_.node(node).entry.point_count));
+      if (!loaded_(node)) return;
+      const std::uint8_t octants = octants_in_view_ ? octants_in_view_(node) : kEveryOctant;
+      if (octants == kEveryOctant) {
+        Add(plan, node, 0, static_cast<std::uint32_t>(hierarchy_.node(node).entry.point_count));
+        return;
+      }
+      const std::array<std::uint32_t, 9> offsets = octant_offsets_(node);
+      for (int o = 0; o < 8; ++o) {
+        if (((octants >> o) & 1) && offsets[o + 1] > offsets[o]) Add(plan, node, offsets[o], offsets[o + 1] - offsets[o]);
+      }
       return;
     }
     if (role != Role::kRefined) return;
@@ -75,6 +86,8 @@ class Planner {
   const NodeHierarchy& hierarchy_;
   const std::function<bool(std::int32_t)>& loaded_;
   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets_;
+  const std::function<std::uint8_t(std::int32_t)>& octants_in_view_;
+  static constexpr std::uint8_t kEveryOctant = 0xFF;
   // By node index: compact arrays, not maps (a frame's frontier may hold
   // tens of thousands of nodes).
   static constexpr std::uint8_t kUnknown = 2;
@@ -86,10 +99,11 @@ class Planner {
 
 DrawPlan PlanDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
                    const std::function<bool(std::int32_t)>& loaded,
-                   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets) {
+                   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets,
+                   const std::function<std::uint8_t(std::int32_t)>& octants_in_view) {
   DrawPlan plan;
   if (frontier.selected.empty()) return plan;
-  Planner planner(hierarchy, loaded, octant_offsets);
+  Planner planner(hierarchy, loaded, octant_offsets, octants_in_view);
   for (std::int32_t n : frontier.selected) planner.SetRole(n, Role::kSelected);
   for (std::int32_t n : frontier.refined) planner.SetRole(n, Role::kRefined);
   planner.Draw(0, plan);

@@ -2,7 +2,9 @@
 // arriving: never a hole where an ancestor is loaded, never a region drawn
 // twice.
 //
-// A selected node that is loaded is drawn whole. A refined node (one the
+// A selected node that is loaded is drawn in its octants in view, which its
+// block tells once it is loaded (how far its blobs reach beyond each octant):
+// whole where the view holds it. A refined node (one the
 // frontier replaced by its children) is "covered" when it is loaded or when
 // every one of its children in view is covered; an unloaded selected node is
 // not covered. Drawing a covered refined node means, octant by octant: the
@@ -13,7 +15,8 @@
 // skipped. Nodes that are not covered draw what they can of their children,
 // leaving holes only where no ancestor is loaded (at start-up).
 //
-// When every selected node is loaded the plan is exactly the selected nodes.
+// When every selected node is loaded the plan is exactly the selected nodes'
+// octants in view.
 #pragma once
 
 #include <array>
@@ -39,9 +42,12 @@ struct DrawPlan {
 };
 
 // `loaded(node)` says whether a node's block is ready to draw;
-// `octant_offsets(node)` gives the 9 octant offsets of a loaded node's block.
+// `octant_offsets(node)` gives the 9 octant offsets of a loaded node's block;
+// `octants_in_view(node)`, a bit per octant of a loaded selected node that
+// may be seen (bit o: octant o; empty function: all of them).
 DrawPlan PlanDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
                    const std::function<bool(std::int32_t)>& loaded,
-                   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets);
+                   const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets,
+                   const std::function<std::uint8_t(std::int32_t)>& octants_in_view = {});
 
 }  // namespace octocosm

@@ -1,5 +1,7 @@
 #include "render/gpu_block.h"
 
+#include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <utility>
@@ -22,6 +24,46 @@ void SetRange(const BlockColumn& c, float (&range)[2][4]) {
     range[0][a] = lo;
     range[1][a] = (hi - lo) / 65535.0f;
   }
+}
+
+// How far each octant's blobs reach from their centres, in world units: the
+// largest smoothing length there, times the root of the largest trace of a
+// cluster's shape (its covariance over trace / 3, so its largest axis is at
+// most the root of its trace times the round radius; index/cluster_shape.h).
+std::array<double, 8> OctantReach(const std::vector<GpuColumnBytes>& columns, const BlockHeader& header,
+                                  const NodeCube& node) {
+  std::span<const std::uint8_t> smoothing, shape;
+  float log2_min = 0, per_octave = 1;
+  for (const BlockColumn& c : header.columns) {
+    for (const GpuColumnBytes& g : columns) {
+      if (g.id != c.id) continue;
+      if (c.id == ColumnId::kSmoothing) {
+        smoothing = g.bytes;
+        log2_min = ParamF32(c, 0);
+        per_octave = ParamF32(c, 4);
+      } else if (c.id == ColumnId::kShape) {
+        shape = g.bytes;
+      }
+    }
+  }
+  std::array<double, 8> reach{};
+  const std::uint32_t n = header.point_count;
+  if (smoothing.size() < 2 * std::size_t{n} || !(per_octave > 0)) return reach;
+  const bool shaped = shape.size() >= 6 * std::size_t{n};
+  for (int o = 0; o < 8; ++o) {
+    const std::uint32_t end = std::min(header.octant_offsets[static_cast<std::size_t>(o) + 1], n);
+    std::uint32_t largest_code = 0, largest_trace = 0;
+    for (std::uint32_t i = std::min(header.octant_offsets[static_cast<std::size_t>(o)], end); i < end; ++i) {
+      largest_code = std::max<std::uint32_t>(largest_code, GetU16(smoothing.data() + 2 * std::size_t{i}));
+      if (shaped) {
+        const std::uint8_t* q = shape.data() + 6 * std::size_t{i};
+        largest_trace = std::max<std::uint32_t>(largest_trace, std::uint32_t{q[0]} + q[1] + q[2]);
+      }
+    }
+    const double h = node.size * std::exp2(log2_min + static_cast<double>(largest_code) / per_octave);
+    reach[static_cast<std::size_t>(o)] = h * std::sqrt(std::max(1.0, largest_trace / 85.0));
+  }
+  return reach;
 }
 
 }  // namespace
@@ -110,6 +152,7 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
     throw;
   }
   block.arena_ = &arena;
+  block.octant_reach_ = OctantReach(columns, header, node);
   for (const GpuColumnBytes& c : columns) block.gpu_bytes_ += c.bytes.size();
   block.gpu_bytes_ += sizeof u;
   return block;
@@ -120,6 +163,7 @@ GpuBlock::GpuBlock(GpuBlock&& other) noexcept
       placement_(other.placement_),
       point_count_(other.point_count_),
       octant_offsets_(other.octant_offsets_),
+      octant_reach_(other.octant_reach_),
       node_(other.node_),
       columns_(other.columns_),
       gpu_bytes_(other.gpu_bytes_) {}
@@ -131,6 +175,7 @@ GpuBlock& GpuBlock::operator=(GpuBlock&& other) noexcept {
     placement_ = other.placement_;
     point_count_ = other.point_count_;
     octant_offsets_ = other.octant_offsets_;
+    octant_reach_ = other.octant_reach_;
     node_ = other.node_;
     columns_ = other.columns_;
     gpu_bytes_ = other.gpu_bytes_;

@@ -39,6 +39,9 @@ class GpuBlock {
   const GpuBlockArena::Placement& placement() const { return placement_; }
   std::uint32_t point_count() const { return point_count_; }
   const std::array<std::uint32_t, 9>& octant_offsets() const { return octant_offsets_; }
+  // How far the blobs of each octant's points reach from their centres at
+  // most (world units): how much the octant's cube grows before it is culled.
+  const std::array<double, 8>& octant_reach() const { return octant_reach_; }
   const NodeCube& node() const { return node_; }
   // The columns it holds.
   ColumnSet columns() const { return columns_; }
@@ -51,6 +54,7 @@ class GpuBlock {
   GpuBlockArena::Placement placement_;
   std::uint32_t point_count_ = 0;
   std::array<std::uint32_t, 9> octant_offsets_{};
+  std::array<double, 8> octant_reach_{};
   NodeCube node_;
   ColumnSet columns_ = 0;
   std::size_t gpu_bytes_ = 0;

@@ -419,7 +419,11 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
     for (std::int32_t node : c.frontier.selected) stats.blocks_missing += resident(node) == nullptr;
     const DrawPlan plan = PlanDraws(
         hierarchy(c.epoch), c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
-        [&](std::int32_t node) { return resident(node)->block.octant_offsets(); });
+        [&](std::int32_t node) { return resident(node)->block.octant_offsets(); },
+        [&](std::int32_t node) {
+          const GpuBlock& block = resident(node)->block;
+          return c.frontier.culler.OctantsInView(block.node(), block.octant_reach());
+        });
     splat_.SetCopy(c.direction, c.weight);
     for (std::size_t i = 0; i < plan.ranges.size(); ++i) {
       if (i + kDrawLookahead < plan.ranges.size()) {

@@ -9,6 +9,7 @@
 
 #include "base/error.h"
 #include "query/lod_frontier.h"
+#include "query/view_culler.h"
 
 namespace octocosm {
 namespace {
@@ -147,6 +148,68 @@ TEST(LodFrontierTest, NodesOutOfViewAreCulled) {
   const LodFrontier part = SelectLodFrontier(h, cube, inside, {0.5, 0, 0});
   EXPECT_GT(part.nodes_culled, 0u);
   EXPECT_LT(part.points, h.total_points_in_leaves());
+}
+
+// Each octant's bit is the test of that octant's cube grown by its reach.
+TEST(ViewCullerTest, OctantsInViewAreEachOctantsOwnTest) {
+  Camera camera;
+  camera.position = {0.5, 0.5, 0.5};
+  camera.look_at = {0.9, 0.8, 0.7};
+  camera.near = 1e-4;
+  camera.far = 100;
+  std::mt19937_64 random(3);
+  std::uniform_real_distribution<double> where(-0.5, 1.5), size(0.01, 0.5), reach(0, 0.1);
+  for (const bool periodic : {false, true}) {
+    const Cube cube{{0, 0, 0}, 1, periodic};
+    const ViewCuller culler(camera, cube, periodic ? 0.02 : 0);
+    int partial = 0;
+    for (int trial = 0; trial < 5000; ++trial) {
+      const NodeCube c{{where(random), where(random), where(random)}, size(random)};
+      std::array<double, 8> reaches{};
+      for (double& r : reaches) r = trial % 2 ? reach(random) : 0;
+      std::uint8_t want = 0;
+      for (int o = 0; o < 8; ++o) {
+        const double half = c.size / 2;
+        const NodeCube octant{{c.origin[0] + (o & 1) * half, c.origin[1] + ((o >> 1) & 1) * half,
+                               c.origin[2] + ((o >> 2) & 1) * half},
+                              half};
+        if (culler.MayMeet(octant, reaches[static_cast<std::size_t>(o)])) want |= 1u << o;
+      }
+      ASSERT_EQ(culler.OctantsInView(c, reaches), want) << trial;
+      partial += want != 0 && want != 0xFF;
+    }
+    EXPECT_GT(partial, 100);
+  }
+  const std::array<double, 8> none{};
+  EXPECT_EQ(ViewCuller().OctantsInView({{5, 5, 5}, 1}, none), 0xFF) << "no view: everything is seen";
+}
+
+// A blob reaching into the view keeps its octant. A 90-degree view along -z
+// sees x <= depth; octants whose nearest corner has x + z = d lie d / sqrt(2)
+// beside it and are kept once grown by d / 2 on every axis.
+TEST(ViewCullerTest, AReachIntoTheViewKeepsTheOctant) {
+  Camera camera;
+  camera.position = {0, 0, 0};
+  camera.look_at = {0, 0, -1};
+  camera.fov_y_degrees = 90;
+  camera.aspect = 1;
+  camera.near = 0.1;
+  camera.far = 100;
+  const ViewCuller culler(camera, Cube{{-100, -100, -100}, 200, false}, 0);
+  // Octants 0 and 2 (low x, low z): d = 0.5; 1, 3, 4, 6: d = 1.5; 5, 7: 2.5.
+  const NodeCube beside{{8.5, -1, -8}, 2};
+  std::array<double, 8> reach{};
+  EXPECT_EQ(culler.OctantsInView(beside, reach), 0);
+  reach.fill(0.2);
+  EXPECT_EQ(culler.OctantsInView(beside, reach), 0);
+  reach.fill(0.3);
+  EXPECT_EQ(culler.OctantsInView(beside, reach), 0b00000101);
+  reach.fill(0.8);
+  EXPECT_EQ(culler.OctantsInView(beside, reach), 0b01011111);
+  reach.fill(1.3);
+  EXPECT_EQ(culler.OctantsInView(beside, reach), 0xFF);
+  reach = {0, 0, 0, 0, 0, 0, 0, 1.3};  // each octant by its own reach
+  EXPECT_EQ(culler.OctantsInView(beside, reach), 0b10000000);
 }
 
 // In a periodic cube, points that interpolation moves past the upper x face

@@ -553,5 +553,36 @@ TEST(FrustumTest, ViewMatrixGivesTheSameCamera) {
   EXPECT_THROW(Camera::FromViewMatrix({2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, 60, 1, 0.1, 10), Error);
 }
 
+// A box is contained exactly when all eight of its corners are inside.
+TEST(FrustumTest, ContainsBoxIsAllCornersInside) {
+  Camera camera;
+  camera.position = {0, 0, 0};
+  camera.look_at = {1, 0.3, -0.2};
+  camera.up = {0, 0, 1};
+  camera.fov_y_degrees = 40;
+  camera.aspect = 1.6;
+  camera.near = 0.5;
+  camera.far = 20;
+  const Frustum frustum = Frustum::FromCamera(camera);
+  std::mt19937_64 random(11);
+  std::uniform_real_distribution<double> where(-12, 12), size(0.01, 6);
+  int inside = 0, outside = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    const std::array<double, 3> lo = {where(random) + 10, where(random), where(random)};
+    const double s = size(random);
+    const std::array<double, 3> hi = {lo[0] + s, lo[1] + s, lo[2] + s};
+    bool corners = true;
+    for (int c = 0; c < 8; ++c) {
+      const double corner[3] = {(c & 1) ? hi[0] : lo[0], (c & 2) ? hi[1] : lo[1], (c & 4) ? hi[2] : lo[2]};
+      corners &= frustum.Contains(corner);
+    }
+    ASSERT_EQ(frustum.ContainsBox(lo, hi), corners) << trial;
+    (corners ? inside : outside) += 1;
+    if (corners) ASSERT_TRUE(frustum.MayIntersectBox(lo, hi));
+  }
+  EXPECT_GT(inside, 100);
+  EXPECT_GT(outside, 100);
+}
+
 }  // namespace
 }  // namespace octocosm

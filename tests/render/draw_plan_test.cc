@@ -3,6 +3,7 @@
 // region drawn twice.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <random>
 
@@ -62,6 +63,28 @@ TEST(DrawPlanTest, EverythingLoadedDrawsExactlyTheSelection) {
   EXPECT_EQ(plan.points, f.points);
   EXPECT_EQ(plan.stand_ins, 0u);
   EXPECT_EQ(plan.ranges.size(), f.selected.size());
+}
+
+TEST(DrawPlanTest, SelectedNodesDrawOnlyTheirOctantsInView) {
+  const NodeHierarchy h = FullTree(3);
+  std::mt19937_64 rng(3);
+  const LodFrontier f = FrontierOf(h, rng);
+  std::vector<std::uint8_t> octants(h.nodes().size());
+  std::uint64_t want = 0;
+  for (std::size_t i = 0; i < f.selected.size(); ++i) {
+    const auto in_view = static_cast<std::uint8_t>(i % 3 == 0 ? 0xFF : rng() | 1);
+    octants[static_cast<std::size_t>(f.selected[i])] = in_view;
+    want += 100 * static_cast<std::uint64_t>(__builtin_popcount(in_view));
+  }
+  const DrawPlan plan = PlanDraws(h, f, [](std::int32_t) { return true; }, Offsets,
+                                  [&](std::int32_t n) { return octants[static_cast<std::size_t>(n)]; });
+  EXPECT_EQ(plan.points, want);
+  for (const DrawRange& r : plan.ranges) {
+    ASSERT_NE(std::find(f.selected.begin(), f.selected.end(), r.node), f.selected.end());
+    for (std::uint32_t o = r.first / 100; o < (r.first + r.count) / 100; ++o) {
+      EXPECT_TRUE((octants[static_cast<std::size_t>(r.node)] >> o) & 1) << "octant " << o << " is out of view";
+    }
+  }
 }
 
 TEST(DrawPlanTest, ParentsStandInForMissingChildrenWithoutHolesOrOverlap) {
