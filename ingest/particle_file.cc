@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
+#include <limits>
 #include <cstring>
 #include <utility>
 
@@ -38,7 +40,8 @@ std::uint8_t LayoutOf(const ParticleChunk& chunk, std::size_t begin, std::size_t
   std::uint8_t layout = kFloatPositions | kOneMass | kOneType | (with_ids ? kNarrowIds : 0);
   for (std::size_t k = 3 * begin; k < 3 * end; ++k) {
     const double x = chunk.position[k];
-    if (static_cast<double>(static_cast<float>(x)) != x) {
+    // Beyond the float range the conversion itself would be undefined.
+    if (!(std::fabs(x) <= std::numeric_limits<float>::max()) || static_cast<double>(static_cast<float>(x)) != x) {
       layout &= ~kFloatPositions;
       break;
     }

@@ -122,6 +122,7 @@ TEST(ParticleFile, BatchesAsNarrowAsTheirValuesAllowComeBackExactly) {
   const Case cases[] = {
       {"all narrow", true, true, true, true, [](ParticleChunk&) {}},
       {"a coordinate that is no float", false, true, true, true, [](ParticleChunk& c) { c.position.back() += 1e-9; }},
+      {"a coordinate beyond the float range", false, true, true, true, [](ParticleChunk& c) { c.position.back() = 1e300; }},
       {"a mass of -0", true, false, true, true,
        [](ParticleChunk& c) {
          c.mass.assign(c.mass.size(), 0.0);
