@@ -46,7 +46,7 @@ std::uint8_t ViewCuller::OctantsInView(const NodeCube& c, const std::array<doubl
   // Wholly in view with the largest reach: every octant is (its images
   // need no test).
   if (frustum_->ContainsBox({c.origin[0] - m, c.origin[1] - m, c.origin[2] - m},
-                                      {c.origin[0] + c.size + m, c.origin[1] + c.size + m, c.origin[2] + c.size + m})) {
+                            {c.origin[0] + c.size + m, c.origin[1] + c.size + m, c.origin[2] + c.size + m})) {
     return 0xFF;
   }
   std::uint8_t mask = 0;

@@ -30,20 +30,17 @@ void SetRange(const BlockColumn& c, float (&range)[2][4]) {
 // largest smoothing length there, times the root of the largest trace of a
 // cluster's shape (its covariance over trace / 3, so its largest axis is at
 // most the root of its trace times the round radius; index/cluster_shape.h).
-std::array<double, 8> OctantReach(const std::vector<GpuColumnBytes>& columns, const BlockHeader& header,
-                                  const NodeCube& node) {
+std::array<double, 8> OctantReach(std::span<const std::uint8_t> bytes, const BlockHeader& header, const NodeCube& node) {
   std::span<const std::uint8_t> smoothing, shape;
   float log2_min = 0, per_octave = 1;
-  for (const BlockColumn& c : header.columns) {
-    for (const GpuColumnBytes& g : columns) {
-      if (g.id != c.id) continue;
-      if (c.id == ColumnId::kSmoothing) {
-        smoothing = g.bytes;
-        log2_min = ParamF32(c, 0);
-        per_octave = ParamF32(c, 4);
-      } else if (c.id == ColumnId::kShape) {
-        shape = g.bytes;
-      }
+  for (const BlockColumn& c : header.columns) {  // their places checked by Upload
+    const auto column = bytes.subspan(static_cast<std::size_t>(c.offset), static_cast<std::size_t>(c.length));
+    if (c.id == ColumnId::kSmoothing) {
+      smoothing = column;
+      log2_min = ParamF32(c, 0);
+      per_octave = ParamF32(c, 4);
+    } else if (c.id == ColumnId::kShape) {
+      shape = column;
     }
   }
   std::array<double, 8> reach{};
@@ -152,7 +149,7 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
     throw;
   }
   block.arena_ = &arena;
-  block.octant_reach_ = OctantReach(columns, header, node);
+  block.octant_reach_ = OctantReach(bytes, header, node);
   for (const GpuColumnBytes& c : columns) block.gpu_bytes_ += c.bytes.size();
   block.gpu_bytes_ += sizeof u;
   return block;
