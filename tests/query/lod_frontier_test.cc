@@ -173,7 +173,7 @@ TEST(ViewCullerTest, OctantsInViewAreEachOctantsOwnTest) {
         const NodeCube octant{{c.origin[0] + (o & 1) * half, c.origin[1] + ((o >> 1) & 1) * half,
                                c.origin[2] + ((o >> 2) & 1) * half},
                               half};
-        if (culler.MayMeet(octant, reaches[static_cast<std::size_t>(o)])) want |= 1u << o;
+        if (culler.MayMeet(octant, reaches[static_cast<std::size_t>(o)])) want |= static_cast<std::uint8_t>(1u << o);
       }
       ASSERT_EQ(culler.OctantsInView(c, reaches), want) << trial;
       partial += want != 0 && want != 0xFF;

@@ -578,7 +578,9 @@ TEST(FrustumTest, ContainsBoxIsAllCornersInside) {
     }
     ASSERT_EQ(frustum.ContainsBox(lo, hi), corners) << trial;
     (corners ? inside : outside) += 1;
-    if (corners) ASSERT_TRUE(frustum.MayIntersectBox(lo, hi));
+    if (corners) {
+      ASSERT_TRUE(frustum.MayIntersectBox(lo, hi));
+    }
   }
   EXPECT_GT(inside, 100);
   EXPECT_GT(outside, 100);
