@@ -22,10 +22,8 @@ work=${1:?usage: epoch_scale.sh WORK [PARTICLES] [MEMORY]}
 particles=$(awk -v n="${2:-1000000000}" 'BEGIN { printf "%.0f", n }')
 memory=${3:-2G}
 neighbours=${NEIGHBOURS:-0}
-octocosm=$(command -v octocosm || echo build/tools/octocosm)
 source "$(dirname "$0")/scale_measure.sh"
-mkdir -p "$work"
-df -h "$work" | tail -1
+prepare_work "$work"
 
 snapshot="$work/snapshot"
 if [ "$(cat "$snapshot/complete" 2>/dev/null)" != "$particles" ]; then

@@ -1,5 +1,13 @@
 # Shared by the scale benches (bench/epoch_scale.sh, bench/series_scale.sh):
-# timing helpers and one measured ingest. Source it; it defines functions only.
+# the program they measure, timing helpers and one measured ingest. Source it.
+
+octocosm=$(command -v octocosm || echo build/tools/octocosm)
+
+# prepare_work WORK: creates the work directory and shows its disk's room.
+prepare_work() {
+  mkdir -p "$1"
+  df -h "$1" | tail -1
+}
 
 now() { date +%s.%N; }
 # Seconds since a time from `now`, to a tenth.

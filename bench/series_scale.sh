@@ -23,10 +23,8 @@ side=${2:-464}
 epochs=${3:-5}
 memory=${4:-2G}
 neighbours=${NEIGHBOURS:-0}
-octocosm=$(command -v octocosm || echo build/tools/octocosm)
 source "$(dirname "$0")/scale_measure.sh"
-mkdir -p "$work"
-df -h "$work" | tail -1
+prepare_work "$work"
 
 snapshots="$work/snapshots"
 if [ ! -e "$snapshots/complete" ]; then
