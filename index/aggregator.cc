@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <queue>
 
@@ -105,7 +106,9 @@ class CellCutter {
       : members_(members),
         pixel2_(std::pow(1.0 / (std::cbrt(static_cast<double>(capacity)) * kPixelsPerSpacing), 2)),
         bin_(members.size()),
-        scratch_(members.size()) {}
+        scratch_(members.size()) {
+    filled_.reserve(kCutBins);
+  }
 
   Cell Measure(std::uint32_t begin, std::uint32_t end) const {
     Cell cell{begin, end, 0, {}, {}};
@@ -176,7 +179,6 @@ class CellCutter {
     const std::uint32_t size = cell.end - cell.begin;
     const int bin_count = static_cast<int>(std::min<std::uint32_t>(kCutBins, 4 * size));
     const double per_bin = bin_count / (hi - lo);
-    std::fill(bins_.begin(), bins_.begin() + bin_count, BinSums{});
     for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
       const Member& p = members_[k];
       double d[3];
@@ -184,28 +186,40 @@ class CellCutter {
       const int b = std::clamp(static_cast<int>((t - lo) * per_bin), 0, bin_count - 1);
       bin_[k] = static_cast<std::uint16_t>(b);
       BinSums& bin = bins_[static_cast<std::size_t>(b)];
+      if (bin.points == 0) occupied_[static_cast<std::size_t>(b) / 64] |= std::uint64_t{1} << (b % 64);
       ++bin.points;
       bin.mass += p.weight;
       for (int a = 0; a < 3; ++a) bin.first[a] += p.weight * d[a];
       bin.second += p.weight * (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
     }
 
+    // The bins that hold members, in order, and the bins left empty for the
+    // next cut. A small cell has four bins a member, most of them empty:
+    // walking only the others keeps the search linear in the members.
+    filled_.clear();
+    for (std::size_t word = 0; word < occupied_.size(); ++word) {
+      for (std::uint64_t bits = occupied_[word]; bits != 0; bits &= bits - 1) {
+        filled_.push_back(static_cast<std::uint16_t>(64 * word + static_cast<std::size_t>(std::countr_zero(bits))));
+      }
+      occupied_[word] = 0;
+    }
+
     // The boundary between bins that leaves the least squared spread (none
     // when every member fell into one bin).
     BinSums all, below;
-    for (int b = 0; b < bin_count; ++b) all.Add(bins_[static_cast<std::size_t>(b)]);
+    for (const std::uint16_t b : filled_) all.Add(bins_[b]);
     double best = INFINITY;
     int cut = 0;
-    for (int b = 0; b + 1 < bin_count; ++b) {
-      const BinSums& here = bins_[static_cast<std::size_t>(b)];
-      below.Add(here);
-      if (here.points == 0 || below.points == all.points) continue;
+    for (const std::uint16_t b : filled_) {
+      below.Add(bins_[b]);
+      if (below.points == all.points) break;
       const double spread = below.SquaredSpread() + below.SquaredSpreadOfRest(all);
       if (spread < best) {
         best = spread;
         cut = b + 1;
       }
     }
+    for (const std::uint16_t b : filled_) bins_[b] = BinSums{};
     if (cut == 0) return false;
 
     // The members below the cut first, in their order; those above after
@@ -235,7 +249,9 @@ class CellCutter {
   double pixel2_;                   // a pixel where the node is drawn, squared, in node edges
   std::vector<std::uint16_t> bin_;  // each member's bin, during a cut
   std::vector<Member> scratch_;
-  std::vector<BinSums> bins_ = std::vector<BinSums>(kCutBins);
+  std::vector<BinSums> bins_ = std::vector<BinSums>(kCutBins);  // all empty between cuts
+  std::array<std::uint64_t, kCutBins / 64> occupied_{};          // which bins hold members, during a cut
+  std::vector<std::uint16_t> filled_;                              // the bins that hold members, in order
 };
 
 }  // namespace
@@ -282,11 +298,18 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
     bool operator<(const Queued& o) const { return error != o.error ? error < o.error : begin > o.begin; }
   };
   std::priority_queue<Queued> costliest;
+  std::vector<std::uint32_t> final_cells;
+  // A cell of one member is final: it goes straight there, not through the
+  // queue.
   const auto enqueue = [&](const Cell& cell) {
     cells.push_back(cell);
-    costliest.push({cell.error, cell.begin, static_cast<std::uint32_t>(cells.size() - 1)});
+    const auto index = static_cast<std::uint32_t>(cells.size() - 1);
+    if (cell.end - cell.begin == 1) {
+      final_cells.push_back(index);
+    } else {
+      costliest.push({cell.error, cell.begin, index});
+    }
   };
-  std::vector<std::uint32_t> final_cells;
   std::size_t count = 0;
   if (m > 0) {
     // The first cut: the node's octants, and inside each the particle types,
@@ -318,9 +341,9 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
     const std::uint32_t top = costliest.top().cell;
     const Cell& cell = cells[top];  // stays put: `cells` has room for every cell
     Cell low{}, high{};
-    if (cell.end - cell.begin > 1 && count + 1 > capacity) break;  // the partition left the cell's members together
+    if (count + 1 > capacity) break;  // the partition left the cell's members together
     costliest.pop();
-    if (cell.end - cell.begin == 1 || !cutter.Cut(cell, low, high)) {
+    if (!cutter.Cut(cell, low, high)) {
       final_cells.push_back(top);
       continue;
     }
