@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <queue>
+#include <span>
 
 #include "base/error.h"
 
@@ -86,6 +87,7 @@ struct Cell {
   double error;              // what drawing it as one blob would cost (aggregator.h)
   double reference[3];       // the point `sums` measures offsets from, in node edges
   Sums sums;
+  int copy = 0;              // which of the cutter's two copies of the members holds its range in order
 };
 
 // A member as the cutter keeps it: where it lies in node edges from the
@@ -99,22 +101,30 @@ struct Member {
   std::uint32_t index;
 };
 
-// Cuts cells of a population in two (aggregator.h), in place in `members`.
+// Cuts cells of a population in two (aggregator.h). The members live in two
+// copies: a cut reads its cell's range from one and writes the halves into
+// the other, so no pass copies them back.
 class CellCutter {
  public:
-  CellCutter(std::vector<Member>& members, std::size_t capacity)
-      : members_(members),
-        pixel2_(std::pow(1.0 / (std::cbrt(static_cast<double>(capacity)) * kPixelsPerSpacing), 2)),
-        bin_(members.size()),
-        scratch_(members.size()) {
+  CellCutter(std::vector<Member> members, std::size_t capacity)
+      : pixel2_(std::pow(1.0 / (std::cbrt(static_cast<double>(capacity)) * kPixelsPerSpacing), 2)),
+        bin_(members.size()) {
+    copies_[1].resize(members.size());
+    copies_[0] = std::move(members);
     filled_.reserve(kCutBins);
   }
 
+  // A cell's members, in its order.
+  std::span<const Member> MembersOf(const Cell& cell) const {
+    return std::span<const Member>(copies_[cell.copy]).subspan(cell.begin, cell.end - cell.begin);
+  }
+
   Cell Measure(std::uint32_t begin, std::uint32_t end) const {
+    const std::vector<Member>& members = copies_[0];
     Cell cell{begin, end, 0, {}, {}};
-    for (int a = 0; a < 3; ++a) cell.reference[a] = members_[begin].d[a];
+    for (int a = 0; a < 3; ++a) cell.reference[a] = members[begin].d[a];
     for (std::uint32_t k = begin; k < end; ++k) {
-      const Member& p = members_[k];
+      const Member& p = members[k];
       const double d[3] = {p.d[0] - cell.reference[0], p.d[1] - cell.reference[1], p.d[2] - cell.reference[2]};
       cell.sums.Add(p.weight, d, p.own);
     }
@@ -179,8 +189,9 @@ class CellCutter {
     const std::uint32_t size = cell.end - cell.begin;
     const int bin_count = static_cast<int>(std::min<std::uint32_t>(kCutBins, 4 * size));
     const double per_bin = bin_count / (hi - lo);
+    const std::vector<Member>& from = copies_[cell.copy];
     for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
-      const Member& p = members_[k];
+      const Member& p = from[k];
       double d[3];
       const double t = project(p, d);
       const int b = std::clamp(static_cast<int>((t - lo) * per_bin), 0, bin_count - 1);
@@ -225,30 +236,30 @@ class CellCutter {
     // The members below the cut first, in their order; those above after
     // them, in reverse order. Each half's sums, about the cell's centre.
     Sums low_sums, high_sums;
+    const int other = 1 - cell.copy;
+    std::vector<Member>& to = copies_[other];
     std::uint32_t front = cell.begin, back = cell.end;
     for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
-      const Member& p = members_[k];
+      const Member& p = from[k];
       const double d[3] = {p.d[0] - mean[0], p.d[1] - mean[1], p.d[2] - mean[2]};
       if (bin_[k] < cut) {
         low_sums.Add(p.weight, d, p.own);
-        scratch_[front++] = p;
+        to[front++] = p;
       } else {
         high_sums.Add(p.weight, d, p.own);
-        scratch_[--back] = p;
+        to[--back] = p;
       }
     }
     const std::uint32_t middle = front;
-    std::copy(scratch_.begin() + cell.begin, scratch_.begin() + cell.end, members_.begin() + cell.begin);
-    low = {cell.begin, middle, low_sums.Error(pixel2_), {mean[0], mean[1], mean[2]}, low_sums};
-    high = {middle, cell.end, high_sums.Error(pixel2_), {mean[0], mean[1], mean[2]}, high_sums};
+    low = {cell.begin, middle, low_sums.Error(pixel2_), {mean[0], mean[1], mean[2]}, low_sums, other};
+    high = {middle, cell.end, high_sums.Error(pixel2_), {mean[0], mean[1], mean[2]}, high_sums, other};
     return true;
   }
 
  private:
-  std::vector<Member>& members_;
+  std::array<std::vector<Member>, 2> copies_;
   double pixel2_;                   // a pixel where the node is drawn, squared, in node edges
   std::vector<std::uint16_t> bin_;  // each member's bin, during a cut
-  std::vector<Member> scratch_;
   std::vector<BinSums> bins_ = std::vector<BinSums>(kCutBins);  // all empty between cuts
   std::array<std::uint64_t, kCutBins / 64> occupied_{};          // which bins hold members, during a cut
   std::vector<std::uint16_t> filled_;                              // the bins that hold members, in order
@@ -283,8 +294,6 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
   }
   const std::size_t m = grid.size();
   if (m > UINT32_MAX) throw Error::InvalidArgument("ClusterPopulation: more than 2^32 - 1 points");
-  std::vector<Member> members(m);
-  CellCutter cutter(members, capacity);
   std::vector<Cell> cells;
   cells.reserve(8 * 256 + 2 * capacity);  // the first cells, and two for each cut
 
@@ -310,14 +319,14 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
       costliest.push({cell.error, cell.begin, index});
     }
   };
-  std::size_t count = 0;
+  // The first cut: the node's octants, and inside each the particle types,
+  // so that every cluster is of one type (colour by type stays exact).
+  std::vector<Member> members(m);
+  std::vector<std::uint32_t> count_by(8 * 256 + 1, 0);
   if (m > 0) {
-    // The first cut: the node's octants, and inside each the particle types,
-    // so that every cluster is of one type (colour by type stays exact).
     const auto first_cell = [&](std::uint32_t i) {
       return OctantAt(grid[i], key.level()) * 256 + (type.empty() ? 0 : type[i]);
     };
-    std::vector<std::uint32_t> count_by(8 * 256 + 1, 0);
     for (std::size_t i = 0; i < m; ++i) ++count_by[first_cell(static_cast<std::uint32_t>(i)) + 1];
     for (std::size_t b = 0; b < 8 * 256; ++b) count_by[b + 1] += count_by[b];
     std::vector<std::uint32_t> next(count_by.begin(), count_by.end() - 1);
@@ -331,11 +340,13 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
       p.own = own_variance.empty() ? 0.0 : own_variance[i];
       p.index = static_cast<std::uint32_t>(i);
     }
-    for (std::size_t b = 0; b < 8 * 256; ++b) {
-      if (count_by[b] == count_by[b + 1]) continue;
-      enqueue(cutter.Measure(count_by[b], count_by[b + 1]));
-      ++count;
-    }
+  }
+  CellCutter cutter(std::move(members), capacity);
+  std::size_t count = 0;
+  for (std::size_t b = 0; b < 8 * 256; ++b) {
+    if (count_by[b] == count_by[b + 1]) continue;
+    enqueue(cutter.Measure(count_by[b], count_by[b + 1]));
+    ++count;
   }
   while (!costliest.empty()) {
     const std::uint32_t top = costliest.top().cell;
@@ -365,7 +376,7 @@ Clusters ClusterPopulation(std::span<const GridPoint> grid, std::span<const doub
   for (const std::uint32_t c : final_cells) {
     out.begin.push_back(static_cast<std::uint32_t>(out.member.size()));
     const std::size_t first = out.member.size();
-    for (std::uint32_t k = cells[c].begin; k < cells[c].end; ++k) out.member.push_back(members[k].index);
+    for (const Member& p : cutter.MembersOf(cells[c])) out.member.push_back(p.index);
     std::sort(out.member.begin() + static_cast<std::ptrdiff_t>(first), out.member.end());
   }
   out.begin.push_back(static_cast<std::uint32_t>(out.member.size()));
