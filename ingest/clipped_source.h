@@ -25,6 +25,7 @@ class ClippedSource : public ParticleSource {
   const SnapshotHeader& header() const override { return header_; }
   bool Next(ParticleChunk& chunk) override;
   void Rewind() override { inner_->Rewind(); }
+  void SetPositionsOnly(bool positions_only) override { inner_->SetPositionsOnly(positions_only); }
   // No mappable segments: a mapping would hand out the particles left out.
 
   std::uint64_t dropped() const { return dropped_; }

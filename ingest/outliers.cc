@@ -96,6 +96,7 @@ PositionBox PositionSurvey::Core() const {
 PositionSurvey SurveyPositions(ParticleSource& source, const std::string& progress_label) {
   PositionSurvey survey;
   Progress progress(progress_label, source.header().total_count, "points");
+  const PositionsOnlyReads positions_only(source);
   source.Rewind();
   ParticleChunk chunk;
   while (source.Next(chunk)) {

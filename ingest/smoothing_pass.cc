@@ -879,6 +879,7 @@ class SmoothedSource : public ParticleSource {
     inner_->Rewind();
     next_ = 0;
   }
+  void SetPositionsOnly(bool positions_only) override { inner_->SetPositionsOnly(positions_only); }
 
   std::uint64_t Skip() override {
     const std::uint64_t skipped = inner_->Skip();
@@ -937,6 +938,8 @@ std::unique_ptr<SmoothingLengthTable> ComputeSmoothingLengths(ParticleSource& so
   SmoothingPassReport local;
   SmoothingPassReport& out = report ? *report : local;
   out = {};
+  // Neighbours need positions alone (and the snapshot's own lengths).
+  const PositionsOnlyReads positions_only(source);
   SmoothingPass pass(source, options, out);
   std::unique_ptr<SmoothingLengthTable> table = pass.Run();
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

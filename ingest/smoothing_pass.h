@@ -28,8 +28,10 @@
 //      against everything inside their spheres, which hold their true k
 //      nearest neighbours; one more read of the snapshot for as many of them
 //      as fit.
-// Processes that share the pass (SmoothingPassOptions::parts) each read the
-// whole snapshot but search only their own regions' particles.
+// Every read asks the source for positions only (ParticleSource::
+// SetPositionsOnly). Processes that share the pass (SmoothingPassOptions::
+// parts) each read the whole snapshot but search only their own regions'
+// particles.
 // With fewer than k particles in all, the radius is the one that holds all
 // of them.
 #pragma once

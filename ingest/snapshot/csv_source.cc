@@ -172,7 +172,7 @@ class CsvSource final : public SegmentedSource {
       FailAt("non-finite coordinate; positions must be finite numbers");
     }
     chunk.position.insert(chunk.position.end(), position, position + 3);
-    if (header_.has_velocity) {
+    if (FillsVelocity()) {
       for (Column c : {kVx, kVy, kVz}) {
         const auto v = static_cast<float>(ParseReal(c));
         if (!std::isfinite(v)) FailAt("non-finite velocity; velocities must be finite numbers");
@@ -184,7 +184,7 @@ class CsvSource final : public SegmentedSource {
       FailAt("mass " + std::to_string(mass) + "; masses must be finite and > 0");
     }
     chunk.mass.push_back(mass);
-    if (header_.has_id) {
+    if (FillsId()) {
       std::string_view text = fields_[static_cast<std::size_t>(index_[kId])];
       std::uint64_t id = 0;
       auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), id);

@@ -125,12 +125,12 @@ class GadgetSource final : public SegmentedSource {
     ReadColumn(binary, file.position, 3 * index, 3 * count, "POS");
     chunk.position.resize(3 * (old + count));
     DecodeReals(buffer_.data(), 3 * count, file.position.width, swap, chunk.position.data() + 3 * old);
-    if (header_.has_velocity) {
+    if (FillsVelocity()) {
       ReadColumn(binary, file.velocity, 3 * index, 3 * count, "VEL");
       chunk.velocity.resize(3 * (old + count));
       DecodeReals(buffer_.data(), 3 * count, file.velocity.width, swap, chunk.velocity.data() + 3 * old);
     }
-    if (header_.has_id) {
+    if (FillsId()) {
       ReadColumn(binary, file.id, index, count, "ID");
       chunk.id.resize(old + count);
       DecodeUnsigned(buffer_.data(), count, file.id.width, swap, chunk.id.data() + old);

@@ -498,12 +498,15 @@ class Hdf5Source final : public SegmentedSource {
     CloseSegment();
   }
 
-  // In the reader process: the range its owner asked for, as AppendRange.
-  void ReadForOwner(const Segment& segment, std::uint64_t begin, std::size_t count, ParticleChunk& chunk) {
+  // In the reader process: the range its owner asked for, as AppendRange,
+  // with or without velocities and IDs as the owner's reader was asked.
+  void ReadForOwner(const Segment& segment, std::uint64_t begin, std::size_t count, bool positions_only,
+                    ParticleChunk& chunk) {
     if (segment.file >= files_.size() || segment.type < 0 ||
         static_cast<std::size_t>(segment.type) >= files_[segment.file].this_file.size()) {
       throw std::invalid_argument("a read of a segment the HDF5 reader does not have");
     }
+    SetPositionsOnly(positions_only);
     AppendRange(segment, begin, count, chunk);
   }
 
@@ -519,13 +522,13 @@ class Hdf5Source final : public SegmentedSource {
     chunk.position.resize(3 * (old + count));
     ReadRows(coordinates_, group + "/Coordinates", H5T_NATIVE_DOUBLE, begin, count, 3,
              chunk.position.data() + 3 * old);
-    if (header_.has_velocity) {
+    if (FillsVelocity()) {
       chunk.velocity.resize(3 * (old + count));
       ReadRows(velocities_, group + "/Velocities", H5T_NATIVE_FLOAT, begin, count, 3,
                chunk.velocity.data() + 3 * old);
     }
     const Hdf5File& file = files_[segment.file];
-    if (header_.has_id) {
+    if (FillsId()) {
       chunk.id.resize(old + count);
       std::uint64_t* ids = chunk.id.data() + old;
       // Signed IDs are read as such, so that a negative one is seen (HDF5's
@@ -874,7 +877,7 @@ class Hdf5Source final : public SegmentedSource {
   // process (AnswerHdf5Request) and appended to `chunk` as AppendRange does.
   void AppendRangeFromReader(const Segment& segment, std::uint64_t begin, std::size_t count, ParticleChunk& chunk) {
     const std::string& path = files_[segment.file].path;
-    const std::string request = RangeRequest(segment, begin, count);
+    const std::string request = RangeRequest(segment, begin, count, PositionsOnly());
     if (read_ahead_ != request) {
       if (!read_ahead_.empty()) reader_->Receive();  // not what was asked for after all
       reader_->Send(request);
@@ -885,8 +888,8 @@ class Hdf5Source final : public SegmentedSource {
     // while this process works on this one.
     const std::uint64_t next = begin + count;
     if (result.returned && !result.bytes.empty() && result.bytes[0] == 'C' && next < segment.count) {
-      read_ahead_ =
-          RangeRequest(segment, next, static_cast<std::size_t>(std::min<std::uint64_t>(count, segment.count - next)));
+      read_ahead_ = RangeRequest(segment, next, static_cast<std::size_t>(std::min<std::uint64_t>(count, segment.count - next)),
+                                 PositionsOnly());
       reader_->Send(read_ahead_);
     }
     const std::string rows =
@@ -899,8 +902,8 @@ class Hdf5Source final : public SegmentedSource {
     if (!answer.empty() && answer[0] == 'E') ThrowAnswered(answer);
     const std::size_t old = chunk.size();
     const std::size_t bytes_per_particle = 3 * sizeof(double) + sizeof(double) +
-                                           (header_.has_velocity ? 3 * sizeof(float) : 0) +
-                                           (header_.has_id ? sizeof(std::uint64_t) : 0) +
+                                           (FillsVelocity() ? 3 * sizeof(float) : 0) +
+                                           (FillsId() ? sizeof(std::uint64_t) : 0) +
                                            (header_.has_smoothing ? sizeof(float) : 0);
     if (answer.size() != 1 + count * bytes_per_particle || answer[0] != 'C') {
       throw Error::BadInput(path, "the process reading " + rows + " with libhdf5 sent a malformed answer (" +
@@ -916,16 +919,17 @@ class Hdf5Source final : public SegmentedSource {
     };
     take(chunk.position, 3 * count);
     take(chunk.mass, count);
-    if (header_.has_velocity) take(chunk.velocity, 3 * count);
-    if (header_.has_id) take(chunk.id, count);
+    if (FillsVelocity()) take(chunk.velocity, 3 * count);
+    if (FillsId()) take(chunk.id, count);
     if (header_.has_smoothing) take(chunk.smoothing, count);
     chunk.type.resize(old + count, static_cast<std::uint8_t>(segment.type));
   }
 
-  static std::string RangeRequest(const Segment& segment, std::uint64_t begin, std::size_t count) {
+  static std::string RangeRequest(const Segment& segment, std::uint64_t begin, std::size_t count,
+                                  bool positions_only) {
     std::string request = "R";
     for (std::uint64_t value : {std::uint64_t{segment.file}, static_cast<std::uint64_t>(segment.type), begin,
-                                std::uint64_t{count}}) {
+                                std::uint64_t{count}, std::uint64_t{positions_only}}) {
       request.append(reinterpret_cast<const char*>(&value), sizeof value);
     }
     return request;
@@ -986,14 +990,14 @@ std::string AnswerHdf5Request(std::string_view request) {
       const std::vector<std::uint8_t> cbor = nlohmann::json::to_cbor(source->State());
       return 'S' + std::string(cbor.begin(), cbor.end());
     }
-    std::uint64_t values[4];
+    std::uint64_t values[5];  // file, type, first particle, count, positions only
     if (request.size() != 1 + sizeof values || request[0] != 'R' || !source) {
       throw std::invalid_argument("a request the HDF5 reader does not know");
     }
     std::memcpy(values, request.data() + 1, sizeof values);
     ParticleChunk chunk;
     source->ReadForOwner(Segment{values[0], static_cast<int>(values[1]), 0}, values[2],
-                         static_cast<std::size_t>(values[3]), chunk);
+                         static_cast<std::size_t>(values[3]), values[4] != 0, chunk);
     std::string answer = "C";
     answer.reserve(1 + chunk.position.size() * sizeof(double) + chunk.mass.size() * sizeof(double) +
                    chunk.velocity.size() * sizeof(float) + chunk.id.size() * sizeof(std::uint64_t) +

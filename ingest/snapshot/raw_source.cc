@@ -66,8 +66,8 @@ class RawSource final : public SegmentedSource {
     file_.ReadAt(begin * layout_.record_bytes, buffer_.data(), buffer_.size(), "records");
     const std::size_t old = chunk.size();
     chunk.position.resize(3 * (old + count));
-    if (header_.has_velocity) chunk.velocity.resize(3 * (old + count));
-    if (header_.has_id) chunk.id.resize(old + count);
+    if (FillsVelocity()) chunk.velocity.resize(3 * (old + count));
+    if (FillsId()) chunk.id.resize(old + count);
     chunk.mass.resize(old + count, 1.0);
     chunk.type.resize(old + count, 0);
     for (std::size_t i = 0; i < count; ++i) {
@@ -82,14 +82,14 @@ class RawSource final : public SegmentedSource {
           case Field::kVx:
           case Field::kVy:
           case Field::kVz:
-            if (header_.has_velocity) {
+            if (FillsVelocity()) {
               auto component = static_cast<std::size_t>(column.field) - static_cast<std::size_t>(Field::kVx);
               chunk.velocity[3 * p + component] = static_cast<float>(LoadReal(bytes, column.scalar, swap_));
             }
             break;
           case Field::kMass: chunk.mass[p] = LoadReal(bytes, column.scalar, swap_); break;
           case Field::kId:
-            if (header_.has_id) chunk.id[p] = LoadId(bytes, column.scalar, begin + i);
+            if (FillsId()) chunk.id[p] = LoadId(bytes, column.scalar, begin + i);
             break;
           case Field::kSkip: break;
         }

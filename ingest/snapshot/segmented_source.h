@@ -29,13 +29,14 @@ class SegmentedSource : public ParticleSource {
   bool Next(ParticleChunk& chunk) override;
   void Rewind() override;
   std::uint64_t Skip() override;
+  void SetPositionsOnly(bool positions_only) override { positions_only_ = positions_only; }
 
  protected:
   explicit SegmentedSource(std::size_t chunk_particles);
 
   // Appends particles [begin, begin + count) of `segment` to `chunk`: position,
-  // mass and type always, velocity, id and smoothing exactly when the header
-  // says so. Calls for one segment come in increasing order of `begin` until
+  // mass and type always, smoothing exactly when the header says so, and
+  // velocity and id exactly when FillsVelocity() and FillsId() say so. Calls for one segment come in increasing order of `begin` until
   // Rewind().
   virtual void AppendRange(const Segment& segment, std::uint64_t begin, std::size_t count,
                            ParticleChunk& chunk) = 0;
@@ -49,6 +50,12 @@ class SegmentedSource : public ParticleSource {
   // Names where `segment`'s smoothing lengths come from in messages, e.g.
   // "block HSML"; asked only of a source whose header has them.
   virtual std::string DescribeSmoothing(const Segment& segment) const;
+
+  // Whether AppendRange fills velocities and IDs: when the header has them
+  // and no pass asked for positions only.
+  bool FillsVelocity() const { return header_.has_velocity && !positions_only_; }
+  bool FillsId() const { return header_.has_id && !positions_only_; }
+  bool PositionsOnly() const { return positions_only_; }
 
   // Fills header_.count_per_type / total_count from segments_ (call once at open).
   void CountSegments(std::size_t type_count);
@@ -67,6 +74,7 @@ class SegmentedSource : public ParticleSource {
 
   std::string box_from_;  // where header_.box_size came from, for messages
   std::size_t chunk_particles_;
+  bool positions_only_ = false;
   std::size_t segment_index_ = 0;
   std::uint64_t segment_offset_ = 0;
 };

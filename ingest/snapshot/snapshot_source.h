@@ -168,6 +168,25 @@ class ParticleSource {
   // smoothing lengths gives none: a segment has no place for them, and a
   // reader of the segments would drop them.
   virtual std::vector<MappableSegment> MappableSegments() const { return {}; }
+  // Asks Next() to leave velocities and IDs out of its chunks from now on
+  // (true), or to fill them again (false), for a pass that needs only
+  // positions, masses, types and smoothing lengths: a format that stores
+  // each column apart (GADGET's blocks, HDF5's datasets) then reads a third
+  // to a half of the bytes. A request only: a source may fill them anyway.
+  virtual void SetPositionsOnly(bool positions_only) { (void)positions_only; }
+};
+
+// Asks `source` for positions only (ParticleSource::SetPositionsOnly) while
+// it lives.
+class PositionsOnlyReads {
+ public:
+  explicit PositionsOnlyReads(ParticleSource& source) : source_(source) { source_.SetPositionsOnly(true); }
+  ~PositionsOnlyReads() { source_.SetPositionsOnly(false); }
+  PositionsOnlyReads(const PositionsOnlyReads&) = delete;
+  PositionsOnlyReads& operator=(const PositionsOnlyReads&) = delete;
+
+ private:
+  ParticleSource& source_;
 };
 
 // Opens a snapshot. `path` is a single file, any one file of a multi-file set

@@ -42,15 +42,22 @@ class VectorSource : public ParticleSource {
     chunk.type.assign(end - next_, 0);
     if (!given_.empty()) chunk.smoothing.assign(given_.begin() + next_, given_.begin() + end);
     next_ = end;
+    ++(positions_only_ ? reads_of_positions_only : reads_of_everything);
     return true;
   }
   void Rewind() override { next_ = 0; }
+  void SetPositionsOnly(bool positions_only) override { positions_only_ = positions_only; }
+  bool positions_only() const { return positions_only_; }
+
+  // Batches handed out while positions only were asked for, and otherwise.
+  int reads_of_positions_only = 0, reads_of_everything = 0;
 
  private:
   std::vector<double> positions_;
   std::vector<float> given_;
   std::size_t chunk_;
   std::size_t next_ = 0;
+  bool positions_only_ = false;
   SnapshotHeader header_;
 };
 
@@ -335,6 +342,27 @@ TEST(SmoothingPass, TheWrappedSourceCarriesTheTable) {
     EXPECT_EQ(next, 1500u);
     EXPECT_TRUE(source->MappableSegments().empty());
     source->Rewind();
+  }
+}
+
+TEST(SmoothingPass, ReadsPositionsOnlyAndAsksForEveryColumnAfterwards) {
+  for (const std::uint64_t budget : {std::uint64_t{0}, std::uint64_t{20000}}) {  // in memory; through files
+    SCOPED_TRACE("budget " + std::to_string(budget));
+    testing_support::TempDir temp("smoothing-pass-positions");
+    SmoothingPassOptions options;
+    options.quiet = true;
+    options.memory_budget = budget;
+    options.temp_dir = temp.path().string();
+    auto inner = std::make_unique<VectorSource>(ClusteredPoints(1500, 10, 6), std::vector<float>{}, 0.0, 100);
+    VectorSource& counted = *inner;
+    std::shared_ptr<const SmoothingLengthTable> table = ComputeSmoothingLengths(counted, options);
+    EXPECT_GT(counted.reads_of_positions_only, 0);
+    EXPECT_EQ(counted.reads_of_everything, 0);
+    EXPECT_FALSE(counted.positions_only());
+    // The source with the lengths passes the request on.
+    auto source = WithSmoothingLengths(std::move(inner), table);
+    source->SetPositionsOnly(true);
+    EXPECT_TRUE(counted.positions_only());
   }
 }
 

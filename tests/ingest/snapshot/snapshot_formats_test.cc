@@ -131,6 +131,43 @@ TEST(Hdf5Reader, DoubleCoordinatesU64IdsFloatMassesRoundTrip) {
   }
 }
 
+// Through the reader process (the default) and in this process alike: a
+// pass asking for positions only gets no velocities or IDs, and the next
+// read after it gets them again, from any point of a segment (the reader
+// reads ahead, and what it read ahead was for the other request).
+TEST(Hdf5Reader, PositionsOnlyLeavesVelocitiesAndIdsOutUntilAskedForAgain) {
+  ScratchDir dir;
+  WriteHdf5(dir.File("snap.hdf5"), {});
+  for (const bool isolate : {true, false}) {
+    SCOPED_TRACE(isolate ? "reader process" : "this process");
+    ReadOptions options;
+    options.chunk_particles = 2;
+    options.isolate_hdf5 = isolate;
+    auto source = OpenSnapshot(dir.File("snap.hdf5"), options);
+    const ParticleChunk everything = ReadAll(*source);
+    source->Rewind();
+    ParticleChunk chunk;
+    ASSERT_TRUE(source->Next(chunk));  // particles 0 and 1, with everything
+    source->SetPositionsOnly(true);
+    std::vector<double> positions(chunk.position);
+    std::size_t count = chunk.size();
+    while (source->Next(chunk)) {
+      EXPECT_TRUE(chunk.velocity.empty());
+      EXPECT_TRUE(chunk.id.empty());
+      EXPECT_EQ(chunk.mass.size(), chunk.size());
+      positions.insert(positions.end(), chunk.position.begin(), chunk.position.end());
+      count += chunk.size();
+    }
+    EXPECT_EQ(count, 8u);
+    EXPECT_EQ(positions, everything.position);
+    source->SetPositionsOnly(false);
+    source->Rewind();
+    const ParticleChunk again = ReadAll(*source);
+    EXPECT_EQ(again.id, everything.id);
+    EXPECT_EQ(again.velocity, everything.velocity);
+  }
+}
+
 // snap.0.hdf5 and snap.1.hdf5: 5 gas and 9 dark-matter particles in all, IDs 1 to 14.
 void WriteTwoFiles(const ScratchDir& dir, const std::vector<std::uint32_t>& total_high) {
   Hdf5Spec first;

@@ -455,6 +455,40 @@ TEST(GadgetReader, NonFiniteCoordinateNamesTheParticle) {
   }
 }
 
+TEST(GadgetReader, PositionsOnlyLeavesVelocitiesAndIdsUnreadUntilAskedForAgain) {
+  ScratchDir dir;
+  GadgetSpec spec = SmallSpec();
+  spec.velocity[3 * 5 + 2] = NAN;  // read, this velocity fails the snapshot
+  WriteBytes(dir.File("snap"), EncodeGadget(spec));
+  auto source = OpenSnapshot(dir.File("snap"), {});
+  ASSERT_TRUE(source->header().has_velocity);
+  ASSERT_TRUE(source->header().has_id);
+
+  source->SetPositionsOnly(true);
+  ParticleChunk positions, chunk;
+  while (source->Next(chunk)) {
+    positions.position.insert(positions.position.end(), chunk.position.begin(), chunk.position.end());
+    positions.mass.insert(positions.mass.end(), chunk.mass.begin(), chunk.mass.end());
+    positions.type.insert(positions.type.end(), chunk.type.begin(), chunk.type.end());
+    positions.velocity.insert(positions.velocity.end(), chunk.velocity.begin(), chunk.velocity.end());
+    positions.id.insert(positions.id.end(), chunk.id.begin(), chunk.id.end());
+  }
+  EXPECT_EQ(positions.position, spec.position);
+  EXPECT_EQ(positions.type.size(), 7u);
+  EXPECT_EQ(positions.mass.size(), 7u);
+  EXPECT_TRUE(positions.velocity.empty());
+  EXPECT_TRUE(positions.id.empty());
+
+  source->SetPositionsOnly(false);
+  source->Rewind();
+  try {
+    ReadAll(*source);
+    FAIL() << "the non-finite velocity was not read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("non-finite velocity"), std::string::npos) << e.what();
+  }
+}
+
 TEST(GadgetReader, NotAGadgetFile) {
   ScratchDir dir;
   WriteBytes(dir.File("junk.dat"), std::string(300, 'x'));
