@@ -888,8 +888,8 @@ class Hdf5Source final : public SegmentedSource {
     // while this process works on this one.
     const std::uint64_t next = begin + count;
     if (result.returned && !result.bytes.empty() && result.bytes[0] == 'C' && next < segment.count) {
-      read_ahead_ = RangeRequest(segment, next, static_cast<std::size_t>(std::min<std::uint64_t>(count, segment.count - next)),
-                                 PositionsOnly());
+      const auto ahead = static_cast<std::size_t>(std::min<std::uint64_t>(count, segment.count - next));
+      read_ahead_ = RangeRequest(segment, next, ahead, PositionsOnly());
       reader_->Send(read_ahead_);
     }
     const std::string rows =

@@ -36,7 +36,8 @@ class SegmentedSource : public ParticleSource {
 
   // Appends particles [begin, begin + count) of `segment` to `chunk`: position,
   // mass and type always, smoothing exactly when the header says so, and
-  // velocity and id exactly when FillsVelocity() and FillsId() say so. Calls for one segment come in increasing order of `begin` until
+  // velocity and id exactly when FillsVelocity() and FillsId() say so.
+  // Calls for one segment come in increasing order of `begin` until
   // Rewind().
   virtual void AppendRange(const Segment& segment, std::uint64_t begin, std::size_t count,
                            ParticleChunk& chunk) = 0;
