@@ -217,6 +217,68 @@ void WritableFile::Close() {
   if (fd >= 0 && ::close(fd) != 0) throw IoErrorFromErrno(path_, "close", errno);
 }
 
+namespace {
+
+Error EndsInsideTheRange(const std::string& path, std::uint64_t offset) {
+  return Error::Corruption(path, "ends at offset " + std::to_string(offset) + ", inside the range to copy");
+}
+
+// The part of CopyFileRange that copy_file_range(2) refuses (across file
+// systems on older kernels, or where a file system lacks it): through a buffer.
+void CopyThroughBuffer(int from_fd, const std::string& from, std::uint64_t from_offset, int to_fd,
+                       const std::string& to, std::uint64_t to_offset, std::uint64_t length) {
+  std::vector<std::uint8_t> buffer(std::min<std::uint64_t>(length, std::uint64_t{4} << 20));
+  while (length > 0) {
+    const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(length, buffer.size()));
+    const ssize_t got = ::pread(from_fd, buffer.data(), want, static_cast<off_t>(from_offset));
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      throw IoErrorFromErrno(from, "pread at offset " + std::to_string(from_offset), errno);
+    }
+    if (got == 0) throw EndsInsideTheRange(from, from_offset);
+    const std::span<const std::uint8_t> piece(buffer.data(), static_cast<std::size_t>(got));
+    if (const int error = WriteAllAt(to_fd, to_offset, piece); error != 0) {
+      throw IoErrorFromErrno(to, "pwrite of " + std::to_string(piece.size()) + " bytes at offset " +
+                                     std::to_string(to_offset), error);
+    }
+    from_offset += piece.size();
+    to_offset += piece.size();
+    length -= piece.size();
+  }
+}
+
+}  // namespace
+
+void CopyFileRange(const std::string& from, std::uint64_t from_offset, const std::string& to,
+                   std::uint64_t to_offset, std::uint64_t length) {
+  const int from_fd = ::open(from.c_str(), O_RDONLY | O_CLOEXEC);
+  if (from_fd < 0) throw IoErrorFromErrno(from, "open", errno);
+  const UniqueFd from_owned(from_fd);
+  const int to_fd = ::open(to.c_str(), O_WRONLY | O_CLOEXEC);
+  if (to_fd < 0) throw IoErrorFromErrno(to, "open", errno);
+  UniqueFd to_owned(to_fd);
+  while (length > 0) {
+    auto in = static_cast<off_t>(from_offset), out = static_cast<off_t>(to_offset);
+    const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(length, std::uint64_t{1} << 30));
+    const ssize_t copied = ::copy_file_range(from_fd, &in, to_fd, &out, want, 0);
+    if (copied < 0) {
+      if (errno == EINTR) continue;
+      if (errno == EXDEV || errno == ENOSYS || errno == EINVAL || errno == EOPNOTSUPP) {
+        CopyThroughBuffer(from_fd, from, from_offset, to_fd, to, to_offset, length);
+        break;
+      }
+      throw IoErrorFromErrno(to, "copy_file_range of " + std::to_string(want) + " bytes from " + from, errno);
+    }
+    if (copied == 0) throw EndsInsideTheRange(from, from_offset);
+    from_offset += static_cast<std::uint64_t>(copied);
+    to_offset += static_cast<std::uint64_t>(copied);
+    length -= static_cast<std::uint64_t>(copied);
+  }
+  if (::fdatasync(to_fd) != 0) throw IoErrorFromErrno(to, "fdatasync", errno);
+  const int fd = to_owned.Release();
+  if (::close(fd) != 0) throw IoErrorFromErrno(to, "close", errno);
+}
+
 void RenameFile(const std::string& from, const std::string& to) {
   if (::rename(from.c_str(), to.c_str()) != 0) {
     throw IoErrorFromErrno(from, "rename to " + to, errno);

@@ -171,6 +171,14 @@ int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::uint8_t> bytes
 // at most IOV_MAX parts a call).
 int WriteAllAt(int fd, std::uint64_t offset, std::span<const std::span<const std::uint8_t>> parts);
 
+// Copies `length` bytes of the file `from`, starting at `from_offset`, into
+// the existing file `to` at `to_offset` (copy_file_range(2), where the kernel
+// copies without this process's memory, else reads and writes), then
+// fdatasyncs `to`. kIo naming the file whose call failed, kCorruption if
+// `from` ends before the range does.
+void CopyFileRange(const std::string& from, std::uint64_t from_offset, const std::string& to,
+                   std::uint64_t to_offset, std::uint64_t length);
+
 // rename(2): atomically replaces `to` on the same file system.
 void RenameFile(const std::string& from, const std::string& to);
 // fsync on the directory, so that renames and creations in it are durable.

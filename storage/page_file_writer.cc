@@ -19,6 +19,11 @@ std::string DirectoryOf(const std::string& path) {
 // disk busy while the builders encode the next blocks.
 constexpr std::size_t kDirectBytesInFlight = std::size_t{16} << 20;
 
+// Blocks take the pages from 1 up to the index's first page in every page file.
+std::uint64_t BlockPageCount(const PageFileHeader& header) {
+  return header.index.first_page > 1 ? header.index.first_page - 1 : 0;
+}
+
 }  // namespace
 
 PageFileWriter::PageFileWriter(std::string path, std::uint32_t page_size, std::uint64_t store_id,
@@ -95,6 +100,50 @@ void PageFileWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> b
     failed_write_ = true;
     throw;
   }
+}
+
+std::uint64_t PageFileWriter::ReserveBlocksOf(const PageFileReader& source) {
+  RequireOpen("ReserveBlocksOf");
+  if (source.page_size() != page_size_) {
+    throw Error::InvalidArgument("blocks of " + source.path() + ", whose pages are " +
+                                 std::to_string(source.page_size()) + " bytes, into " + path_ + ", whose pages are " +
+                                 std::to_string(page_size_));
+  }
+  if (source.header().store_id != store_id_ || source.epoch() != epoch_) {
+    throw Error::InvalidArgument("blocks of " + source.path() + " (epoch " + std::to_string(source.epoch()) +
+                                 " of store " + Hex64(source.header().store_id) + ") into " + path_ + " (epoch " +
+                                 std::to_string(epoch_) + " of store " + Hex64(store_id_) + ")");
+  }
+  std::vector<IndexEntry> added;
+  added.reserve(source.block_count());
+  source.Scan(0, ~std::uint64_t{0}, [&added](const IndexEntry& entry) {
+    added.push_back(entry);
+    return true;
+  });
+  const std::uint64_t pages = BlockPageCount(source.header());
+  MutexLock lock(mutex_);
+  RequireNoFailedWrite("ReserveBlocksOf");
+  for (const IndexEntry& entry : added) {
+    if (keys_.count(entry.key) != 0) {
+      throw Error::InvalidArgument("duplicate key: block " + Hex64(entry.key) + " of " + source.path() +
+                                   " was already added to epoch " + std::to_string(epoch_) + " (" + path_ + ")");
+    }
+  }
+  const std::uint64_t offset = file_->ReserveRange(pages * page_size_);
+  const std::uint64_t first_page = next_page_;
+  next_page_ += pages;
+  for (IndexEntry entry : added) {
+    if (entry.first_page != 0) entry.first_page = entry.first_page - 1 + first_page;
+    keys_.insert(entry.key);
+    entries_.push_back(entry);
+  }
+  return offset;
+}
+
+void CopyBlockPages(const std::string& source, const std::string& target, std::uint64_t offset) {
+  const std::unique_ptr<PageFileReader> reader = PageFileReader::Open(source);
+  const std::uint64_t page_size = reader->page_size();
+  CopyFileRange(source, page_size, target, offset, BlockPageCount(reader->header()) * page_size);
 }
 
 PageFileWriter::Summary PageFileWriter::Finish() {

@@ -21,6 +21,7 @@
 #include "storage/direct_writer.h"
 #include "storage/file.h"
 #include "storage/page_file_format.h"
+#include "storage/page_file_reader.h"
 
 namespace octocosm {
 
@@ -45,6 +46,17 @@ class PageFileWriter {
   // comes from a later AddBlock or from Finish; after it the writer refuses
   // further blocks and Finish.
   void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count) EXCLUDES(mutex_);
+
+  // Makes room for every block of `source`, a finished page file of this page
+  // size, store and epoch, and adds their index entries, moved to the pages
+  // they take here.
+  // Their bytes are then copied as they are (CopyBlockPages, from the
+  // returned byte offset on), by this process or by another that sees this
+  // writer's temporary file, and must be there before Finish, which cannot
+  // check. So an epoch whose blocks several processes built is put together
+  // without reading and writing each block again, and each process may copy
+  // its own. A key already added is kInvalidArgument (nothing is added).
+  std::uint64_t ReserveBlocksOf(const PageFileReader& source) EXCLUDES(mutex_);
 
   // Writes the index and header, makes the file durable and gives it its
   // final name. The writer cannot be used afterwards. Every AddBlock must
@@ -75,5 +87,11 @@ class PageFileWriter {
   std::unordered_set<std::uint64_t> keys_ GUARDED_BY(mutex_);
   bool failed_write_ GUARDED_BY(mutex_) = false;
 };
+
+// Copies the blocks' pages of the finished page file `source` as they are into
+// `target` at `offset`, where PageFileWriter::ReserveBlocksOf made room for
+// them in the temporary file of another page file's writer, and makes them
+// durable.
+void CopyBlockPages(const std::string& source, const std::string& target, std::uint64_t offset);
 
 }  // namespace octocosm

@@ -239,6 +239,16 @@ void StoreWriter::AddBlock(std::uint64_t key, std::span<const std::uint8_t> byte
   epoch_writer_->AddBlock(key, bytes, point_count);
 }
 
+std::uint64_t StoreWriter::ReserveBlocksOf(const PageFileReader& source) {
+  if (!epoch_writer_) throw Error::InvalidArgument("ReserveBlocksOf with no open epoch in " + directory_);
+  return epoch_writer_->ReserveBlocksOf(source);
+}
+
+std::string StoreWriter::open_epoch_temporary_path() const {
+  if (!epoch_writer_) throw Error::InvalidArgument("no open epoch in " + directory_);
+  return epoch_writer_->temporary_path();
+}
+
 void StoreWriter::EndEpoch() {
   if (!epoch_writer_) throw Error::InvalidArgument("EndEpoch with no open epoch in " + directory_);
   PageFileWriter::Summary summary = epoch_writer_->Finish();

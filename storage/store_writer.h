@@ -75,6 +75,12 @@ class StoreWriter {
   // Adds a block to the current epoch (see PageFileWriter::AddBlock); may be
   // called from several threads at once, but not beside the other calls.
   void AddBlock(std::uint64_t key, std::span<const std::uint8_t> bytes, std::uint64_t point_count);
+  // Makes room in the current epoch for the blocks of `source`, a finished
+  // page file, to be copied in as they are at the returned offset of
+  // open_epoch_temporary_path() (see PageFileWriter::ReserveBlocksOf).
+  std::uint64_t ReserveBlocksOf(const PageFileReader& source);
+  // The file the current epoch is written to until EndEpoch.
+  std::string open_epoch_temporary_path() const;
   // Finishes the current epoch's page file (durable, under its final name).
   void EndEpoch();
   // Replaces the dataset metadata (a JSON object) that Finish() will write:

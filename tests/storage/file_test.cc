@@ -10,9 +10,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <optional>
 #include <thread>
+#include <tuple>
 #include <vector>
 
+#include "base/error.h"
 #include "tests/support/temp_dir.h"
 
 namespace octocosm {
@@ -120,6 +123,54 @@ TEST(WriteAllAt, PartsLandOneAfterAnotherBeyondOneCallsWorth) {
   EXPECT_EQ(WriteAllAt(fd, 100, spans), 0);
   ::close(fd);
   EXPECT_EQ(ReadAll(path), expected);
+}
+
+TEST(CopyFileRange, CopiesARangeIntoTheMiddleOfAnotherFile) {
+  testing_support::TempDir dir("file-test");
+  const std::string from = (dir.path() / "from").string(), to = (dir.path() / "to").string();
+  std::vector<std::uint8_t> source(300000);
+  for (std::size_t i = 0; i < source.size(); ++i) source[i] = static_cast<std::uint8_t>(i * 131 + i / 7);
+  {
+    WritableFile file = WritableFile::Create(from);
+    file.Append(source);
+    file.Close();
+  }
+  WritableFile target = WritableFile::Create(to);
+  target.Append(Bytes("head"));
+  const std::uint64_t at = target.ReserveRange(200000);
+  target.Append(Bytes("tail"));
+  target.Close();
+  CopyFileRange(from, 50000, to, at, 200000);
+  std::vector<std::uint8_t> expected = Bytes("head");
+  expected.insert(expected.end(), source.begin() + 50000, source.begin() + 250000);
+  for (char c : std::string("tail")) expected.push_back(static_cast<std::uint8_t>(c));
+  EXPECT_EQ(ReadAll(to), expected);
+}
+
+TEST(CopyFileRange, ARangeBeyondTheSourceOrAMissingFileIsAnErrorNamingIt) {
+  testing_support::TempDir dir("file-test");
+  const std::string from = (dir.path() / "short").string(), to = (dir.path() / "to").string();
+  {
+    WritableFile file = WritableFile::Create(from);
+    file.Append(Bytes("only a few bytes"));
+    file.Close();
+    WritableFile target = WritableFile::Create(to);
+    target.Close();
+  }
+  auto failure = [](auto&& call) -> std::pair<std::optional<ErrorKind>, std::string> {
+    try {
+      call();
+    } catch (const Error& error) {
+      return {error.kind(), error.what()};
+    }
+    return {std::nullopt, ""};
+  };
+  auto [kind, message] = failure([&] { CopyFileRange(from, 4, to, 0, 100); });
+  EXPECT_EQ(kind, ErrorKind::kCorruption) << message;
+  EXPECT_NE(message.find(from), std::string::npos) << message;
+  std::tie(kind, message) = failure([&] { CopyFileRange(from, 0, (dir.path() / "absent").string(), 0, 4); });
+  EXPECT_EQ(kind, ErrorKind::kIo) << message;
+  EXPECT_NE(message.find("absent"), std::string::npos) << message;
 }
 
 }  // namespace

@@ -225,6 +225,88 @@ TEST(PageFileWriter, RejectsDuplicateKeysAndBadPageSizes) {
   }
 }
 
+// Blocks of keys [first_key, first_key + count), sizes from empty to several
+// pages, written to a page file of their own.
+std::map<std::uint64_t, Expected> WriteKeyRange(const std::string& path, std::uint32_t page_size,
+                                                std::uint64_t first_key, std::size_t count, std::uint32_t epoch = 0) {
+  std::map<std::uint64_t, Expected> blocks;
+  PageFileWriter writer(path, page_size, kStoreId, epoch);
+  for (std::uint64_t key = first_key; key < first_key + count; ++key) {
+    const std::size_t size = key % 7 == 0 ? 0 : (key * 2654435761u) % (3 * page_size);
+    blocks[key] = Expected{BlockContent(first_key, key, size), key * 3};
+    writer.AddBlock(key, blocks[key].bytes, blocks[key].point_count);
+  }
+  writer.Finish();
+  return blocks;
+}
+
+TEST(PageFileWriter, BlocksOfOtherPageFilesCopiedInAsTheyAreReadBackExactly) {
+  ScratchDirectory dir;
+  const auto first = WriteKeyRange(dir.File("first.pages"), 4096, 1000, 300);
+  const auto second = WriteKeyRange(dir.File("second.pages"), 4096, 5000, 200);
+  const auto empty = WriteKeyRange(dir.File("empty.pages"), 4096, 9000, 0);
+  std::map<std::uint64_t, Expected> expected;
+  PageFileWriter writer(dir.File("whole.pages"), 4096, kStoreId, 0);
+  auto add = [&](std::uint64_t key, std::size_t size) {
+    expected[key] = Expected{BlockContent(7, key, size), key};
+    writer.AddBlock(key, expected[key].bytes, key);
+  };
+  add(1, 5000);
+  add(2, 0);
+  const std::uint64_t first_at = writer.ReserveBlocksOf(*PageFileReader::Open(dir.File("first.pages")));
+  add(3, 100);
+  const std::uint64_t empty_at = writer.ReserveBlocksOf(*PageFileReader::Open(dir.File("empty.pages")));
+  const std::uint64_t second_at = writer.ReserveBlocksOf(*PageFileReader::Open(dir.File("second.pages")));
+  add(4, 9000);
+  EXPECT_EQ(first_at % 4096, 0u);
+  EXPECT_LT(first_at, second_at);
+  EXPECT_EQ(empty_at, second_at);
+  // Copied while the writer's own blocks are still being written, from other
+  // threads, as other processes would.
+  std::thread copy_first([&] { CopyBlockPages(dir.File("first.pages"), writer.temporary_path(), first_at); });
+  std::thread copy_second([&] { CopyBlockPages(dir.File("second.pages"), writer.temporary_path(), second_at); });
+  CopyBlockPages(dir.File("empty.pages"), writer.temporary_path(), empty_at);
+  add(5, 70000);
+  copy_first.join();
+  copy_second.join();
+  EXPECT_EQ(writer.Finish().block_count, 5u + first.size() + second.size());
+  expected.insert(first.begin(), first.end());
+  expected.insert(second.begin(), second.end());
+  const auto reader = PageFileReader::Open(dir.File("whole.pages"));
+  EXPECT_EQ(reader->block_count(), expected.size());
+  ExpectAllBlocksRead(*reader, expected);
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> ranges;
+  reader->Scan(0, UINT64_MAX, [&](const IndexEntry& entry) {
+    if (entry.page_count > 0) ranges.emplace_back(entry.first_page, entry.first_page + entry.page_count);
+    return true;
+  });
+  std::sort(ranges.begin(), ranges.end());
+  for (std::size_t i = 1; i < ranges.size(); ++i) EXPECT_LE(ranges[i - 1].second, ranges[i].first);
+}
+
+TEST(PageFileWriter, RefusesBlocksOfAnotherPageSizeEpochStoreOrWithKeysItHas) {
+  ScratchDirectory dir;
+  WriteKeyRange(dir.File("big_pages.pages"), 8192, 100, 10);
+  WriteKeyRange(dir.File("epoch_1.pages"), 4096, 200, 10, /*epoch=*/1);
+  WriteKeyRange(dir.File("overlap.pages"), 4096, 300, 10);
+  {
+    PageFileWriter other_store(dir.File("other_store.pages"), 4096, kStoreId + 1, 0);
+    other_store.AddBlock(400, BlockContent(1, 400, 10), 1);
+    other_store.Finish();
+  }
+  PageFileWriter writer(dir.File("whole.pages"), 4096, kStoreId, 0);
+  writer.AddBlock(305, BlockContent(1, 305, 10), 1);
+  for (const char* name : {"big_pages.pages", "epoch_1.pages", "overlap.pages", "other_store.pages"}) {
+    const std::string message = ExpectError(ErrorKind::kInvalidArgument, [&] {
+      writer.ReserveBlocksOf(*PageFileReader::Open(dir.File(name)));
+    });
+    EXPECT_NE(message.find(name), std::string::npos) << message;
+  }
+  // Nothing of a refused file was added.
+  writer.AddBlock(301, BlockContent(1, 301, 10), 1);
+  EXPECT_EQ(writer.Finish().block_count, 2u);
+}
+
 TEST(PageFileWriter, AbandonedWriterLeavesNoFiles) {
   ScratchDirectory dir;
   {
