@@ -628,6 +628,10 @@ class IngestRun {
   // A rank other than 0 of a spread epoch, once its part is finished: tells
   // rank 0 where its blocks and leaves' IDs are and what it built.
   void SendSpreadSummary(const IngestPart& part);
+  // The same rank next: copies its blocks into the store's page file where
+  // rank 0 made room for them, and tells rank 0 when they are there (or
+  // why not).
+  void CopyBlocksForRankZero(const IngestPart& part);
   IngestReport Finish();
   IngestPart FinishPart();
 
@@ -1094,7 +1098,9 @@ void IngestRun::IngestEpoch(std::size_t e) {
 //   3. build   each rank chunks and builds its domains' subtrees one domain
 //              after the other, as a single process builds its chunks; rank
 //              0 merges the levels above every rank's domains from their roots
-//   4. gather  rank 0 copies the others' blocks and leaves' IDs into its
+//   4. gather  rank 0 makes room for the others' blocks in its page file,
+//              where each rank copies its own, as they are, at once; and
+//              reads their leaves' IDs into its
 //              part, which is then the epoch a single process writes
 // Every rank screens (and smooths) the whole epoch alike first, so that all
 // choose the same cube.
@@ -1296,17 +1302,14 @@ void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, Ep
     } catch (const std::out_of_range&) {
       throw Error::Corruption(what, "a summary of a rank's part without its epoch");
     }
-    // Its blocks, as they are, into this rank's epoch.
+    // Room for its blocks, which it copies in itself, while this rank goes on.
     const std::string pages = (fs::path(summary.at("part").at("directory").get<std::string>()) /
                                summary.at("part").at("epochs").at(0).at("file").get<std::string>())
                                   .string();
-    const std::unique_ptr<PageFileReader> reader = PageFileReader::Open(pages);
-    reader->AdviseSequential();
-    reader->Scan(0, ~std::uint64_t{0}, [&](const IndexEntry& entry) {
-      const Bytes block = reader->ReadBlock(entry);
-      store_.AddBlock(entry.key, block, entry.point_count);
-      return true;
-    });
+    const std::uint64_t offset = store_.ReserveBlocksOf(*PageFileReader::Open(pages));
+    const nlohmann::json order = {{"target", store_.open_epoch_temporary_path()}, {"offset", offset}};
+    const std::string order_text = order.dump();
+    group.Send(r, Bytes(order_text.begin(), order_text.end()));
     if (has_id_) {
       LeafIdsFile::ForEach(summary.at("leaf_ids").get<std::string>(),
                            [&](NodeKey leaf, std::span<const std::uint64_t> ids) {
@@ -1318,6 +1321,13 @@ void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, Ep
                                build.id_pairs->Add(pairs);
                              }
                            });
+    }
+  }
+  for (int r = 1; r < group.size(); ++r) {
+    const Bytes answer = group.Receive(r);
+    if (!answer.empty()) {
+      throw Error::Io(label + ": rank " + std::to_string(r), "copying its blocks into the store failed: " +
+                                                                  std::string(answer.begin(), answer.end()));
     }
   }
 }
@@ -1426,6 +1436,21 @@ void IngestRun::SendSpreadSummary(const IngestPart& part) {
   group_->Send(0, Bytes(text.begin(), text.end()));
 }
 
+void IngestRun::CopyBlocksForRankZero(const IngestPart& part) {
+  const Bytes message = group_->Receive(0);
+  std::string failure;
+  try {
+    const nlohmann::json order = nlohmann::json::parse(message.begin(), message.end());
+    CopyBlockPages((fs::path(part.directory) / part.epochs.at(0).file).string(),
+                   order.at("target").get<std::string>(), order.at("offset").get<std::uint64_t>());
+  } catch (const std::exception& e) {
+    // Rank 0 ends the ingest with it, removing what the ranks wrote.
+    failure = e.what();
+    if (failure.empty()) failure = "an unnamed error";
+  }
+  group_->Send(0, Bytes(failure.begin(), failure.end()));
+}
+
 IngestPart IngestRun::FinishPart() {
   IngestPart part;
   part.directory = output_;
@@ -1493,6 +1518,7 @@ IngestPart IngestSpreadInto(const IngestOptions& options, const IngestShare& sha
   IngestPart part = run.FinishPart();
   if (group.rank() == 0) return part;
   run.SendSpreadSummary(part);
+  run.CopyBlocksForRankZero(part);
   part.epochs.clear();
   part.id_epochs.clear();
   part.records.clear();
