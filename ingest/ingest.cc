@@ -664,7 +664,8 @@ class IngestRun {
   void BuildDomains(const std::string& label, const Cube& cube, const std::vector<NodeKey>& mine,
                     const std::vector<DomainFile>& files, const ParticleColumns& columns, EpochBuild& build,
                     EpochReport& epoch_report, TopLevelMerger* top);
-  void GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report, TopLevelMerger& top);
+  void GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report, TopLevelMerger& top,
+                        PhaseClock& clock);
 
   const IngestOptions& options_;
   const std::string output_;
@@ -1268,7 +1269,7 @@ void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const s
 // order (depth-first order: ranks hold consecutive runs of domains), then
 // their blocks and leaves' IDs.
 void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report,
-                                 TopLevelMerger& top) {
+                                 TopLevelMerger& top, PhaseClock& clock) {
   RankGroup& group = *group_;
   for (int r = 1; r < group.size(); ++r) {
     const std::string what = label + ": rank " + std::to_string(r);
@@ -1282,6 +1283,8 @@ void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, Ep
       top.Add(key, std::move(root));
     }
   }
+  // Until here mostly waiting for the other ranks' builds.
+  clock.Lap("wait");
   const NodePoints root = top.Finish();
   for (double w : root.weight) epoch_report.mass += w;
   for (int r = 1; r < group.size(); ++r) {
@@ -1415,7 +1418,7 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
     fs::remove(leaf_ids_->path());
     leaf_ids_.reset();
   }
-  GatherOtherRanks(label, build, epoch_report, *top);
+  GatherOtherRanks(label, build, epoch_report, *top, clock);
   clock.Lap("gather");
   if (has_id_) WriteIdIndex(header, id_table.get(), id_pairs.get());
   store_.EndEpoch();
