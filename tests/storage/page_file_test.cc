@@ -86,6 +86,17 @@ void ExpectAllBlocksRead(const PageFileReader& reader, const std::map<std::uint6
   }
 }
 
+// Every block on pages of its own: none overlaps another.
+void ExpectNoBlocksOverlap(const PageFileReader& reader) {
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> ranges;
+  reader.Scan(0, UINT64_MAX, [&](const IndexEntry& entry) {
+    if (entry.page_count > 0) ranges.emplace_back(entry.first_page, entry.first_page + entry.page_count);
+    return true;
+  });
+  std::sort(ranges.begin(), ranges.end());
+  for (std::size_t i = 1; i < ranges.size(); ++i) EXPECT_LE(ranges[i - 1].second, ranges[i].first);
+}
+
 class PageFileRoundTrip : public ::testing::TestWithParam<std::uint32_t> {};
 
 TEST_P(PageFileRoundTrip, RandomBlocksReadBackExactly) {
@@ -157,14 +168,7 @@ TEST(PageFileWriter, BlocksAddedFromSeveralThreadsReadBackExactly) {
   auto reader = PageFileReader::Open(path);
   EXPECT_EQ(reader->block_count(), expected.size());
   ExpectAllBlocksRead(*reader, expected);
-  // Every block on pages of its own: none overlaps another.
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> ranges;
-  reader->Scan(0, UINT64_MAX, [&](const IndexEntry& entry) {
-    if (entry.page_count > 0) ranges.emplace_back(entry.first_page, entry.first_page + entry.page_count);
-    return true;
-  });
-  std::sort(ranges.begin(), ranges.end());
-  for (std::size_t i = 1; i < ranges.size(); ++i) EXPECT_LE(ranges[i - 1].second, ranges[i].first);
+  ExpectNoBlocksOverlap(*reader);
 }
 
 // A write that fails (here: past the file size limit, EFBIG) is an I/O error,
@@ -275,13 +279,7 @@ TEST(PageFileWriter, BlocksOfOtherPageFilesCopiedInAsTheyAreReadBackExactly) {
   const auto reader = PageFileReader::Open(dir.File("whole.pages"));
   EXPECT_EQ(reader->block_count(), expected.size());
   ExpectAllBlocksRead(*reader, expected);
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> ranges;
-  reader->Scan(0, UINT64_MAX, [&](const IndexEntry& entry) {
-    if (entry.page_count > 0) ranges.emplace_back(entry.first_page, entry.first_page + entry.page_count);
-    return true;
-  });
-  std::sort(ranges.begin(), ranges.end());
-  for (std::size_t i = 1; i < ranges.size(); ++i) EXPECT_LE(ranges[i - 1].second, ranges[i].first);
+  ExpectNoBlocksOverlap(*reader);
 }
 
 TEST(PageFileWriter, RefusesBlocksOfAnotherPageSizeEpochStoreOrWithKeysItHas) {
