@@ -49,13 +49,13 @@ class PageFileWriter {
 
   // Makes room for every block of `source`, a finished page file of this page
   // size, store and epoch, and adds their index entries, moved to the pages
-  // they take here.
-  // Their bytes are then copied as they are (CopyBlockPages, from the
-  // returned byte offset on), by this process or by another that sees this
-  // writer's temporary file, and must be there before Finish, which cannot
-  // check. So an epoch whose blocks several processes built is put together
-  // without reading and writing each block again, and each process may copy
-  // its own. A key already added is kInvalidArgument (nothing is added).
+  // they take here. Their bytes are then copied as they are (CopyBlockPages,
+  // from the returned byte offset on), by this process or by another that
+  // sees this writer's temporary file, and must be there before Finish, which
+  // cannot check. So an epoch whose blocks several processes built is put
+  // together without reading and writing each block again, and each process
+  // may copy its own. Another page size, store or epoch, or a key already
+  // added, is kInvalidArgument (nothing is added).
   std::uint64_t ReserveBlocksOf(const PageFileReader& source) EXCLUDES(mutex_);
 
   // Writes the index and header, makes the file durable and gives it its
