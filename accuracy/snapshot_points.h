@@ -9,7 +9,7 @@
 namespace octocosm::accuracy {
 
 // Reads every particle of `path` (any format OpenSnapshot detects; velocities
-// are skipped). Throws as the readers do (Error::BadInput naming the file).
+// and smoothing lengths are skipped). Throws as the readers do (Error::BadInput naming the file).
 ParticleChunk ReadSnapshotPoints(const std::string& path);
 
 }  // namespace octocosm::accuracy

@@ -50,6 +50,9 @@ struct ParticleChunk {
   bool has_smoothing() const { return !smoothing.empty(); }
 
   void clear();
+  // Appends every column of `other` to this chunk's, as they are (a column
+  // one of them lacks stays as it was in this one).
+  void Append(const ParticleChunk& other);
 };
 
 // The vector columns of a ParticleChunk or NodePoints (const or not), indexed
@@ -67,6 +70,18 @@ inline void ParticleChunk::clear() {
   type.clear();
   smoothing.clear();
   for (std::vector<float>* column : VectorColumns(*this)) column->clear();
+}
+
+inline void ParticleChunk::Append(const ParticleChunk& other) {
+  const auto append = [](auto& to, const auto& from) { to.insert(to.end(), from.begin(), from.end()); };
+  append(position, other.position);
+  append(mass, other.mass);
+  append(id, other.id);
+  append(type, other.type);
+  append(smoothing, other.smoothing);
+  const auto to = VectorColumns(*this);
+  const auto from = VectorColumns(other);
+  for (std::size_t c = 0; c < to.size(); ++c) append(*to[c], *from[c]);
 }
 
 }  // namespace octocosm

@@ -175,14 +175,7 @@ TEST(ParticleFile, WritersTakingTurnsOnThreadsKeepTheirOwnBytes) {
           const ParticleChunk batch = RandomChunk(static_cast<std::size_t>(1 + (round * 7919 + f * 104729) % 30000),
                                                   static_cast<std::uint64_t>(round * kFiles + f));
           writers[f].Append(batch);
-          ParticleChunk& all = written[f];
-          all.position.insert(all.position.end(), batch.position.begin(), batch.position.end());
-          all.mass.insert(all.mass.end(), batch.mass.begin(), batch.mass.end());
-          all.id.insert(all.id.end(), batch.id.begin(), batch.id.end());
-          all.type.insert(all.type.end(), batch.type.begin(), batch.type.end());
-          all.smoothing.insert(all.smoothing.end(), batch.smoothing.begin(), batch.smoothing.end());
-          all.velocity.insert(all.velocity.end(), batch.velocity.begin(), batch.velocity.end());
-          all.displacement.insert(all.displacement.end(), batch.displacement.begin(), batch.displacement.end());
+          written[f].Append(batch);
         }
       });
     }

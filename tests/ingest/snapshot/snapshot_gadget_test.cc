@@ -467,7 +467,7 @@ TEST(GadgetReader, PositionsOnlyLeavesVelocitiesAndIdsUnreadUntilAskedForAgain) 
   source->SetPositionsOnly(true);
   ParticleChunk positions, chunk;
   // Not ReadAll: its chunks must carry every column the header announces.
-  while (source->Next(chunk)) AppendChunk(positions, chunk);
+  while (source->Next(chunk)) positions.Append(chunk);
   EXPECT_EQ(positions.position, spec.position);
   EXPECT_EQ(positions.type.size(), 7u);
   EXPECT_EQ(positions.mass.size(), 7u);

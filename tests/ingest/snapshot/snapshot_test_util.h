@@ -15,16 +15,6 @@
 
 namespace octocosm {
 
-// Appends every column of `chunk` to those of `all`, as they are.
-inline void AppendChunk(ParticleChunk& all, const ParticleChunk& chunk) {
-  all.position.insert(all.position.end(), chunk.position.begin(), chunk.position.end());
-  all.velocity.insert(all.velocity.end(), chunk.velocity.begin(), chunk.velocity.end());
-  all.mass.insert(all.mass.end(), chunk.mass.begin(), chunk.mass.end());
-  all.id.insert(all.id.end(), chunk.id.begin(), chunk.id.end());
-  all.type.insert(all.type.end(), chunk.type.begin(), chunk.type.end());
-  all.smoothing.insert(all.smoothing.end(), chunk.smoothing.begin(), chunk.smoothing.end());
-}
-
 // Concatenates every chunk of `source` (from where it stands to the end),
 // checking the per-chunk invariants on the way.
 inline ParticleChunk ReadAll(ParticleSource& source, std::size_t* chunks = nullptr) {
@@ -47,7 +37,7 @@ inline ParticleChunk ReadAll(ParticleSource& source, std::size_t* chunks = nullp
     if (chunk.has_id()) {
       EXPECT_EQ(chunk.id.size(), chunk.size());
     }
-    AppendChunk(all, chunk);
+    all.Append(chunk);
   }
   EXPECT_EQ(chunk.size(), 0u) << "Next() returning false must leave the chunk empty";
   if (chunks != nullptr) *chunks = count;
