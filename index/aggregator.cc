@@ -189,6 +189,10 @@ class CellCutter {
     const std::uint32_t size = cell.end - cell.begin;
     const int bin_count = static_cast<int>(std::min<std::uint32_t>(kCutBins, 4 * size));
     const double per_bin = bin_count / (hi - lo);
+    // Members lie in space in about the order they come, so neighbours often
+    // fall into one bin, and each addition to it would wait for the one
+    // before: members alternate between two sets of bins, summed once the
+    // pass is done.
     const std::vector<Member>& from = copies_[cell.copy];
     for (std::uint32_t k = cell.begin; k < cell.end; ++k) {
       const Member& p = from[k];
@@ -196,8 +200,8 @@ class CellCutter {
       const double t = project(p, d);
       const int b = std::clamp(static_cast<int>((t - lo) * per_bin), 0, bin_count - 1);
       bin_[k] = static_cast<std::uint16_t>(b);
-      BinSums& bin = bins_[static_cast<std::size_t>(b)];
-      if (bin.points == 0) occupied_[static_cast<std::size_t>(b) / 64] |= std::uint64_t{1} << (b % 64);
+      BinSums& bin = bins_[static_cast<std::size_t>(b) + kCutBins * (k & 1)];
+      occupied_[static_cast<std::size_t>(b) / 64] |= std::uint64_t{1} << (b % 64);
       ++bin.points;
       bin.mass += p.weight;
       for (int a = 0; a < 3; ++a) bin.first[a] += p.weight * d[a];
@@ -218,7 +222,11 @@ class CellCutter {
     // The boundary between bins that leaves the least squared spread (none
     // when every member fell into one bin).
     BinSums all, below;
-    for (const std::uint16_t b : filled_) all.Add(bins_[b]);
+    for (const std::uint16_t b : filled_) {
+      bins_[b].Add(bins_[b + kCutBins]);
+      bins_[b + kCutBins] = BinSums{};
+      all.Add(bins_[b]);
+    }
     double best = INFINITY;
     int cut = 0;
     for (const std::uint16_t b : filled_) {
@@ -260,9 +268,9 @@ class CellCutter {
   std::array<std::vector<Member>, 2> copies_;
   double pixel2_;                   // a pixel where the node is drawn, squared, in node edges
   std::vector<std::uint16_t> bin_;  // each member's bin, during a cut
-  std::vector<BinSums> bins_ = std::vector<BinSums>(kCutBins);  // all empty between cuts
-  std::array<std::uint64_t, kCutBins / 64> occupied_{};          // which bins hold members, during a cut
-  std::vector<std::uint16_t> filled_;                              // the bins that hold members, in order
+  std::vector<BinSums> bins_ = std::vector<BinSums>(2 * kCutBins);  // two sets, all empty between cuts
+  std::array<std::uint64_t, kCutBins / 64> occupied_{};              // which bins hold members, during a cut
+  std::vector<std::uint16_t> filled_;                                  // the bins that hold members, in order
 };
 
 }  // namespace
