@@ -178,19 +178,6 @@ void BucketByCell(const Cube& cube, const ParticleChunk& batch, NodeKey root, in
               1);
 }
 
-// Appends every point of `from` to `to` (the columns `from` carries).
-void AppendWhole(const ParticleChunk& from, ParticleChunk& to) {
-  const auto append = [](const auto& source, auto& target) { target.insert(target.end(), source.begin(), source.end()); };
-  append(from.position, to.position);
-  append(from.mass, to.mass);
-  append(from.type, to.type);
-  append(from.id, to.id);
-  append(from.smoothing, to.smoothing);
-  const auto source = VectorColumns(from);
-  const auto target = VectorColumns(to);
-  for (std::size_t v = 0; v < kVectorColumnCount; ++v) append(*source[v], *target[v]);
-}
-
 }  // namespace
 
 ParticleChunk Chunk::TakePoints() {
@@ -204,7 +191,7 @@ ParticleChunk Chunk::TakePoints() {
   std::remove(path.c_str());
   path.clear();
   if (all.size() == 0) return from_file;
-  AppendWhole(all, from_file);
+  from_file.Append(all);
   return from_file;
 }
 
@@ -563,7 +550,7 @@ std::vector<Chunk> Chunker::MergeLeafSubtrees(NodeKey root, std::vector<Chunk> c
       if (!chunks[i].resident.empty()) {
         resident.push_back(&chunks[i]);
       } else {
-        AppendWhole(chunks[i].TakePoints(), merged.points);
+        merged.points.Append(chunks[i].TakePoints());
       }
     }
     if (!resident.empty()) JoinResident(resident, merged);
