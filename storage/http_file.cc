@@ -145,19 +145,31 @@ struct HttpFile::Response {
   std::string etag;
   std::string last_modified;
   std::string content_range;
-  std::span<std::uint8_t> out;  // where the body goes
-  std::size_t body_bytes = 0;   // written into `out`
-  bool overflow = false;        // the body was longer than `out`: cut off
+  std::size_t length = 0;                 // the body expected
+  std::span<const BodyPiece> pieces;      // where it goes
+  std::size_t next_piece = 0;             // the first piece not yet filled
+  std::size_t body_bytes = 0;             // received
+  bool overflow = false;                  // the body was longer than `length`: cut off
 
+  // Copies each arriving run of the body into the pieces it overlaps, so
+  // that ranges read together need no buffer of their own.
   static std::size_t OnBody(char* data, std::size_t size, std::size_t count, void* self) {
     auto* response = static_cast<Response*>(self);
     const std::size_t bytes = size * count;
-    if (bytes > response->out.size() - response->body_bytes) {
+    if (bytes > response->length - response->body_bytes) {
       response->overflow = true;
       return 0;  // stops the transfer (CURLE_WRITE_ERROR)
     }
-    std::memcpy(response->out.data() + response->body_bytes, data, bytes);
-    response->body_bytes += bytes;
+    const std::size_t begin = response->body_bytes, end = begin + bytes;
+    const std::span<const BodyPiece> pieces = response->pieces;
+    std::size_t& next = response->next_piece;
+    while (next < pieces.size() && pieces[next].at + pieces[next].out.size() <= begin) ++next;
+    for (std::size_t p = next; p < pieces.size() && pieces[p].at < end; ++p) {
+      const std::size_t from = std::max(begin, pieces[p].at);
+      const std::size_t to = std::min(end, pieces[p].at + pieces[p].out.size());
+      if (from < to) std::memcpy(pieces[p].out.data() + (from - pieces[p].at), data + (from - begin), to - from);
+    }
+    response->body_bytes = end;
     return bytes;
   }
 
@@ -192,7 +204,8 @@ std::unique_ptr<HttpFile> HttpFile::Open(const std::string& url, HttpOptions opt
   std::unique_ptr<HttpFile> file(new HttpFile(url, options));
   file->head_.resize(kHeadBytes);
   Opened opened;
-  file->FetchRange(0, file->head_, &opened);
+  const BodyPiece head{0, file->head_};
+  file->FetchRange(0, file->head_.size(), {&head, 1}, &opened);
   file->head_.resize(opened.head_bytes);
   file->size_ = opened.size;
   file->etag_ = std::move(opened.etag);
@@ -250,15 +263,17 @@ void HttpFile::ReadRanges(std::span<RangeRead> ranges) const {
   }
   if (missing.empty()) return;
   // One request for all the missing ranges: a round trip to the server costs
-  // more than the few bytes between them.
+  // more than the few bytes between them. Each range's bytes go straight
+  // into its buffer.
   const std::uint64_t first = missing.front()->offset;
-  std::vector<std::uint8_t> span(static_cast<std::size_t>(missing.back()->offset + missing.back()->got - first));
-  FetchRange(first, span, nullptr);
-  for (RangeRead* range : missing) {
-    const auto bytes = std::span<const std::uint8_t>(span).subspan(static_cast<std::size_t>(range->offset - first), range->got);
-    std::memcpy(range->out.data(), bytes.data(), bytes.size());
-    if (!cache_key_.empty()) options_.cache->Put(cache_key_, range->offset, bytes);
+  std::vector<BodyPiece> pieces;
+  pieces.reserve(missing.size());
+  for (const RangeRead* range : missing) {
+    pieces.push_back({static_cast<std::size_t>(range->offset - first), range->out.first(range->got)});
   }
+  FetchRange(first, static_cast<std::size_t>(missing.back()->offset + missing.back()->got - first), pieces, nullptr);
+  if (cache_key_.empty()) return;
+  for (const RangeRead* range : missing) options_.cache->Put(cache_key_, range->offset, range->out.first(range->got));
 }
 
 void HttpFile::ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) const {
@@ -267,7 +282,8 @@ void HttpFile::ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) cons
 }
 
 void HttpFile::FetchAndCache(std::uint64_t offset, std::span<std::uint8_t> out) const {
-  FetchRange(offset, out, nullptr);
+  const BodyPiece whole{0, out};
+  FetchRange(offset, out.size(), {&whole, 1}, nullptr);
   if (!cache_key_.empty()) options_.cache->Put(cache_key_, offset, out);
 }
 
@@ -283,13 +299,14 @@ void HttpFile::ThrowIfReadCancelled(std::uint64_t offset, std::size_t length) co
                             ": read cancelled (no longer wanted)");
 }
 
-void HttpFile::FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const {
+void HttpFile::FetchRange(std::uint64_t offset, std::size_t length, std::span<const BodyPiece> pieces,
+                          Opened* opened) const {
   std::unique_ptr<CurlHandle> handle = CurlHandlePool::Shared().Acquire();
   std::string failure;
   double backoff_s = options_.first_backoff_s;
   for (int attempt = 0;; ++attempt) {
-    ThrowIfReadCancelled(offset, out.size());
-    if (TryFetchRange(handle->curl, handle->error, offset, out, opened, failure)) break;
+    ThrowIfReadCancelled(offset, length);
+    if (TryFetchRange(handle->curl, handle->error, offset, length, pieces, opened, failure)) break;
     if (attempt >= options_.retries) {
       throw Error::Io(url_, failure + " (gave up after " + std::to_string(attempt + 1) + " attempts)");
     }
@@ -300,12 +317,13 @@ void HttpFile::FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Ope
   CurlHandlePool::Shared().Release(std::move(handle));
 }
 
-bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
-                             std::string& failure) const {
-  const std::uint64_t last = offset + out.size() - 1;
+bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_t offset, std::size_t length,
+                             std::span<const BodyPiece> pieces, Opened* opened, std::string& failure) const {
+  const std::uint64_t last = offset + length - 1;
   const std::string range = std::to_string(offset) + "-" + std::to_string(last);
   Response response;
-  response.out = out;
+  response.length = length;
+  response.pieces = pieces;
 
   CURL* curl = static_cast<CURL*>(curl_handle);
   error_buffer[0] = '\0';
@@ -336,7 +354,7 @@ bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_
   bytes_fetched_.fetch_add(response.body_bytes, std::memory_order_relaxed);
 
   const std::string what = "bytes " + range;
-  if (response.code == CURLE_ABORTED_BY_CALLBACK) ThrowIfReadCancelled(offset, out.size());
+  if (response.code == CURLE_ABORTED_BY_CALLBACK) ThrowIfReadCancelled(offset, length);
   if (response.code != CURLE_OK && !(response.code == CURLE_WRITE_ERROR && response.overflow)) {
     failure = what + ": " + (error_buffer[0] != '\0' ? std::string(error_buffer) : curl_easy_strerror(response.code));
     return false;  // no connection, a timeout, a cut transfer: may pass
@@ -407,9 +425,9 @@ bool HttpFile::TryFetchRange(void* curl_handle, char* error_buffer, std::uint64_
   if (content_range.first != offset || content_range.last != last) {
     throw Error::Io(url_, "the server answered a request for " + what + " with " + response.content_range);
   }
-  if (response.overflow || response.body_bytes != out.size()) {
+  if (response.overflow || response.body_bytes != length) {
     failure = what + ": the server sent " + std::to_string(response.body_bytes) + (response.overflow ? "+" : "") +
-              " of " + std::to_string(out.size()) + " bytes";
+              " of " + std::to_string(length) + " bytes";
     return false;
   }
   return true;

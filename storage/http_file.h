@@ -98,18 +98,26 @@ class HttpFile final : public ReadableFile {
   // A range from the cache, else fetched (and then cached).
   void ReadRange(std::uint64_t offset, std::span<std::uint8_t> out) const;
   void FetchAndCache(std::uint64_t offset, std::span<std::uint8_t> out) const;
-  // One range request with retries; fills `out` with exactly bytes
-  // [offset, offset + out.size()) of the file, or throws. At open
-  // (`opened` not null) the file's size is not known yet: the answer may be
-  // shorter than `out` and tells the size and validators.
-  void FetchRange(std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened) const;
+  // Where the body of one range request goes: its bytes [at, at +
+  // out.size()) into `out`. Pieces ascend without overlapping; the bytes
+  // between them are dropped as they arrive.
+  struct BodyPiece {
+    std::size_t at = 0;
+    std::span<std::uint8_t> out;
+  };
+  // One range request with retries for exactly bytes [offset, offset +
+  // length) of the file, each piece filled, or throws. At open (`opened`
+  // not null) the file's size is not known yet: the answer may be shorter
+  // than `length` and tells the size and validators.
+  void FetchRange(std::uint64_t offset, std::size_t length, std::span<const BodyPiece> pieces,
+                  Opened* opened) const;
   // Throws kIo "read cancelled" when the read on this thread is
   // (storage/read_cancellation.h).
   void ThrowIfReadCancelled(std::uint64_t offset, std::size_t length) const;
   // One attempt. Returns false for a failure worth retrying (described in
   // `failure`); throws for one that is not.
-  bool TryFetchRange(void* curl, char* error_buffer, std::uint64_t offset, std::span<std::uint8_t> out, Opened* opened,
-                     std::string& failure) const;
+  bool TryFetchRange(void* curl, char* error_buffer, std::uint64_t offset, std::size_t length,
+                     std::span<const BodyPiece> pieces, Opened* opened, std::string& failure) const;
 
   std::string url_;
   HttpOptions options_;

@@ -115,6 +115,32 @@ std::vector<RangeRead> Ranges(std::vector<std::pair<std::uint64_t, std::size_t>>
   return ranges;
 }
 
+// One answer of several megabytes arrives in many runs, which start and end
+// anywhere: inside a range, between two, across several small ones.
+TEST(HttpFile, ManyRangesOfOneRequestEachGetTheirBytesAcrossTheAnswersRuns) {
+  FakeHttpServer server;
+  const std::string contents = RandomBytes(6 << 20, 5);
+  server.Put("/f", contents);
+  std::mt19937_64 random(11);
+  std::vector<std::pair<std::uint64_t, std::size_t>> wanted;
+  for (std::uint64_t at = 70000; wanted.size() < 300;) {
+    const std::size_t length = 1 + random() % (random() % 4 == 0 ? 200000 : 3000);
+    if (at + length > contents.size()) break;
+    wanted.emplace_back(at, length);
+    at += length + random() % 3 * (random() % 5000);  // a third adjacent, the rest with a gap
+  }
+  ASSERT_GT(wanted.back().first, std::uint64_t{2} << 20) << "an answer longer than libcurl's receive buffer";
+  auto file = HttpFile::Open(server.Url("/f"), QuickOptions());
+  std::vector<std::string> buffers;
+  std::vector<RangeRead> ranges = Ranges(wanted, buffers);
+  file->ReadRanges(ranges);
+  for (std::size_t i = 0; i < wanted.size(); ++i) {
+    ASSERT_EQ(ranges[i].got, wanted[i].second) << i;
+    ASSERT_EQ(buffers[i], contents.substr(wanted[i].first, wanted[i].second)) << "range " << i;
+  }
+  EXPECT_EQ(file->stats().requests, 2u);  // the open and one for all ranges
+}
+
 TEST(HttpFile, SeveralRangesComeWithOneRequestAndAreCachedOneByOne) {
   FakeHttpServer server;
   const std::string contents = RandomBytes(1 << 20, 3);
