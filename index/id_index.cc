@@ -30,13 +30,31 @@ std::uint64_t GetU64(const Bytes& in, std::size_t offset) { return octocosm::Get
 std::uint32_t GetU32(const Bytes& in, std::size_t offset) { return octocosm::GetU32(in.data() + offset); }
 std::uint16_t GetU16(const Bytes& in, std::size_t offset) { return octocosm::GetU16(in.data() + offset); }
 
+void CheckLeafKeys(std::span<const std::uint64_t> leaves) {
+  for (const std::uint64_t leaf : leaves) {
+    if (!NodeKey::FromValue(leaf).IsValid()) {
+      throw Error::InvalidArgument("IdIndexEpochWriter: invalid leaf key " + std::to_string(leaf));
+    }
+  }
+}
+
 }  // namespace
 
-IdIndexEpochWriter::IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size)
+IdIndexEpochWriter::IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size, std::uint64_t first_bucket)
     : store_(store),
       page_size_(page_size),
-      bucket_pairs_(std::max<std::size_t>((page_size - 16) / 16, 1)),
+      first_bucket_(first_bucket),
+      bucket_pairs_(BucketPairs(page_size)),
       bucket_(16 + 16 * bucket_pairs_) {}
+
+std::size_t IdIndexEpochWriter::BucketPairs(std::uint32_t page_size) {
+  return std::max<std::size_t>((page_size - 16) / 16, 1);
+}
+
+std::size_t IdIndexEpochWriter::TableBucketSlots(std::uint32_t page_size, std::uint64_t leaf_count) {
+  const std::size_t slot_bytes = leaf_count <= kMostNarrowOrdinal ? 2 : 4;
+  return std::max<std::size_t>((page_size - kTableHeader) / slot_bytes, 1);
+}
 
 void IdIndexEpochWriter::Add(std::uint64_t id, NodeKey leaf) {
   if (finished_) throw Error::InvalidArgument("IdIndexEpochWriter: Add after Finish");
@@ -57,39 +75,47 @@ void IdIndexEpochWriter::FlushBucket() {
   PutU32(bucket_.data(), kBucketMagic);
   PutU32(bucket_.data() + 4, kPairsVersion);
   PutU64(bucket_.data() + 8, bucket_fill_);
-  store_.AddBlock(first_ids_.size() - 1, std::span<const std::uint8_t>(bucket_.data(), 16 + 16 * bucket_fill_),
-                  bucket_fill_);
+  store_.AddBlock(first_bucket_ + first_ids_.size() - 1,
+                  std::span<const std::uint8_t>(bucket_.data(), 16 + 16 * bucket_fill_), bucket_fill_);
   bucket_fill_ = 0;
 }
 
 void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots,
                                   std::span<const std::uint64_t> leaves) {
-  AddTableOf(first_id, slots, leaves);
+  CheckLeafKeys(leaves);
+  AddTableOf(first_id, slots, leaves.size());
+  WriteLeafTable(store_, leaves);
 }
 
 void IdIndexEpochWriter::AddTable(std::uint64_t first_id, std::span<const std::uint16_t> slots,
                                   std::span<const std::uint64_t> leaves) {
-  AddTableOf(first_id, slots, leaves);
+  CheckLeafKeys(leaves);
+  AddTableOf(first_id, slots, leaves.size());
+  WriteLeafTable(store_, leaves);
+}
+
+void IdIndexEpochWriter::AddTableBuckets(std::uint64_t first_id, std::span<const std::uint32_t> slots,
+                                         std::uint64_t leaf_count) {
+  AddTableOf(first_id, slots, leaf_count);
+}
+
+void IdIndexEpochWriter::AddTableBuckets(std::uint64_t first_id, std::span<const std::uint16_t> slots,
+                                         std::uint64_t leaf_count) {
+  AddTableOf(first_id, slots, leaf_count);
 }
 
 template <typename Slot>
-void IdIndexEpochWriter::AddTableOf(std::uint64_t first_id, std::span<const Slot> slots,
-                                    std::span<const std::uint64_t> leaves) {
+void IdIndexEpochWriter::AddTableOf(std::uint64_t first_id, std::span<const Slot> slots, std::uint64_t leaf_count) {
   if (finished_) throw Error::InvalidArgument("IdIndexEpochWriter: AddTable after Finish");
   if (has_table_ || total_ > 0) throw Error::InvalidArgument("IdIndexEpochWriter: AddTable after Add or AddTable");
   if (!slots.empty() && slots.size() - 1 > ~std::uint64_t{0} - first_id) {
     throw Error::InvalidArgument("IdIndexEpochWriter: a table of " + std::to_string(slots.size()) +
                                  " IDs from " + std::to_string(first_id) + " runs past 2^64 - 1");
   }
-  for (const std::uint64_t leaf : leaves) {
-    if (!NodeKey::FromValue(leaf).IsValid()) {
-      throw Error::InvalidArgument("IdIndexEpochWriter: invalid leaf key " + std::to_string(leaf));
-    }
-  }
   has_table_ = true;
-  const bool narrow = leaves.size() <= kMostNarrowOrdinal;
+  const bool narrow = leaf_count <= kMostNarrowOrdinal;
   const std::size_t slot_bytes = narrow ? 2 : 4;
-  const std::size_t per_bucket = std::max<std::size_t>((page_size_ - kTableHeader) / slot_bytes, 1);
+  const std::size_t per_bucket = TableBucketSlots(page_size_, leaf_count);
   Bytes block(kTableHeader + slot_bytes * std::min(per_bucket, slots.size()));
   for (std::size_t begin = 0; begin < slots.size(); begin += per_bucket) {
     const std::size_t m = std::min(per_bucket, slots.size() - begin);
@@ -100,10 +126,10 @@ void IdIndexEpochWriter::AddTableOf(std::uint64_t first_id, std::span<const Slot
       present += slot[i] != 0;
       most = std::max<std::uint32_t>(most, slot[i]);
     }
-    if (most > leaves.size()) {
+    if (most > leaf_count) {
       throw Error::InvalidArgument("IdIndexEpochWriter: ordinal " + std::to_string(most) + " for ID " +
                                    std::to_string(first_id + begin) + ".. lies past the " +
-                                   std::to_string(leaves.size()) + " leaves");
+                                   std::to_string(leaf_count) + " leaves");
     }
     if (present == 0) continue;  // a look-up lands on the bucket before, whose slots end short of it
     PutU32(block.data(), kBucketMagic);
@@ -122,30 +148,44 @@ void IdIndexEpochWriter::AddTableOf(std::uint64_t first_id, std::span<const Slot
     } else {
       for (std::size_t i = 0; i < m; ++i) PutU32(out + 4 * i, slot[i]);
     }
-    store_.AddBlock(first_ids_.size(), std::span<const std::uint8_t>(block.data(), kTableHeader + slot_bytes * m),
-                    present);
+    store_.AddBlock(first_bucket_ + first_ids_.size(),
+                    std::span<const std::uint8_t>(block.data(), kTableHeader + slot_bytes * m), present);
     first_ids_.push_back(first_id + begin);
     total_ += present;
   }
+}
+
+void IdIndexEpochWriter::WriteLeafTable(StoreWriter& store, std::span<const std::uint64_t> leaves) {
+  CheckLeafKeys(leaves);
   Bytes table;
   Append<std::uint32_t>(table, kLeafTableMagic);
   Append<std::uint32_t>(table, kVersion);
   Append<std::uint64_t>(table, leaves.size());
   for (const std::uint64_t leaf : leaves) Append<std::uint64_t>(table, leaf);
-  store_.AddBlock(kIdIndexLeafTableKey, table, 0);
+  store.AddBlock(kIdIndexLeafTableKey, table, 0);
+}
+
+void IdIndexEpochWriter::FinishBuckets() {
+  if (finished_) return;
+  FlushBucket();
+  finished_ = true;
 }
 
 void IdIndexEpochWriter::Finish() {
   if (finished_) return;
-  FlushBucket();
+  FinishBuckets();
+  WriteDirectory(store_, first_ids_, total_);
+}
+
+void IdIndexEpochWriter::WriteDirectory(StoreWriter& store, std::span<const std::uint64_t> first_ids,
+                                        std::uint64_t total) {
   Bytes block;
   Append<std::uint32_t>(block, kDirectoryMagic);
   Append<std::uint32_t>(block, kVersion);
-  Append<std::uint64_t>(block, first_ids_.size());
-  Append<std::uint64_t>(block, total_);
-  for (std::uint64_t v : first_ids_) Append<std::uint64_t>(block, v);
-  store_.AddBlock(kIdIndexDirectoryKey, block, total_);
-  finished_ = true;
+  Append<std::uint64_t>(block, first_ids.size());
+  Append<std::uint64_t>(block, total);
+  for (std::uint64_t v : first_ids) Append<std::uint64_t>(block, v);
+  store.AddBlock(kIdIndexDirectoryKey, block, total);
 }
 
 IdIndexReader::IdIndexReader(const std::string& directory) : store_(StoreReader::Open(directory)) {}

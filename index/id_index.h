@@ -57,10 +57,16 @@ inline constexpr std::uint64_t kIdIndexLeafTableKey = ~std::uint64_t{0} - 1;
 inline constexpr std::uint32_t kIdIndexMinPageSize = 64 * 1024;
 
 // Writes one epoch of the ID index into a StoreWriter whose epoch is open.
+// An epoch may also be written in parts (the ranks of a spread ingest):
+// each part holds the buckets of a run of consecutive IDs, numbered from
+// its `first_bucket` (AddTableBuckets or Add, then FinishBuckets), and one
+// part adds the directory of them all (WriteDirectory) and, for tables, the
+// leaf table (WriteLeafTable).
 class IdIndexEpochWriter {
  public:
-  // Buckets of (page_size - 16) / 16 pairs fill one page each.
-  IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size);
+  // Buckets of (page_size - 16) / 16 pairs fill one page each; the first
+  // gets the key `first_bucket` (0 unless the epoch is written in parts).
+  IdIndexEpochWriter(StoreWriter& store, std::uint32_t page_size, std::uint64_t first_bucket = 0);
   // Pairs must arrive in non-decreasing ID order.
   void Add(std::uint64_t id, NodeKey leaf);
   // The whole epoch as a table instead of pairs: slot i tells which leaf
@@ -76,16 +82,37 @@ class IdIndexEpochWriter {
   // buckets' width depends only on the count of leaves.
   void AddTable(std::uint64_t first_id, std::span<const std::uint32_t> slots, std::span<const std::uint64_t> leaves);
   void AddTable(std::uint64_t first_id, std::span<const std::uint16_t> slots, std::span<const std::uint64_t> leaves);
+  // A part of a table: its buckets without the leaf table, for an epoch of
+  // `leaf_count` leaves. `first_id` must begin a bucket of the whole table
+  // (a multiple of TableBucketSlots from the table's first ID).
+  void AddTableBuckets(std::uint64_t first_id, std::span<const std::uint32_t> slots, std::uint64_t leaf_count);
+  void AddTableBuckets(std::uint64_t first_id, std::span<const std::uint16_t> slots, std::uint64_t leaf_count);
   // Writes the last bucket and the directory.
   void Finish();
+  // Writes the last bucket of a part; the directory is left to WriteDirectory.
+  void FinishBuckets();
+  // The first ID of each bucket written, and the IDs they hold.
+  const std::vector<std::uint64_t>& first_ids() const { return first_ids_; }
+  std::uint64_t total() const { return total_; }
+
+  // The directory of an epoch written in parts: every part's first_ids(),
+  // in ID order, and the sum of their total().
+  static void WriteDirectory(StoreWriter& store, std::span<const std::uint64_t> first_ids, std::uint64_t total);
+  // The leaf table of a table epoch (the ordinals' leaves, in their order).
+  static void WriteLeafTable(StoreWriter& store, std::span<const std::uint64_t> leaves);
+  // IDs a table bucket holds for an epoch of `leaf_count` leaves, and pairs
+  // a pairs bucket holds.
+  static std::size_t TableBucketSlots(std::uint32_t page_size, std::uint64_t leaf_count);
+  static std::size_t BucketPairs(std::uint32_t page_size);
 
  private:
   template <typename Slot>
-  void AddTableOf(std::uint64_t first_id, std::span<const Slot> slots, std::span<const std::uint64_t> leaves);
+  void AddTableOf(std::uint64_t first_id, std::span<const Slot> slots, std::uint64_t leaf_count);
   void FlushBucket();
 
   StoreWriter& store_;
   std::uint32_t page_size_;
+  std::uint64_t first_bucket_;
   std::size_t bucket_pairs_;
   Bytes bucket_;                 // the bucket block being filled
   std::size_t bucket_fill_ = 0;  // pairs in it
