@@ -45,6 +45,7 @@
 #include "ingest/rank_messages.h"
 #include "ingest/resident_epoch.h"
 #include "ingest/smoothing_pass.h"
+#include "ingest/spread_id_index.h"
 #include "storage/http_file.h"
 #include "storage/page_file_reader.h"
 #include "storage/store_writer.h"
@@ -303,60 +304,6 @@ class PhaseClock {
   double last_cpu_ = ProcessCpuSeconds();
 };
 
-// The leaves' IDs that a rank other than 0 of a spread epoch builds, for
-// rank 0's ID index (IngestSpreadInto): per leaf its key, the number of its
-// IDs and the IDs. In the rank's part directory, where rank 0 reads it.
-class LeafIdsFile {
- public:
-  explicit LeafIdsFile(std::string path) : path_(std::move(path)), file_(std::fopen(path_.c_str(), "wb")) {
-    if (file_ == nullptr) throw Error::Io(path_, std::string("cannot create: ") + std::strerror(errno));
-  }
-  ~LeafIdsFile() {
-    if (file_ != nullptr) std::fclose(file_);
-  }
-  LeafIdsFile(const LeafIdsFile&) = delete;
-  LeafIdsFile& operator=(const LeafIdsFile&) = delete;
-
-  void Add(NodeKey leaf, std::span<const std::uint64_t> ids) EXCLUDES(mutex_) {
-    const std::uint64_t head[2] = {leaf.value(), ids.size()};
-    MutexLock lock(mutex_);
-    if (std::fwrite(head, sizeof head, 1, file_) != 1 ||
-        (!ids.empty() && std::fwrite(ids.data(), sizeof(std::uint64_t), ids.size(), file_) != ids.size())) {
-      throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
-    }
-  }
-  void Close() EXCLUDES(mutex_) {
-    MutexLock lock(mutex_);
-    std::FILE* file = file_;
-    file_ = nullptr;
-    if (std::fclose(file) != 0) throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
-  }
-  const std::string& path() const { return path_; }
-
-  // Every leaf of the file at `path`, in the order they were added.
-  static void ForEach(const std::string& path, const std::function<void(NodeKey, std::span<const std::uint64_t>)>& visit) {
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
-    if (!file) throw Error::Io(path, std::string("cannot open: ") + std::strerror(errno));
-    std::vector<std::uint64_t> ids;
-    for (std::uint64_t head[2]; std::fread(head, sizeof head, 1, file.get()) == 1;) {
-      if (!NodeKey::FromValue(head[0]).IsValid() || head[1] > (std::uint64_t{1} << 32)) {
-        throw Error::Corruption(path, "not a file of leaves' IDs");
-      }
-      ids.resize(static_cast<std::size_t>(head[1]));
-      if (std::fread(ids.data(), sizeof(std::uint64_t), ids.size(), file.get()) != ids.size()) {
-        throw Error::Corruption(path, "a file of leaves' IDs is cut short");
-      }
-      visit(NodeKey::FromValue(head[0]), ids);
-    }
-    if (std::ferror(file.get())) throw Error::Io(path, std::string("cannot read: ") + std::strerror(errno));
-  }
-
- private:
-  std::string path_;
-  Mutex mutex_;
-  std::FILE* file_ GUARDED_BY(mutex_);
-};
-
 // Messages kept in a file until they are sent: a rank's domain roots, each
 // up to a node's capacity of points, which it may hold dozens of.
 class MessageFile {
@@ -417,7 +364,7 @@ struct EpochBuild {
   // points too, so they are left out here. Invalid for a whole epoch.
   NodeKey domain;
   NodePoints* domain_root = nullptr;
-  LeafIdsFile* leaf_ids = nullptr;  // where the leaves' IDs go on ranks other than 0
+  LeafIdsFile* leaf_ids = nullptr;  // where a spread epoch's leaves' IDs go
 
   // Encodes a finished node into `block` (the caller's buffer, reused from
   // node to node) and adds it to the store. `is_leaf` decides whether its
@@ -626,11 +573,12 @@ class IngestRun {
                      const std::string& part_directory = "", RankGroup* group = nullptr);
   void IngestEpoch(std::size_t e);
   // A rank other than 0 of a spread epoch, once its part is finished: tells
-  // rank 0 where its blocks and leaves' IDs are and what it built.
+  // rank 0 where its blocks and its share of the ID index are and what it
+  // built.
   void SendSpreadSummary(const IngestPart& part);
-  // The same rank next: copies its blocks into the store's page file where
-  // rank 0 made room for them, and tells rank 0 when they are there (or
-  // why not).
+  // The same rank next: copies its blocks (and its ID index's) into the
+  // store's page files where rank 0 made room for them, and tells rank 0
+  // when they are there (or why not).
   void CopyBlocksForRankZero(const IngestPart& part);
   IngestReport Finish();
   IngestPart FinishPart();
@@ -664,8 +612,11 @@ class IngestRun {
   void BuildDomains(const std::string& label, const Cube& cube, const std::vector<NodeKey>& mine,
                     const std::vector<DomainFile>& files, const ParticleColumns& columns, EpochBuild& build,
                     EpochReport& epoch_report, TopLevelMerger* top);
-  void GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report, TopLevelMerger& top,
-                        PhaseClock& clock);
+  void MergeOtherRanksRoots(const std::string& label, EpochReport& epoch_report, TopLevelMerger& top,
+                            PhaseClock& clock);
+  void WriteIdIndexShare(const SnapshotHeader& header, const SpreadCensus& census, LeafIdsFile& leaf_ids,
+                         EpochReport& epoch_report);
+  void GatherOtherRanks(const std::string& label, EpochReport& epoch_report);
 
   const IngestOptions& options_;
   const std::string output_;
@@ -689,7 +640,6 @@ class IngestRun {
   std::unique_ptr<ParticleSource> next_source_;
   std::uint64_t missing_in_prev_ = 0;  // of the epoch to come, counted by the join before it
   RankGroup* group_ = nullptr;         // the ranks an epoch is spread over, or null
-  std::unique_ptr<LeafIdsFile> leaf_ids_;  // a spread epoch's on ranks other than 0
   EpochReport spread_report_;          // what this rank built of a spread epoch
 };
 
@@ -1266,10 +1216,10 @@ void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const s
 }
 
 // Step 4, on rank 0: the other ranks' domain roots into `top`, in rank
-// order (depth-first order: ranks hold consecutive runs of domains), then
-// their blocks and leaves' IDs.
-void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, EpochReport& epoch_report,
-                                 TopLevelMerger& top, PhaseClock& clock) {
+// order (depth-first order: ranks hold consecutive runs of domains), and
+// the levels above them.
+void IngestRun::MergeOtherRanksRoots(const std::string& label, EpochReport& epoch_report, TopLevelMerger& top,
+                                     PhaseClock& clock) {
   RankGroup& group = *group_;
   for (int r = 1; r < group.size(); ++r) {
     const std::string what = label + ": rank " + std::to_string(r);
@@ -1287,13 +1237,37 @@ void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, Ep
   clock.Lap("wait");
   const NodePoints root = top.Finish();
   for (double w : root.weight) epoch_report.mass += w;
+}
+
+// Step 5, on every rank: its share of the ID index, from every rank's
+// leaves, into its ID store's epoch (ingest/spread_id_index.h).
+void IngestRun::WriteIdIndexShare(const SnapshotHeader& header, const SpreadCensus& census, LeafIdsFile& leaf_ids,
+                                  EpochReport& epoch_report) {
+  SpreadIdIndexOptions options;
+  options.page_size = id_index_page_size_;
+  options.table = census.ids_dense && census.id_count > 0;
+  options.table_first = census.id_first;
+  options.table_span = options.table ? census.id_last - census.id_first + 1 : 0;
+  options.round_pairs = static_cast<std::size_t>(options_.read.chunk_particles);
+  options.temp_prefix = temp_->path() + "/ids";
+  options.run_records = shares_.id_run_records;
+  options.refuse_repeated_id = [&header](std::uint64_t id) { RefuseDuplicateIds(header, id, 0); };
+  epoch_report.ids_sorted = !options.table;
+  id_store_->BeginEpoch(header.time, header.redshift);
+  WriteSpreadIdIndex(*group_, leaf_ids, *id_store_, options);
+}
+
+// Step 6, on rank 0: room in the store's page files for the other ranks'
+// blocks and ID index buckets, which they copy in themselves.
+void IngestRun::GatherOtherRanks(const std::string& label, EpochReport& epoch_report) {
+  RankGroup& group = *group_;
   for (int r = 1; r < group.size(); ++r) {
     const std::string what = label + ": rank " + std::to_string(r);
     const Bytes message = group.Receive(r);
-    nlohmann::json summary;
+    IngestPart part;
     try {
-      summary = nlohmann::json::parse(message.begin(), message.end());
-      const EpochReport built = IngestPart::FromJson(summary.at("part"), what).report.epochs.at(0);
+      part = IngestPart::FromJson(nlohmann::json::parse(message.begin(), message.end()), what);
+      const EpochReport& built = part.report.epochs.at(0);
       epoch_report.points += built.points;
       epoch_report.chunks += built.chunks;
       epoch_report.spilled_points += built.spilled_points;
@@ -1305,26 +1279,21 @@ void IngestRun::GatherOtherRanks(const std::string& label, EpochBuild& build, Ep
     } catch (const std::out_of_range&) {
       throw Error::Corruption(what, "a summary of a rank's part without its epoch");
     }
-    // Room for its blocks, which it copies in itself, while this rank goes on.
-    const std::string pages = (fs::path(summary.at("part").at("directory").get<std::string>()) /
-                               summary.at("part").at("epochs").at(0).at("file").get<std::string>())
-                                  .string();
-    const std::uint64_t offset = store_.ReserveBlocksOf(*PageFileReader::Open(pages));
-    const nlohmann::json order = {{"target", store_.open_epoch_temporary_path()}, {"offset", offset}};
+    if (part.epochs.size() != 1 || part.id_epochs.size() != (has_id_ ? 1u : 0u)) {
+      throw Error::Corruption(what, "a summary of a rank's part with " + std::to_string(part.epochs.size()) +
+                                        " epochs and " + std::to_string(part.id_epochs.size()) + " of IDs");
+    }
+    nlohmann::json order;
+    const std::string pages = (fs::path(part.directory) / part.epochs[0].file).string();
+    order["target"] = store_.open_epoch_temporary_path();
+    order["offset"] = store_.ReserveBlocksOf(*PageFileReader::Open(pages));
+    if (has_id_) {
+      const std::string id_pages = (fs::path(part.directory) / "ids" / part.id_epochs[0].file).string();
+      order["id_target"] = id_store_->open_epoch_temporary_path();
+      order["id_offset"] = id_store_->ReserveBlocksOf(*PageFileReader::Open(id_pages));
+    }
     const std::string order_text = order.dump();
     group.Send(r, Bytes(order_text.begin(), order_text.end()));
-    if (has_id_) {
-      LeafIdsFile::ForEach(summary.at("leaf_ids").get<std::string>(),
-                           [&](NodeKey leaf, std::span<const std::uint64_t> ids) {
-                             if (build.id_table != nullptr) build.RecordLeafIds(ids, leaf);
-                             if (build.id_pairs != nullptr) {
-                               std::vector<IdLeafRecord> pairs;
-                               pairs.reserve(ids.size());
-                               for (std::uint64_t id : ids) pairs.push_back({id, leaf.value()});
-                               build.id_pairs->Add(pairs);
-                             }
-                           });
-    }
   }
   for (int r = 1; r < group.size(); ++r) {
     const Bytes answer = group.Receive(r);
@@ -1369,29 +1338,14 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
   clock.Lap("exchange");
 
   store_.BeginEpoch(header.time, header.redshift);
-  std::unique_ptr<DenseIdTable> id_table;
-  std::unique_ptr<ExternalSorter<IdLeafRecord>> id_pairs;
-  if (has_id_ && rank != 0) {
-    leaf_ids_ = std::make_unique<LeafIdsFile>((fs::path(output_) / "leaf-ids").string());
-  } else if (has_id_ && census.ids_dense && census.id_count > 0) {
-    // Two particles with one ID read by different ranks may meet in this
-    // rank's domains, built on several threads at once, which the table
-    // cannot be trusted to see: its own leaves' IDs wait in a file too, and
-    // every rank's go into the table one leaf after another.
-    id_table = std::make_unique<DenseIdTable>(census.id_first, census.id_last - census.id_first + 1);
-    leaf_ids_ = std::make_unique<LeafIdsFile>(temp_->path() + "/leaf-ids-" + std::to_string(e));
-  } else if (has_id_) {
-    epoch_report.ids_sorted = true;
-    id_pairs = std::make_unique<ExternalSorter<IdLeafRecord>>(temp_->path() + "/ids-" + std::to_string(e),
-                                                             shares_.id_run_records);
-  }
+  std::unique_ptr<LeafIdsFile> leaf_ids;
+  if (has_id_) leaf_ids = std::make_unique<LeafIdsFile>(temp_->path() + "/leaf-ids-" + std::to_string(e));
   EpochBuild build;
   build.cube = &points.cube;
   build.tree = &options_.tree;
   build.store = &store_;
   build.header = &header;
-  build.id_pairs = id_pairs.get();
-  build.leaf_ids = leaf_ids_.get();
+  build.leaf_ids = leaf_ids.get();
   build.report = &epoch_report;
   Bytes top_block;
   std::optional<TopLevelMerger> top;
@@ -1402,25 +1356,24 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
   }
   BuildDomains(label, points.cube, mine, files, columns, build, epoch_report, top ? &*top : nullptr);
   clock.Lap("build");
+  if (rank == 0) MergeOtherRanksRoots(label, epoch_report, *top, clock);
+  if (leaf_ids) {
+    leaf_ids->Close();
+    WriteIdIndexShare(header, census, *leaf_ids, epoch_report);
+    leaf_ids.reset();
+    clock.Lap("ids");
+  }
   if (rank != 0) {
-    if (leaf_ids_) leaf_ids_->Close();
+    if (id_store_) id_store_->EndEpoch();
     store_.EndEpoch();
     spread_report_ = epoch_report;
     manifest_.epochs.push_back(RecordOf(header, points.cube, epoch_report));
     report_.epochs.push_back(epoch_report);
     return;
   }
-  if (id_table) {
-    leaf_ids_->Close();
-    build.id_table = id_table.get();
-    LeafIdsFile::ForEach(leaf_ids_->path(),
-                         [&build](NodeKey leaf, std::span<const std::uint64_t> ids) { build.RecordLeafIds(ids, leaf); });
-    fs::remove(leaf_ids_->path());
-    leaf_ids_.reset();
-  }
-  GatherOtherRanks(label, build, epoch_report, *top, clock);
+  GatherOtherRanks(label, epoch_report);
   clock.Lap("gather");
-  if (has_id_) WriteIdIndex(header, id_table.get(), id_pairs.get());
+  if (id_store_) id_store_->EndEpoch();
   store_.EndEpoch();
   clock.Lap("write");
   epoch_report.read_points = screened_[e].read;
@@ -1434,8 +1387,7 @@ void IngestRun::IngestSpreadEpoch(std::size_t e) {
 }
 
 void IngestRun::SendSpreadSummary(const IngestPart& part) {
-  nlohmann::json summary = {{"part", part.ToJson()}, {"leaf_ids", leaf_ids_ ? leaf_ids_->path() : std::string()}};
-  const std::string text = summary.dump();
+  const std::string text = part.ToJson().dump();
   group_->Send(0, Bytes(text.begin(), text.end()));
 }
 
@@ -1446,6 +1398,10 @@ void IngestRun::CopyBlocksForRankZero(const IngestPart& part) {
     const nlohmann::json order = nlohmann::json::parse(message.begin(), message.end());
     CopyBlockPages((fs::path(part.directory) / part.epochs.at(0).file).string(),
                    order.at("target").get<std::string>(), order.at("offset").get<std::uint64_t>());
+    if (order.contains("id_target")) {
+      CopyBlockPages((fs::path(part.directory) / "ids" / part.id_epochs.at(0).file).string(),
+                     order.at("id_target").get<std::string>(), order.at("id_offset").get<std::uint64_t>());
+    }
   } catch (const std::exception& e) {
     // Rank 0 ends the ingest with it, removing what the ranks wrote.
     failure = e.what();

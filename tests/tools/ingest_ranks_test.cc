@@ -15,6 +15,7 @@
 
 #include "index/dataset.h"
 #include "index/id_index.h"
+#include "storage/coding.h"
 #include "storage/store_reader.h"
 #include "tests/ingest/store_check.h"
 #include "tests/support/program_run.h"
@@ -186,8 +187,14 @@ TEST_F(IngestRanksTest, OneEpochSpreadOverTwoAndFourRanksIsTheStoreOneProcessWri
 struct Repeat {
   int from = -1, to = -1;
 };
-std::uint64_t ClumpsId(int i) { return 100 + 3 * static_cast<std::uint64_t>(i); }
-void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}) {
+// Compact IDs (100, 103, ...) make an ID index of tables; sparse ones,
+// scattered over 64 bits, one of sorted pairs.
+enum class Ids { kCompact, kSparse };
+std::uint64_t ClumpsId(int i, Ids ids = Ids::kCompact) {
+  const std::uint64_t n = static_cast<std::uint64_t>(i);
+  return ids == Ids::kCompact ? 100 + 3 * n : (n + 1) * 0x9E3779B97F4A7C15ull;
+}
+void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}, Ids ids = Ids::kCompact) {
   std::mt19937_64 random(5);
   std::normal_distribution<double> clump(0, 0.3);
   std::uniform_real_distribution<double> background(-20, 35);
@@ -197,7 +204,7 @@ void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}) {
     const bool in_clump = i % 3 != 0;
     const double c = in_clump ? (i % 2 ? 4.0 : -7.0) : 0;
     for (int k = 0; k < 3; ++k) out << (in_clump ? c + clump(random) : background(random)) << ",";
-    out << 1 + (i % 5) << "," << ClumpsId(i == repeat.to ? repeat.from : i) << "\n";
+    out << 1 + (i % 5) << "," << ClumpsId(i == repeat.to ? repeat.from : i, ids) << "\n";
   }
 }
 
@@ -210,26 +217,38 @@ std::string SpreadCsvCommand(const std::string& csv, const std::string& store, i
 }
 
 // Without a periodic box every rank finds the same bounding cube; a CSV
-// file, which cannot seek to a batch, is read through by every rank.
+// file, which cannot seek to a batch, is read through by every rank. The
+// ID index's buckets (three of pairs, with sparse IDs) fall where one
+// process's do.
 TEST_F(IngestRanksTest, ASpreadSnapshotWithoutABoxIsTheStoreOneProcessWrites) {
-  const std::string csv = (dir_.path() / "points.csv").string();
-  WriteClumpsCsv(csv);
-  auto ingest = [&](const std::string& store, int ranks) {
-    return Run(SpreadCsvCommand(csv, store, ranks), ranks > 0 ? kMpiEnvironment : "");
-  };
-  const std::string single = (dir_.path() / "single").string();
-  const ProgramRun one = ingest(single, 0);
-  ASSERT_EQ(one.status, 0) << one.Describe();
-  const Dataset expected = Dataset::Open(single);
-  for (int ranks : {2, 3}) {
-    SCOPED_TRACE(std::to_string(ranks) + " ranks");
-    const std::string store = (dir_.path() / ("spread-" + std::to_string(ranks))).string();
-    const ProgramRun run = ingest(store, ranks);
-    ASSERT_EQ(run.status, 0) << run.Describe();
-    const Dataset got = Dataset::Open(store);
-    EXPECT_EQ(got.store().dataset(), expected.store().dataset());
-    EXPECT_TRUE(EpochBlocks(got, 0) == EpochBlocks(expected, 0)) << "the blocks differ";
-    EXPECT_TRUE(IdIndexBlocks(store) == IdIndexBlocks(single)) << "the ID index's blocks differ";
+  for (const Ids ids : {Ids::kCompact, Ids::kSparse}) {
+    SCOPED_TRACE(ids == Ids::kCompact ? "compact IDs" : "sparse IDs");
+    const std::string tag = ids == Ids::kCompact ? "compact" : "sparse";
+    const std::string csv = (dir_.path() / ("points-" + tag + ".csv")).string();
+    WriteClumpsCsv(csv, {}, ids);
+    auto ingest = [&](const std::string& store, int ranks) {
+      return Run(SpreadCsvCommand(csv, store, ranks), ranks > 0 ? kMpiEnvironment : "");
+    };
+    const std::string single = (dir_.path() / ("single-" + tag)).string();
+    const ProgramRun one = ingest(single, 0);
+    ASSERT_EQ(one.status, 0) << one.Describe();
+    const Dataset expected = Dataset::Open(single);
+    const std::vector<std::vector<Bytes>> want_ids = IdIndexBlocks(single);
+    ASSERT_EQ(want_ids.size(), 1u);
+    ASSERT_GE(want_ids[0].size(), ids == Ids::kCompact ? 2u : 4u);  // buckets, the directory (and the leaf table)
+    EXPECT_EQ(GetU32(want_ids[0][0].data() + 4), ids == Ids::kCompact ? 3u : 1u) << "bucket version";
+    for (int ranks : {2, 3}) {
+      SCOPED_TRACE(std::to_string(ranks) + " ranks");
+      const std::string store = (dir_.path() / ("spread-" + tag + "-" + std::to_string(ranks))).string();
+      const ProgramRun run = ingest(store, ranks);
+      ASSERT_EQ(run.status, 0) << run.Describe();
+      const Dataset got = Dataset::Open(store);
+      EXPECT_EQ(got.store().dataset(), expected.store().dataset());
+      EXPECT_TRUE(EpochBlocks(got, 0) == EpochBlocks(expected, 0)) << "the blocks differ";
+      EXPECT_TRUE(IdIndexBlocks(store) == want_ids) << "the ID index's blocks differ";
+      const ProgramRun verify = Run(std::string(OCTOCOSM_BINARY) + " verify " + store);
+      EXPECT_EQ(verify.status, 0) << verify.Describe();
+    }
   }
 }
 
@@ -241,20 +260,22 @@ TEST_F(IngestRanksTest, AnIdGivenTwiceAcrossRanksIsRefusedNamingTheSnapshot) {
   struct Case {
     int ranks;
     Repeat repeat;
+    Ids ids = Ids::kCompact;
   };
   // Particles 11 and 515 lie in the same clump, 10 and 511 in different
   // ones; 1015 is read by the third rank of three.
-  const Case cases[] = {{2, {11, 515}}, {2, {10, 511}}, {3, {11, 1015}}, {3, {10, 1015}}};
+  const Case cases[] = {{2, {11, 515}},           {2, {10, 511}},           {3, {11, 1015}},
+                        {3, {10, 1015}},          {2, {10, 511}, Ids::kSparse}, {3, {11, 1015}, Ids::kSparse}};
   for (const Case& c : cases) {
     SCOPED_TRACE(std::to_string(c.ranks) + " ranks, particle " + std::to_string(c.repeat.to) + " given the ID of " +
-                 std::to_string(c.repeat.from));
+                 std::to_string(c.repeat.from) + (c.ids == Ids::kSparse ? ", sparse IDs" : ""));
     const std::string csv = (dir_.path() / "repeated.csv").string();
-    WriteClumpsCsv(csv, c.repeat);
+    WriteClumpsCsv(csv, c.repeat, c.ids);
     const std::string store = (dir_.path() / "store").string();
     const ProgramRun run = Run(SpreadCsvCommand(csv, store, c.ranks), kMpiEnvironment);
     EXPECT_NE(run.status, 0) << run.Describe();
     EXPECT_NE(run.output.find("repeated.csv"), std::string::npos) << run.output;
-    EXPECT_NE(run.output.find("ID " + std::to_string(ClumpsId(c.repeat.from)) + " is given to more than one particle"),
+    EXPECT_NE(run.output.find("ID " + std::to_string(ClumpsId(c.repeat.from, c.ids)) + " is given to more than one particle"),
               std::string::npos)
         << run.output;
     EXPECT_FALSE(fs::exists(store)) << "left behind: " << store;
