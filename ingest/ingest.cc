@@ -1250,7 +1250,9 @@ void IngestRun::WriteIdIndexShare(const SnapshotHeader& header, const SpreadCens
   options.table_span = options.table ? census.id_last - census.id_first + 1 : 0;
   options.round_pairs = static_cast<std::size_t>(options_.read.chunk_particles);
   options.temp_prefix = temp_->path() + "/ids";
-  options.run_records = shares_.id_run_records;
+  // The build is over: the pairs may take half the budget (the other half
+  // is the rounds' messages and the merge's buffers).
+  options.sort_memory = shares_.budget / 2;
   options.refuse_repeated_id = [&header](std::uint64_t id) { RefuseDuplicateIds(header, id, 0); };
   epoch_report.ids_sorted = !options.table;
   id_store_->BeginEpoch(header.time, header.redshift);

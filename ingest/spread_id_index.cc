@@ -4,6 +4,7 @@
 #include <cerrno>
 #include <cstring>
 #include <memory>
+#include <optional>
 
 #include "base/error.h"
 #include "index/id_index.h"
@@ -29,7 +30,15 @@ void LeafIdsFile::Add(NodeKey leaf, std::span<const std::uint64_t> ids) {
     throw Error::Io(path_, std::string("cannot write: ") + std::strerror(errno));
   }
   leaves_.push_back(leaf.value());
-  id_count_ += ids.size();
+  for (const std::uint64_t id : ids) {
+    if (id_count_++ % sample_stride_ != 0) continue;
+    samples_.push_back(id);
+    if (samples_.size() == 2 * kSamples) {
+      for (std::size_t k = 0; k < kSamples; ++k) samples_[k] = samples_[2 * k];
+      samples_.resize(kSamples);
+      sample_stride_ *= 2;
+    }
+  }
 }
 
 void LeafIdsFile::Close() {
@@ -128,6 +137,20 @@ void ExchangeToOwners(RankGroup& group, const LeafIdsFile& leaf_ids, std::size_t
   while (round < rounds) exchange();
 }
 
+// The smallest ID any rank found given twice, once every rank has looked.
+// Rank 0 refuses it (options.refuse_repeated_id), so that the ingest ends
+// from rank 0, which removes what the ranks wrote; the others return true
+// and write nothing more, and are ended with it.
+bool AnyRankFoundARepeat(RankGroup& group, std::optional<std::uint64_t> repeated, const SpreadIdIndexOptions& options,
+                         const char* what) {
+  std::uint64_t most[2] = {repeated ? 1u : 0u, repeated ? ~*repeated : 0};
+  group.Max(most);
+  if (most[0] == 0) return false;
+  if (group.rank() != 0) return true;
+  if (options.refuse_repeated_id) options.refuse_repeated_id(~most[1]);
+  throw Error::BadInput(what, "ID " + std::to_string(~most[1]) + " is given to more than one particle");
+}
+
 // Rank 0: the directory of every rank's buckets (each rank sends its first
 // IDs and its count of IDs), and the leaf table of a table epoch.
 void WriteDirectoryOnRankZero(RankGroup& group, const IdIndexEpochWriter& writer, StoreWriter& ids,
@@ -170,6 +193,7 @@ void WriteTableShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
   const std::uint64_t begin = lowest[rank] * per_bucket;
   const std::uint64_t end = std::min(lowest[rank + 1] * per_bucket, span);
   std::vector<Slot> slots(end - begin);
+  std::optional<std::uint64_t> repeated;
   ExchangeToOwners(
       group, leaf_ids, options.round_pairs,
       [&](NodeKey leaf) -> std::uint64_t {
@@ -190,10 +214,14 @@ void WriteTableShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
           if (pair.key < first + begin || slot >= slots.size() || pair.leaf == 0 || pair.leaf > leaves.size()) {
             throw Error::Corruption(what, "ID " + std::to_string(pair.key) + " reached a rank that does not hold it");
           }
-          if (slots[slot] != 0 && options.refuse_repeated_id) options.refuse_repeated_id(pair.key);
+          if (slots[slot] != 0) {
+            if (!repeated || pair.key < *repeated) repeated = pair.key;
+            continue;  // the slot keeps the leaf it had
+          }
           slots[slot] = static_cast<Slot>(pair.leaf);
         }
       });
+  if (AnyRankFoundARepeat(group, repeated, options, what)) return;
   // Buckets without an ID are left out, so a rank's keys follow the count
   // of buckets the ranks before it write.
   std::uint64_t written = 0;
@@ -217,16 +245,7 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
   const std::size_t ranks = static_cast<std::size_t>(group.size());
   const int rank = group.rank();
   // The ranks' runs of IDs, cut at quantiles of samples from every rank.
-  constexpr std::uint64_t kSamplesPerRank = 1024;
-  const std::uint64_t stride = std::max<std::uint64_t>(leaf_ids.id_count() / kSamplesPerRank, 1);
-  std::vector<std::uint64_t> samples;
-  std::uint64_t seen = 0;
-  leaf_ids.ForEach([&](NodeKey, std::span<const std::uint64_t> leaf_ids_of) {
-    for (const std::uint64_t id : leaf_ids_of) {
-      if (seen++ % stride == 0) samples.push_back(id);
-    }
-  });
-  std::vector<std::uint64_t> all = AllGather(group, samples, what);
+  std::vector<std::uint64_t> all = AllGather(group, leaf_ids.samples(), what);
   std::sort(all.begin(), all.end());
   std::vector<std::uint64_t> cuts;  // rank r owns IDs in [cuts[r - 1], cuts[r])
   for (std::size_t r = 1; r < ranks && !all.empty(); ++r) cuts.push_back(all[r * all.size() / ranks]);
@@ -234,7 +253,8 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
     return static_cast<int>(std::upper_bound(cuts.begin(), cuts.end(), id) - cuts.begin());
   };
 
-  ExternalSorter<IdLeaf> sorter(options.temp_prefix, options.run_records);
+  ExternalSorter<IdLeaf> sorter(options.temp_prefix,
+                                static_cast<std::size_t>(std::max<std::uint64_t>(options.sort_memory / sizeof(IdLeaf), 1)));
   ExchangeToOwners(
       group, leaf_ids, options.round_pairs, [](NodeKey leaf) { return leaf.value(); }, owner_of,
       [&](std::span<const IdLeaf> pairs) {
@@ -268,9 +288,10 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
   IdLeaf pair{};
   std::uint64_t previous = 0;
   std::uint64_t read = 0;
+  std::optional<std::uint64_t> repeated;  // sorted: the first found is the smallest
   const auto next = [&] {
     if (!reader.Next(pair)) throw Error::Corruption(what, "the sorted IDs end short");
-    if (read++ > 0 && pair.key == previous && options.refuse_repeated_id) options.refuse_repeated_id(pair.key);
+    if (read++ > 0 && pair.key == previous && !repeated) repeated = pair.key;
     previous = pair.key;
   };
   std::vector<IdLeaf> head_pairs;
@@ -290,10 +311,8 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
   }
   for (std::size_t from = static_cast<std::size_t>(rank) + 1; from < ranks; ++from) {
     for (const IdLeaf& tail : Unpack<IdLeaf>(incoming[from], what)) {
-      if (read++ > 0 && tail.key <= previous) {
-        if (tail.key == previous && options.refuse_repeated_id) options.refuse_repeated_id(tail.key);
-        throw Error::Corruption(what, "the ranks' sorted IDs are out of order");
-      }
+      if (read++ > 0 && tail.key < previous) throw Error::Corruption(what, "the ranks' sorted IDs are out of order");
+      if (read > 1 && tail.key == previous && !repeated) repeated = tail.key;
       previous = tail.key;
       writer.Add(tail.key, NodeKey::FromValue(tail.leaf));
     }
@@ -302,6 +321,7 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
     if (!incoming[from].empty()) throw Error::Corruption(what, "sorted IDs from a rank before this one");
   }
   writer.FinishBuckets();
+  if (AnyRankFoundARepeat(group, repeated, options, what)) return;
   WriteDirectoryOnRankZero(group, writer, ids, {}, /*table=*/false, what);
 }
 

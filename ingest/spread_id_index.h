@@ -46,6 +46,11 @@ class LeafIdsFile {
   // Once closed: the leaves' keys, in the order added, and their IDs in all.
   const std::vector<std::uint64_t>& leaves() const NO_THREAD_SAFETY_ANALYSIS { return leaves_; }
   std::uint64_t id_count() const NO_THREAD_SAFETY_ANALYSIS { return id_count_; }
+  // Once closed: every stride-th ID in the order added, the stride doubled
+  // whenever they reach twice kSamples, so between kSamples and twice that
+  // many (all of them when fewer): where the ranks' runs of IDs are cut.
+  static constexpr std::size_t kSamples = 1024;
+  const std::vector<std::uint64_t>& samples() const NO_THREAD_SAFETY_ANALYSIS { return samples_; }
 
   // Every leaf of the file, in the order added.
   void ForEach(const std::function<void(NodeKey, std::span<const std::uint64_t>)>& visit) const;
@@ -56,6 +61,8 @@ class LeafIdsFile {
   std::FILE* file_ GUARDED_BY(mutex_);
   std::vector<std::uint64_t> leaves_ GUARDED_BY(mutex_);
   std::uint64_t id_count_ GUARDED_BY(mutex_) = 0;
+  std::vector<std::uint64_t> samples_ GUARDED_BY(mutex_);
+  std::uint64_t sample_stride_ GUARDED_BY(mutex_) = 1;
 };
 
 struct SpreadIdIndexOptions {
@@ -66,8 +73,9 @@ struct SpreadIdIndexOptions {
   std::uint64_t table_first = 0, table_span = 0;
   std::size_t round_pairs = 65536;  // pairs a rank sends in one round at most
   std::string temp_prefix;          // the pairs' sort runs: temp_prefix + "-run-N"
-  std::size_t run_records = 1 << 20;
-  // Called with an ID given to two particles; throws.
+  std::uint64_t sort_memory = 64 << 20;  // bytes of pairs sorted in memory at once
+  // Called on rank 0 with the smallest ID given to two particles, whichever
+  // rank found it; throws (else an Error::BadInput naming the leaves' file).
   std::function<void(std::uint64_t id)> refuse_repeated_id;
 };
 
@@ -76,7 +84,10 @@ struct SpreadIdIndexOptions {
 // this rank's buckets into `ids`, and on rank 0 the directory of every
 // rank's buckets and the leaf table; a rank's blocks are then copied into
 // rank 0's page file (StoreWriter::ReserveBlocksOf) to make the epoch's index.
-// An ID given twice calls options.refuse_repeated_id on the rank that owns it.
+// When the leaves give an ID twice, rank 0 throws (options.refuse_repeated_id),
+// so that the ingest ends from the rank that removes the output, and the
+// others return without writing the rest of their share: they are ended
+// with it.
 void WriteSpreadIdIndex(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter& ids,
                         const SpreadIdIndexOptions& options);
 
