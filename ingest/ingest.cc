@@ -742,12 +742,10 @@ std::unique_ptr<ParticleSource> IngestRun::Smooth(std::unique_ptr<ParticleSource
   pass.temp_dir = temp_->path();
   pass.threads = threads_;
   pass.quiet = options_.quiet;
-  // A spread epoch: each rank searches a share of the regions, and the
-  // ranks' tables (zero where another rank searched) are combined.
-  if (group_ != nullptr) {
-    pass.part = static_cast<unsigned>(group_->rank());
-    pass.parts = static_cast<unsigned>(group_->size());
-  }
+  // A spread epoch: each rank reads a share of the snapshot and searches a
+  // share of the regions, and the ranks' tables (zero where another rank
+  // searched or read) are combined.
+  pass.group = group_;
   std::unique_ptr<SmoothingLengthTable> table = ComputeSmoothingLengths(*raw, pass);
   if (group_ != nullptr) group_->Max(std::span<float>(table->data(), table->size()));
   return WithSmoothingLengths(std::move(raw), std::move(table));

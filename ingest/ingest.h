@@ -150,8 +150,9 @@ IngestPart IngestShareInto(const IngestOptions& options, const IngestShare& shar
 // merges the levels above the domains. Each rank writes the ID index's
 // buckets of a run of IDs (ingest/spread_id_index.h) and copies its blocks
 // and buckets into rank 0's part, which is then the part IngestShareInto
-// writes for the same share. Every rank screens the whole epoch and reads
-// its positions for the neighbour pass, whose search is shared. For a series of one epoch, `share`
+// writes for the same share. Every rank screens the whole epoch; the
+// neighbour pass is shared (each rank reads a share of the snapshot and
+// searches a share of its regions). For a series of one epoch, `share`
 // its only one; every rank calls it. Returns the part on rank 0; on the
 // others an empty one (no epochs), whose directory rank 0 reads from until
 // it returns.

@@ -9,8 +9,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <limits>
+#include <optional>
+#include <span>
 #include <vector>
 
 #include "base/cancellation.h"
@@ -135,6 +138,90 @@ struct SpilledParticle {
 };
 constexpr std::uint64_t kQueryBit = std::uint64_t{1} << 63;
 
+// A particle a process of a shared pass sends another that wants it.
+struct SharedParticle {
+  double position[3];     // in the domain
+  std::uint64_t ordinal;  // kGivenBit set when the snapshot gives its length
+};
+constexpr std::uint64_t kGivenBit = std::uint64_t{1} << 63;
+
+// Which processes of a shared pass want a particle: those one of whose
+// boxes holds it, found through a coarse grid over the domain listing the
+// boxes that touch each cell.
+class Router {
+ public:
+  Router(const std::vector<std::vector<Box>>& wanted, const Domain& domain) : domain_(domain), cells_(kSide * kSide * kSide) {
+    for (unsigned q = 0; q < wanted.size(); ++q) {
+      for (const Box& box : wanted[q]) {
+        std::array<std::size_t, 3> first{}, last{};
+        bool empty = false;
+        for (int a = 0; a < 3; ++a) {
+          const double lo = std::max(box.lo[a], domain.box.lo[a]), hi = std::min(box.hi[a], domain.box.hi[a]);
+          empty = empty || !(lo < hi);
+          first[static_cast<std::size_t>(a)] = Cell(lo, a);
+          last[static_cast<std::size_t>(a)] = Cell(hi, a);
+        }
+        if (empty) continue;
+        const std::uint32_t index = static_cast<std::uint32_t>(boxes_.size());
+        boxes_.push_back({box, q});
+        for (std::size_t z = first[2]; z <= last[2]; ++z) {
+          for (std::size_t y = first[1]; y <= last[1]; ++y) {
+            for (std::size_t x = first[0]; x <= last[0]; ++x) cells_[x + kSide * (y + kSide * z)].push_back(index);
+          }
+        }
+      }
+    }
+  }
+
+  // Calls `to(q)` once for each process q that wants the particle at `p`.
+  template <typename To>
+  void Route(const double* p, To to) const {
+    const auto& candidates = cells_[Cell(p[0], 0) + kSide * (Cell(p[1], 1) + kSide * Cell(p[2], 2))];
+    unsigned last = ~0u;
+    for (const std::uint32_t index : candidates) {  // in process order
+      const auto& [box, q] = boxes_[index];
+      if (q != last && box.Contains(p)) {
+        to(q);
+        last = q;
+      }
+    }
+  }
+
+ private:
+  static constexpr std::size_t kSide = 32;
+  std::size_t Cell(double coordinate, int a) const {
+    const double t = (coordinate - domain_.cube.origin[static_cast<std::size_t>(a)]) / domain_.edge();
+    return static_cast<std::size_t>(std::clamp(std::floor(t * kSide), 0.0, static_cast<double>(kSide - 1)));
+  }
+
+  const Domain& domain_;
+  std::vector<std::pair<Box, unsigned>> boxes_;
+  std::vector<std::vector<std::uint32_t>> cells_;
+};
+
+// Every box of the pieces of `tasks`' loads.
+std::vector<Box> LoadBoxes(const std::vector<Task>& tasks) {
+  std::vector<Box> boxes;
+  for (const Task& task : tasks) {
+    for (const Piece& piece : task.pieces) boxes.push_back(piece.box);
+  }
+  return boxes;
+}
+
+// An order-keeping map of doubles to unsigned integers, so that the ranks'
+// largest and smallest coordinates combine exactly through RankGroup::Max.
+std::uint64_t Ordered(double value) {
+  std::uint64_t bits;
+  std::memcpy(&bits, &value, sizeof bits);
+  return (bits >> 63) ? ~bits : bits | (std::uint64_t{1} << 63);
+}
+double FromOrdered(std::uint64_t ordered) {
+  const std::uint64_t bits = (ordered >> 63) ? ordered & ~(std::uint64_t{1} << 63) : ~ordered;
+  double value;
+  std::memcpy(&value, &bits, sizeof value);
+  return value;
+}
+
 // The pieces of the domain that make up `load`: itself in a non-periodic
 // domain, and in a periodic one its images inside the box, each shifted back.
 std::vector<Piece> PiecesOf(const Box& load, const Domain& domain) {
@@ -188,6 +275,8 @@ class CountPyramid {
   }
 
   void Add(const double* p) { ++levels_.back()[CellIndex(p)]; }
+  // The counts on the grid itself, before Finish (to sum several processes').
+  std::span<std::uint64_t> grid() { return levels_.back(); }
 
   void Finish() {
     for (int level = kCountGridBits; level > 0; --level) {
@@ -248,11 +337,10 @@ class SmoothingPass {
         budget_(options.memory_budget ? options.memory_budget : kDefaultBudget),
         capacity_(std::max<std::uint64_t>(budget_ / kBytesPerLoadedPoint, 1)),
         region_most_(std::max<std::uint64_t>(capacity_ / 4, 1)),
-        threads_(ResolveThreadCount(static_cast<int>(options.threads))) {
-    if (options.parts < 1 || options.part >= options.parts) {
-      throw Error::InvalidArgument("smoothing lengths: no part " + std::to_string(options.part) + " of " +
-                                   std::to_string(options.parts));
-    }
+        threads_(ResolveThreadCount(static_cast<int>(options.threads))),
+        group_(options.group != nullptr && options.group->size() > 1 ? options.group : nullptr),
+        rank_(group_ ? static_cast<unsigned>(group_->rank()) : 0),
+        ranks_(group_ ? static_cast<unsigned>(group_->size()) : 1) {
     if (options.neighbours < 1) {
       throw Error::InvalidArgument("the number of neighbours must be at least 1, not " +
                                    std::to_string(options.neighbours));
@@ -278,10 +366,10 @@ class SmoothingPass {
     table_ = std::make_unique<SmoothingLengthTable>(total, budget_, options_.temp_dir);
     report_.particles = total;
     neighbours_ = static_cast<int>(std::min<std::uint64_t>(static_cast<std::uint64_t>(options_.neighbours), total));
-    if (!options_.quiet && options_.parts == 1) progress_ = std::make_unique<Progress>("smoothing", total, "points");
+    if (!options_.quiet && ranks_ == 1) progress_ = std::make_unique<Progress>("smoothing", total, "points");
 
     std::vector<Unresolved> unresolved;
-    if (options_.parts > 1) {
+    if (ranks_ > 1) {
       SearchShare(total, unresolved);
     } else if (total * kBytesPerLoadedPoint <= budget_) {
       Task whole;
@@ -328,29 +416,65 @@ class SmoothingPass {
 
   // Reads the source once, handing each particle (wrapped into a periodic
   // box) and its ordinal to `visit`. On the first read also checks the count
-  // and keeps the snapshot's own smoothing lengths.
+  // and keeps the snapshot's own smoothing lengths. Shared, each process
+  // reads its share of the batches and keeps the lengths of those; with
+  // `wanted` (every process's boxes: what its loads hold), each particle goes
+  // to `visit` on every process one of whose boxes holds it, else only to
+  // the one that read it.
   template <typename Visit>
-  void ReadSource(bool first_read, Visit visit) {
+  void ReadSource(bool first_read, Visit visit, const std::vector<std::vector<Box>>* wanted = nullptr) {
     source_.Rewind();
     ++report_.reads;
     ParticleChunk chunk;
     std::uint64_t ordinal = 0;
     float* table = table_->data();
-    while (source_.Next(chunk)) {
-      const std::size_t n = chunk.size();
-      if (ordinal + n > table_->size()) TooMany();
-      const bool has_given = chunk.has_smoothing();
-      for (std::size_t i = 0; i < n; ++i) {
-        double p[3] = {chunk.position[3 * i], chunk.position[3 * i + 1], chunk.position[3 * i + 2]};
-        if (domain_.periodic) domain_.cube.Wrap(p);
-        const bool given = has_given && chunk.smoothing[i] > 0;
-        if (first_read && given) {
-          table[ordinal + i] = chunk.smoothing[i];
-          ++report_.given;
+    std::optional<Router> router;
+    if (wanted != nullptr) router.emplace(*wanted, domain_);
+    std::vector<std::vector<SharedParticle>> outgoing(ranks_);
+    bool read_all = false;
+    for (std::uint64_t batch = 0;;) {
+      // On to this process's next batch, past the others' (not read where
+      // the reader can seek).
+      bool got = false;
+      while (!read_all && !got) {
+        if (batch % ranks_ != rank_) {
+          const std::uint64_t skipped = source_.Skip();
+          if (ordinal + skipped > table_->size()) TooMany();
+          ordinal += skipped;
+          read_all = skipped == 0;
+        } else {
+          got = source_.Next(chunk);
+          read_all = !got;
         }
-        visit(ordinal + i, p, given);
+        if (!read_all) ++batch;
       }
-      ordinal += n;
+      if (got) {
+        const std::size_t n = chunk.size();
+        if (ordinal + n > table_->size()) TooMany();
+        const bool has_given = chunk.has_smoothing();
+        for (std::size_t i = 0; i < n; ++i) {
+          double p[3] = {chunk.position[3 * i], chunk.position[3 * i + 1], chunk.position[3 * i + 2]};
+          if (domain_.periodic) domain_.cube.Wrap(p);
+          const bool given = has_given && chunk.smoothing[i] > 0;
+          if (first_read && given) {
+            table[ordinal + i] = chunk.smoothing[i];
+            ++report_.given;
+          }
+          if (router) {
+            router->Route(p, [&](unsigned to) {
+              outgoing[to].push_back({{p[0], p[1], p[2]}, (ordinal + i) | (given ? kGivenBit : 0)});
+            });
+          } else {
+            visit(ordinal + i, p, given);
+          }
+        }
+        ordinal += n;
+      }
+      if (router) {
+        if (ExchangeRound(outgoing, read_all, visit)) break;
+      } else if (read_all) {
+        break;
+      }
     }
     if (ordinal != table_->size()) {
       throw Error::BadInput(SourceName(), "the snapshot gave " + std::to_string(ordinal) +
@@ -360,6 +484,42 @@ class SmoothingPass {
     if (first_read && progress_) progress_->Add(report_.given);
   }
 
+  // One round of a shared read: each process's particles to those that want
+  // them, which visit what they receive. Returns whether every process has
+  // read all of its share (each message says whether its sender has).
+  template <typename Visit>
+  bool ExchangeRound(std::vector<std::vector<SharedParticle>>& outgoing, bool read_all, Visit& visit) {
+    std::vector<Bytes> messages(ranks_);
+    for (unsigned q = 0; q < ranks_; ++q) {
+      const std::uint64_t done = read_all ? 1 : 0;
+      Bytes& message = messages[q];
+      message.resize(sizeof done + outgoing[q].size() * sizeof(SharedParticle));
+      std::memcpy(message.data(), &done, sizeof done);
+      if (!outgoing[q].empty()) {
+        std::memcpy(message.data() + sizeof done, outgoing[q].data(), outgoing[q].size() * sizeof(SharedParticle));
+      }
+      outgoing[q].clear();
+    }
+    bool all_done = true;
+    for (const Bytes& message : group_->Exchange(messages)) {
+      std::uint64_t done = 0;
+      if (message.size() < sizeof done || (message.size() - sizeof done) % sizeof(SharedParticle) != 0) {
+        throw Error::Corruption(SourceName(), "a malformed message of the shared smoothing pass");
+      }
+      std::memcpy(&done, message.data(), sizeof done);
+      all_done = all_done && done == 1;
+      const std::size_t count = (message.size() - sizeof done) / sizeof(SharedParticle);
+      for (std::size_t k = 0; k < count; ++k) {
+        SharedParticle particle;
+        std::memcpy(&particle, message.data() + sizeof done + k * sizeof particle, sizeof particle);
+        const std::uint64_t ordinal = particle.ordinal & ~kGivenBit;
+        if (ordinal >= table_->size()) throw Error::Corruption(SourceName(), "a shared particle past the snapshot's count");
+        visit(ordinal, particle.position, (particle.ordinal & kGivenBit) != 0);
+      }
+    }
+    return all_done;
+  }
+
   [[noreturn]] void TooMany() const {
     throw Error::BadInput(SourceName(), "the snapshot gave more particles than its header declares (" +
                                             std::to_string(table_->size()) + ")");
@@ -367,7 +527,7 @@ class SmoothingPass {
 
   // Loads every task's particles (and the first round's queries) from one
   // read of the source.
-  void LoadInMemory(std::vector<Task>& tasks, bool first_read) {
+  void LoadInMemory(std::vector<Task>& tasks, bool first_read, const std::vector<std::vector<Box>>* wanted = nullptr) {
     ReadSource(first_read, [&](std::uint64_t ordinal, const double* p, bool given) {
       for (Task& task : tasks) {
         if (!task.explicit_queries && !given && task.region.Contains(p)) {
@@ -378,7 +538,7 @@ class SmoothingPass {
           for (int a = 0; a < 3; ++a) task.positions.push_back(p[a] + piece.shift[a]);
         }
       }
-    });
+    }, wanted);
   }
 
   // Searches the task's queries against its load; exact radii go into the
@@ -580,6 +740,7 @@ class SmoothingPass {
     pyramid_ = std::make_unique<CountPyramid>(domain_);
     CountPyramid& counts = *pyramid_;
     ReadSource(/*first_read=*/true, [&](std::uint64_t, const double* p, bool) { counts.Add(p); });
+    if (group_) group_->Sum(counts.grid());
     counts.Finish();
     std::vector<Task> tasks;
     CutRegions(counts, most, 0, 0, 0, 0, tasks);
@@ -592,28 +753,32 @@ class SmoothingPass {
   // from memory where their loads fit the capacity together.
   void SearchShare(std::uint64_t total, std::vector<Unresolved>& unresolved) {
     std::vector<Task> tasks = CountAndCutRegions(
-        std::max<std::uint64_t>(1, std::min(region_most_, total / (std::uint64_t{options_.parts} * kRegionsPerPart))));
+        std::max<std::uint64_t>(1, std::min(region_most_, total / (std::uint64_t{ranks_} * kRegionsPerPart))));
     // Regions come in depth-first order: a part takes those whose middle
     // particle falls in its share of the particles.
-    std::vector<Task> mine;
-    std::uint64_t before = 0, own = 0;
+    std::vector<std::vector<Task>> shares(ranks_);
+    std::uint64_t before = 0;
     for (Task& task : tasks) {
       const std::uint64_t middle = before + task.count / 2;
       before += task.count;
-      const std::uint64_t part = std::min<std::uint64_t>(middle * options_.parts / total, options_.parts - 1);
-      if (part != options_.part) continue;
+      const std::uint64_t part = std::min<std::uint64_t>(middle * ranks_ / total, ranks_ - 1);
+      shares[part].push_back(std::move(task));
+    }
+    std::vector<std::vector<Box>> wanted;
+    for (const std::vector<Task>& share : shares) wanted.push_back(LoadBoxes(share));
+    std::vector<Task>& mine = shares[rank_];
+    std::uint64_t own = 0, load = 0;
+    for (const Task& task : mine) {
       own += task.count;
-      mine.push_back(std::move(task));
+      load += task.estimate;
     }
     if (!options_.quiet) progress_ = std::make_unique<Progress>("smoothing (this rank's share)", own, "points");
-    std::uint64_t load = 0;
-    for (const Task& task : mine) load += task.estimate;
     if (load <= capacity_) {
-      LoadInMemory(mine, /*first_read=*/false);
+      LoadInMemory(mine, /*first_read=*/false, &wanted);
       for (Task& task : mine) Search(task, unresolved);
     } else {
       report_.spilled = true;
-      SearchSpilled(mine, unresolved);
+      SearchSpilled(mine, unresolved, &wanted);
     }
   }
 
@@ -625,6 +790,18 @@ class SmoothingPass {
         hi[a] = std::max(hi[a], p[a]);
       }
     });
+    if (group_) {
+      std::array<std::uint64_t, 6> most{};
+      for (int a = 0; a < 3; ++a) {
+        most[static_cast<std::size_t>(a)] = ~Ordered(lo[a]);
+        most[static_cast<std::size_t>(a + 3)] = Ordered(hi[a]);
+      }
+      group_->Max(most);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = FromOrdered(~most[static_cast<std::size_t>(a)]);
+        hi[a] = FromOrdered(most[static_cast<std::size_t>(a + 3)]);
+      }
+    }
     domain_.cube = Cube::FromBounds(lo, hi);
     for (int a = 0; a < 3; ++a) {
       domain_.box.lo[a] = lo[a];
@@ -700,7 +877,8 @@ class SmoothingPass {
 
   // Out of core, the particles do not fit together: one read writes each particle into the file of
   // every task whose load holds it; then each task is read back and searched.
-  void SearchSpilled(std::vector<Task>& tasks, std::vector<Unresolved>& unresolved) {
+  void SearchSpilled(std::vector<Task>& tasks, std::vector<Unresolved>& unresolved,
+                     const std::vector<std::vector<Box>>* wanted = nullptr) {
     TempDirectory temp(TempParent(), "octocosm-smoothing");
     // Which tasks' pieces touch each cell of a coarse lookup grid.
     constexpr int kLookupBits = 5;
@@ -739,7 +917,7 @@ class SmoothingPass {
         writers[t]->Add(SpilledParticle{{p[0] + piece.shift[0], p[1] + piece.shift[1], p[2] + piece.shift[2]},
                                         ordinal | (query ? kQueryBit : 0)});
       }
-    });
+    }, wanted);
     for (auto& writer : writers) writer->Close();
     writers.clear();
     for (std::size_t t = 0; t < tasks.size(); ++t) {
@@ -768,21 +946,48 @@ class SmoothingPass {
 
   // Step 4: each unresolved particle against everything inside its sphere,
   // in groups whose loads fit the capacity, one read of the source per batch.
+  // Shared, every process reads as many times as the one with the most
+  // batches, each wanting its own batch's loads.
   void SearchAgain(std::vector<Unresolved> unresolved) {
-    for (int round = 0; !unresolved.empty(); ++round) {
+    for (int round = 0;; ++round) {
+      std::uint64_t left = unresolved.size();
+      if (group_) group_->Sum(std::span<std::uint64_t>(&left, 1));
+      if (left == 0) return;
       if (round == 3) {
-        throw Error::BadInput(SourceName(), std::to_string(unresolved.size()) +
+        throw Error::BadInput(SourceName(), std::to_string(left) +
                                                 " particles' neighbours could not be bounded (positions too large "
                                                 "for double precision?)");
       }
       std::vector<Task> tasks;
-      Group(std::move(unresolved), tasks);
+      if (!unresolved.empty()) Group(std::move(unresolved), tasks);
       unresolved.clear();
-      for (auto& batch : Batches(std::move(tasks))) {
-        LoadInMemory(batch, /*first_read=*/false);
+      std::vector<std::vector<Task>> batches = Batches(std::move(tasks));
+      std::uint64_t reads = batches.size();
+      if (group_) group_->Max(std::span<std::uint64_t>(&reads, 1));
+      batches.resize(static_cast<std::size_t>(reads));
+      for (std::vector<Task>& batch : batches) {
+        if (group_) {
+          const std::vector<std::vector<Box>> wanted = EveryProcessBoxes(LoadBoxes(batch));
+          LoadInMemory(batch, /*first_read=*/false, &wanted);
+        } else {
+          LoadInMemory(batch, /*first_read=*/false);
+        }
         for (Task& task : batch) Search(task, unresolved);
       }
     }
+  }
+
+  // Every process's `mine`, by process.
+  std::vector<std::vector<Box>> EveryProcessBoxes(const std::vector<Box>& mine) const {
+    const auto* bytes = reinterpret_cast<const std::uint8_t*>(mine.data());
+    const Bytes message(bytes, bytes + mine.size() * sizeof(Box));
+    std::vector<std::vector<Box>> wanted;
+    for (const Bytes& theirs : group_->Exchange(std::vector<Bytes>(ranks_, message))) {
+      if (theirs.size() % sizeof(Box) != 0) throw Error::Corruption(SourceName(), "a malformed message of boxes");
+      std::vector<Box>& boxes = wanted.emplace_back(theirs.size() / sizeof(Box));
+      if (!boxes.empty()) std::memcpy(boxes.data(), theirs.data(), theirs.size());
+    }
+    return wanted;
   }
 
   // The load holding the spheres of `group`: their bounding box, or, when a
@@ -845,6 +1050,8 @@ class SmoothingPass {
   std::uint64_t capacity_;  // particles held at once
   const std::uint64_t region_most_;  // particles an out-of-core region holds at most: a quarter of the capacity
   int threads_;
+  RankGroup* const group_;  // the processes sharing the pass, or null
+  const unsigned rank_, ranks_;
   int neighbours_ = kDefaultNeighbours;
   Domain domain_;
   std::unique_ptr<CountPyramid> pyramid_;  // out of core only: estimates what a load holds

@@ -30,8 +30,9 @@
 //      as fit.
 // Every read asks the source for positions only (ParticleSource::
 // SetPositionsOnly). Processes that share the pass (SmoothingPassOptions::
-// parts) each read the whole snapshot but search only their own regions'
-// particles.
+// group) each read a share of the snapshot's batches in every pass: they
+// combine their bounds and counts, and send each particle to the processes
+// whose loads hold it; each searches only its own regions' particles.
 // With fewer than k particles in all, the radius is the one that holds all
 // of them.
 #pragma once
@@ -42,6 +43,7 @@
 #include <string>
 
 #include "index/neighbour_radius.h"
+#include "ingest/rank_group.h"
 #include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -57,14 +59,16 @@ struct SmoothingPassOptions {
   std::string temp_dir;                // parent of the temporary files; "" = $TMPDIR or /tmp
   unsigned threads = 0;                // 0 = all cores
   bool quiet = false;                  // no progress bars
-  // A share of the search, for processes that split it (ingest over MPI
-  // ranks): this one searches only the regions of part `part` of `parts`
-  // (consecutive in space, about equal in particles; with more than one
-  // part the domain is always cut into regions) and leaves 0 in the table
-  // for the particles of the others. The snapshot's own lengths are kept
-  // for every particle. The element-wise largest of all the parts' tables
-  // is the table of one process.
-  unsigned part = 0, parts = 1;
+  // A pass shared by the processes of `group` (ingest over MPI ranks; null,
+  // or a group of one: this process alone), every one of which calls it:
+  // each reads every size()-th batch of the snapshot from its rank()-th,
+  // and searches only the regions of its share of the particles
+  // (consecutive in space, about equal in particles; the domain is always
+  // cut into regions). Its table holds 0 for the particles others search,
+  // and keeps the snapshot's own lengths only of the batches it reads. The
+  // element-wise largest of all the processes' tables is the table of one
+  // process.
+  RankGroup* group = nullptr;
 };
 
 struct SmoothingPassReport {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -16,6 +17,7 @@
 
 #include "base/error.h"
 #include "tests/support/temp_dir.h"
+#include "tests/support/thread_rank_group.h"
 
 namespace octocosm {
 namespace {
@@ -46,6 +48,12 @@ class VectorSource : public ParticleSource {
     return true;
   }
   void Rewind() override { next_ = 0; }
+  std::uint64_t Skip() override {
+    const std::size_t total = positions_.size() / 3;
+    const std::size_t skipped = std::min(chunk_, total - std::min(next_, total));
+    next_ += skipped;
+    return skipped;
+  }
   void SetPositionsOnly(bool positions_only) override { positions_only_ = positions_only; }
   bool positions_only() const { return positions_only_; }
 
@@ -241,11 +249,13 @@ TEST(SmoothingPass, SeveralThreadsGiveTheLengthsOfOne) {
   }
 }
 
-// Parts of a shared search each fill only their own regions' particles,
-// and together, element by element the largest, give one search's lengths
-// exactly: in memory and through files, with and without a periodic box,
-// with part of the snapshot's own lengths given.
-TEST(SmoothingPass, PartsTogetherGiveTheLengthsOfOneSearch) {
+// Processes that share the pass (threads here) each read a share of the
+// batches and fill only their own regions' particles (and the snapshot's
+// own lengths of the batches they read), and together, element by element
+// the largest, give one search's lengths exactly: in memory and through
+// files, with and without a periodic box, with part of the snapshot's own
+// lengths given.
+TEST(SmoothingPass, SharedByProcessesTogetherGiveTheLengthsOfOneSearch) {
   const std::size_t n = 6000;
   struct Setting {
     const char* name;
@@ -265,33 +275,49 @@ TEST(SmoothingPass, PartsTogetherGiveTheLengthsOfOneSearch) {
     options.temp_dir = temp.path().string();
     options.quiet = true;
     VectorSource whole_source(points, given, setting.box);
-    const auto whole = ComputeSmoothingLengths(whole_source, options);
-    for (unsigned parts : {2u, 3u, 5u}) {
-      SCOPED_TRACE(std::string(setting.name) + ", " + std::to_string(parts) + " parts");
-      std::vector<float> combined(n, 0);
-      std::vector<std::size_t> filled(parts, 0);
-      for (unsigned part = 0; part < parts; ++part) {
-        options.part = part;
-        options.parts = parts;
+    SmoothingPassReport whole_report;
+    const auto whole = ComputeSmoothingLengths(whole_source, options, &whole_report);
+    const int batches = whole_source.reads_of_positions_only / whole_report.reads;
+    for (int ranks : {2, 3, 5}) {
+      SCOPED_TRACE(std::string(setting.name) + ", " + std::to_string(ranks) + " processes");
+      std::vector<std::vector<float>> tables(static_cast<std::size_t>(ranks));
+      std::vector<int> reads(static_cast<std::size_t>(ranks)), batches_read(static_cast<std::size_t>(ranks));
+      std::vector<std::uint64_t> regions(static_cast<std::size_t>(ranks)), again(static_cast<std::size_t>(ranks));
+      testing_support::RunRanks(ranks, [&](RankGroup& group) {
+        SmoothingPassOptions mine = options;
+        mine.group = &group;
         VectorSource source(points, given, setting.box);
         SmoothingPassReport report;
-        const auto table = ComputeSmoothingLengths(source, options, &report);
-        EXPECT_GE(report.regions, std::uint64_t{8} * parts);
+        const auto table = ComputeSmoothingLengths(source, mine, &report);
+        const std::size_t r = static_cast<std::size_t>(group.rank());
+        tables[r].assign(table->data(), table->data() + n);
+        reads[r] = report.reads;
+        batches_read[r] = source.reads_of_positions_only + source.reads_of_everything;
+        regions[r] = report.regions;
+        again[r] = report.searched_again;
+      });
+      // Some particles near their regions' edges are searched again, from reads shared as well.
+      EXPECT_GT(std::accumulate(again.begin(), again.end(), std::uint64_t{0}), 0u);
+      std::vector<float> combined(n, 0);
+      std::vector<std::size_t> filled(static_cast<std::size_t>(ranks), 0);
+      for (std::size_t r = 0; r < tables.size(); ++r) {
+        EXPECT_GE(regions[r], std::uint64_t{8} * static_cast<std::uint64_t>(ranks));
+        // Each reads its share of the batches in every pass, no more.
+        EXPECT_LE(batches_read[r], reads[r] * ((batches + ranks - 1) / ranks)) << "process " << r;
         for (std::size_t i = 0; i < n; ++i) {
+          const float length = tables[r][i];
           if (given[i] > 0) {
-            ASSERT_EQ((*table)[i], given[i]) << "a given length, particle " << i;
-          } else if ((*table)[i] > 0) {
-            ASSERT_EQ(combined[i], 0.0f) << "particle " << i << " searched by two parts";
-            ++filled[part];
+            ASSERT_TRUE(length == 0 || length == given[i]) << "a given length, particle " << i;
+          } else if (length > 0) {
+            ASSERT_EQ(combined[i], 0.0f) << "particle " << i << " searched by two processes";
+            ++filled[r];
           }
-          combined[i] = std::max(combined[i], (*table)[i]);
+          combined[i] = std::max(combined[i], length);
         }
       }
       for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(combined[i], (*whole)[i]) << "particle " << i;
       // The shares come out about even.
-      for (unsigned part = 0; part < parts; ++part) {
-        EXPECT_GT(filled[part], n * 9 / 10 / parts / 2) << "part " << part;
-      }
+      for (std::size_t r = 0; r < filled.size(); ++r) EXPECT_GT(filled[r], n * 9 / 10 / static_cast<std::size_t>(ranks) / 2) << "process " << r;
       EXPECT_TRUE(std::filesystem::is_empty(temp.path()));
     }
   }
@@ -376,13 +402,6 @@ TEST(SmoothingPass, RefusesBadOptionsAndEmptySnapshots) {
   EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
   options.neighbours = 32;
   options.box_size = std::nan("");
-  EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
-  options.box_size = 0;
-  options.parts = 2;
-  options.part = 2;
-  EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
-  options.parts = 0;
-  options.part = 0;
   EXPECT_THROW(ComputeSmoothingLengths(one, options), Error);
 }
 
