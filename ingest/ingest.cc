@@ -742,12 +742,11 @@ std::unique_ptr<ParticleSource> IngestRun::Smooth(std::unique_ptr<ParticleSource
   pass.temp_dir = temp_->path();
   pass.threads = threads_;
   pass.quiet = options_.quiet;
-  // A spread epoch: each rank reads a share of the snapshot and searches a
-  // share of the regions, and the ranks' tables (zero where another rank
-  // searched or read) are combined.
+  // A spread epoch: each rank reads a share of the snapshot's batches and
+  // searches a share of the regions; its table holds the lengths of the
+  // batches it reads, the only ones it reads again.
   pass.group = group_;
   std::unique_ptr<SmoothingLengthTable> table = ComputeSmoothingLengths(*raw, pass);
-  if (group_ != nullptr) group_->Max(std::span<float>(table->data(), table->size()));
   return WithSmoothingLengths(std::move(raw), std::move(table));
 }
 

@@ -138,6 +138,14 @@ struct SpilledParticle {
 };
 constexpr std::uint64_t kQueryBit = std::uint64_t{1} << 63;
 
+// A length a process of a shared pass found, for the process that reads
+// the particle's batch.
+struct FoundLength {
+  std::uint64_t ordinal;
+  float length;
+  std::uint32_t unused = 0;
+};
+
 // A particle a process of a shared pass sends another that wants it.
 struct SharedParticle {
   double position[3];     // in the domain
@@ -389,6 +397,7 @@ class SmoothingPass {
     }
     report_.searched_again = unresolved.size();
     SearchAgain(std::move(unresolved));
+    if (found_) DeliverFoundLengths();
     if (progress_) progress_->Finish();
     source_.Rewind();
     return std::move(table_);
@@ -437,6 +446,7 @@ class SmoothingPass {
       // the reader can seek).
       bool got = false;
       while (!read_all && !got) {
+        if (group_ && batch == batch_starts_.size()) batch_starts_.push_back(ordinal);
         if (batch % ranks_ != rank_) {
           const std::uint64_t skipped = source_.Skip();
           if (ordinal + skipped > table_->size()) TooMany();
@@ -546,29 +556,33 @@ class SmoothingPass {
   void Search(Task& task, std::vector<Unresolved>& unresolved) {
     SortSpatially(task);
     const NeighbourRadii radii(task.positions, task.block_begins, threads_);
-    Mutex mutex;  // guards unresolved
+    Mutex mutex;  // guards unresolved and found_
     float* table = table_->data();
     ParallelForDynamic(task.queries.size(), threads_, 1024, [&](std::size_t begin, std::size_t end) {
       std::vector<Unresolved> local;
+      std::vector<FoundLength> found;  // shared: for the processes that read the particles
       double bound = kInfinity;  // the previous query's radius plus the step to this one
       for (std::size_t q = begin; q < end; ++q) {
         const Query& query = task.queries[q];
         if (q > begin) bound += Distance(task.queries[q - 1].position, query.position);
         const double radius = radii.Radius(query.position.data(), neighbours_, task.query_blocks[q], bound);
         bound = radius;
-        if (SphereInsideLoad(query.position, radius, task.load, domain_)) {
-          table[query.ordinal] = static_cast<float>(radius);
-        } else {
+        if (!SphereInsideLoad(query.position, radius, task.load, domain_)) {
           Vec3 p = query.position;
           if (domain_.periodic) domain_.cube.Wrap(p.data());
           local.push_back({query.ordinal, p, radius});
+        } else if (found_) {
+          found.push_back({query.ordinal, static_cast<float>(radius)});
+        } else {
+          table[query.ordinal] = static_cast<float>(radius);
         }
       }
       if (progress_) progress_->Add(end - begin - local.size());
       ThrowIfCancelled();  // also when quiet, without a progress line
-      if (local.empty()) return;
+      if (local.empty() && found.empty()) return;
       MutexLock lock(mutex);
       unresolved.insert(unresolved.end(), local.begin(), local.end());
+      for (const FoundLength& f : found) found_->Add(f);
     });
     if (!task.explicit_queries) report_.searched += task.queries.size();
     Release(task.positions);
@@ -773,6 +787,8 @@ class SmoothingPass {
       load += task.estimate;
     }
     if (!options_.quiet) progress_ = std::make_unique<Progress>("smoothing (this rank's share)", own, "points");
+    found_temp_.emplace(TempParent(), "octocosm-smoothing-found");
+    found_ = std::make_unique<RecordFileWriter<FoundLength>>(found_temp_->path() + "/found", "the lengths found");
     if (load <= capacity_) {
       LoadInMemory(mine, /*first_read=*/false, &wanted);
       for (Task& task : mine) Search(task, unresolved);
@@ -977,6 +993,53 @@ class SmoothingPass {
     }
   }
 
+  // Shared: every length this process found goes to the process that reads
+  // its particle's batch (batch b: process b % size), in rounds of at most
+  // kDeliveryRound from each, so that each process's table holds the lengths
+  // of its own batches only (the rest of it is never written: in a mapped
+  // file, no disk either).
+  void DeliverFoundLengths() {
+    constexpr std::uint64_t kDeliveryRound = std::uint64_t{1} << 16;
+    found_->Close();
+    const std::string path = found_temp_->path() + "/found";
+    std::uint64_t count = 0;
+    {
+      RecordFileReader<FoundLength> counter(path, "the lengths found");
+      for (FoundLength f; counter.Next(f);) ++count;
+    }
+    std::uint64_t rounds = (count + kDeliveryRound - 1) / kDeliveryRound;
+    group_->Max(std::span<std::uint64_t>(&rounds, 1));
+    const auto reader_of = [&](std::uint64_t ordinal) {
+      const auto after = std::upper_bound(batch_starts_.begin(), batch_starts_.end(), ordinal);
+      return static_cast<unsigned>(static_cast<std::uint64_t>(after - batch_starts_.begin() - 1) % ranks_);
+    };
+    RecordFileReader<FoundLength> reader(path, "the lengths found");
+    float* table = table_->data();
+    for (std::uint64_t round = 0; round < rounds; ++round) {
+      std::vector<Bytes> messages(ranks_);
+      FoundLength f;
+      for (std::uint64_t k = 0; k < kDeliveryRound && reader.Next(f); ++k) {
+        Bytes& message = messages[reader_of(f.ordinal)];
+        const auto* bytes = reinterpret_cast<const std::uint8_t*>(&f);
+        message.insert(message.end(), bytes, bytes + sizeof f);
+      }
+      for (const Bytes& message : group_->Exchange(messages)) {
+        if (message.size() % sizeof(FoundLength) != 0) {
+          throw Error::Corruption(SourceName(), "a malformed message of smoothing lengths");
+        }
+        for (std::size_t at = 0; at < message.size(); at += sizeof(FoundLength)) {
+          std::memcpy(&f, message.data() + at, sizeof f);
+          if (f.ordinal >= table_->size() || reader_of(f.ordinal) != rank_) {
+            throw Error::Corruption(SourceName(), "a smoothing length for a particle this process does not read");
+          }
+          table[f.ordinal] = f.length;
+        }
+      }
+    }
+    found_.reset();
+    found_temp_.reset();
+  }
+
   // Every process's `mine`, by process.
   std::vector<std::vector<Box>> EveryProcessBoxes(const std::vector<Box>& mine) const {
     const auto* bytes = reinterpret_cast<const std::uint8_t*>(mine.data());
@@ -1057,6 +1120,12 @@ class SmoothingPass {
   std::unique_ptr<CountPyramid> pyramid_;  // out of core only: estimates what a load holds
   std::unique_ptr<SmoothingLengthTable> table_;
   std::unique_ptr<Progress> progress_;
+  // Shared: the ordinal where each batch of the snapshot starts, and the
+  // lengths this process found, until they go to the processes that read
+  // their batches.
+  std::vector<std::uint64_t> batch_starts_;
+  std::optional<TempDirectory> found_temp_;
+  std::unique_ptr<RecordFileWriter<FoundLength>> found_;
 };
 
 class SmoothedSource : public ParticleSource {

@@ -32,7 +32,8 @@
 // SetPositionsOnly). Processes that share the pass (SmoothingPassOptions::
 // group) each read a share of the snapshot's batches in every pass: they
 // combine their bounds and counts, and send each particle to the processes
-// whose loads hold it; each searches only its own regions' particles.
+// whose loads hold it; each searches only its own regions' particles, and
+// sends each length to the process that reads its particle's batch.
 // With fewer than k particles in all, the radius is the one that holds all
 // of them.
 #pragma once
@@ -62,12 +63,12 @@ struct SmoothingPassOptions {
   // A pass shared by the processes of `group` (ingest over MPI ranks; null,
   // or a group of one: this process alone), every one of which calls it:
   // each reads every size()-th batch of the snapshot from its rank()-th,
-  // and searches only the regions of its share of the particles
-  // (consecutive in space, about equal in particles; the domain is always
-  // cut into regions). Its table holds 0 for the particles others search,
-  // and keeps the snapshot's own lengths only of the batches it reads. The
-  // element-wise largest of all the processes' tables is the table of one
-  // process.
+  // searches only the regions of its share of the particles (consecutive in
+  // space, about equal in particles; the domain is always cut into
+  // regions), and sends each length it finds to the process that reads the
+  // particle's batch. A process's table holds the lengths of the batches it
+  // reads, as one process's does, and 0 for the rest (never written: in a
+  // mapped table, no disk either).
   RankGroup* group = nullptr;
 };
 
