@@ -583,6 +583,7 @@ class SmoothingPass {
       MutexLock lock(mutex);
       unresolved.insert(unresolved.end(), local.begin(), local.end());
       for (const FoundLength& f : found) found_->Add(f);
+      found_count_ += found.size();
     });
     if (!task.explicit_queries) report_.searched += task.queries.size();
     Release(task.positions);
@@ -1002,12 +1003,7 @@ class SmoothingPass {
     constexpr std::uint64_t kDeliveryRound = std::uint64_t{1} << 16;
     found_->Close();
     const std::string path = found_temp_->path() + "/found";
-    std::uint64_t count = 0;
-    {
-      RecordFileReader<FoundLength> counter(path, "the lengths found");
-      for (FoundLength f; counter.Next(f);) ++count;
-    }
-    std::uint64_t rounds = (count + kDeliveryRound - 1) / kDeliveryRound;
+    std::uint64_t rounds = (found_count_ + kDeliveryRound - 1) / kDeliveryRound;
     group_->Max(std::span<std::uint64_t>(&rounds, 1));
     const auto reader_of = [&](std::uint64_t ordinal) {
       const auto after = std::upper_bound(batch_starts_.begin(), batch_starts_.end(), ordinal);
@@ -1126,6 +1122,7 @@ class SmoothingPass {
   std::vector<std::uint64_t> batch_starts_;
   std::optional<TempDirectory> found_temp_;
   std::unique_ptr<RecordFileWriter<FoundLength>> found_;
+  std::uint64_t found_count_ = 0;
 };
 
 class SmoothedSource : public ParticleSource {
