@@ -1046,12 +1046,13 @@ void IngestRun::IngestEpoch(std::size_t e) {
 //   3. build   each rank chunks and builds its domains' subtrees one domain
 //              after the other, as a single process builds its chunks; rank
 //              0 merges the levels above every rank's domains from their roots
-//   4. gather  rank 0 makes room for the others' blocks in its page file,
-//              where each rank copies its own, as they are, at once; and
-//              reads their leaves' IDs into its
-//              part, which is then the epoch a single process writes
-// Every rank screens (and smooths) the whole epoch alike first, so that all
-// choose the same cube.
+//   4. ids     each rank writes the ID index's buckets of a run of IDs,
+//              from every rank's leaves (ingest/spread_id_index.h)
+//   5. gather  rank 0 makes room for the others' blocks and buckets in its
+//              page files, where each rank copies its own, as they are, at
+//              once; rank 0's part is then the epoch a single process writes
+// Every rank screens the whole epoch alike first, so that all choose the
+// same cube, and the ranks share the neighbour pass.
 
 struct IngestRun::SpreadCensus {
   std::vector<std::uint64_t> cells;  // points in each cell of the domains' grid, summed over the ranks
@@ -1212,7 +1213,7 @@ void IngestRun::BuildDomains(const std::string& label, const Cube& cube, const s
   roots.ForEach([this](const Bytes& root) { group_->Send(0, root); });
 }
 
-// Step 4, on rank 0: the other ranks' domain roots into `top`, in rank
+// Step 3, on rank 0: the other ranks' domain roots into `top`, in rank
 // order (depth-first order: ranks hold consecutive runs of domains), and
 // the levels above them.
 void IngestRun::MergeOtherRanksRoots(const std::string& label, EpochReport& epoch_report, TopLevelMerger& top,
@@ -1236,7 +1237,7 @@ void IngestRun::MergeOtherRanksRoots(const std::string& label, EpochReport& epoc
   for (double w : root.weight) epoch_report.mass += w;
 }
 
-// Step 5, on every rank: its share of the ID index, from every rank's
+// Step 4, on every rank: its share of the ID index, from every rank's
 // leaves, into its ID store's epoch (ingest/spread_id_index.h).
 void IngestRun::WriteIdIndexShare(const SnapshotHeader& header, const SpreadCensus& census, LeafIdsFile& leaf_ids,
                                   EpochReport& epoch_report) {
@@ -1256,7 +1257,7 @@ void IngestRun::WriteIdIndexShare(const SnapshotHeader& header, const SpreadCens
   WriteSpreadIdIndex(*group_, leaf_ids, *id_store_, options);
 }
 
-// Step 6, on rank 0: room in the store's page files for the other ranks'
+// Step 5, on rank 0: room in the store's page files for the other ranks'
 // blocks and ID index buckets, which they copy in themselves.
 void IngestRun::GatherOtherRanks(const std::string& label, EpochReport& epoch_report) {
   RankGroup& group = *group_;
