@@ -79,6 +79,9 @@ ThrottledProxy::~ThrottledProxy() {
   ::close(listener_);
 }
 
+// Each connection to the server is made on the connection's own thread, so
+// that a slow connect (a full backlog waits for a SYN to be sent again, 1 s
+// and then 3 s) holds up that connection alone, not every accept after it.
 void ThrottledProxy::AcceptLoop() {
   while (!stopping_) {
     const int client = ::accept4(listener_, nullptr, nullptr, SOCK_CLOEXEC);
@@ -86,22 +89,36 @@ void ThrottledProxy::AcceptLoop() {
       if (stopping_) return;
       continue;
     }
-    const int server = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    sockaddr_in address = LoopbackAddress(server_port_);
-    if (::connect(server, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
-      ::close(server);
-      ::close(client);
-      continue;
-    }
-    const int yes = 1;
-    ::setsockopt(client, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
-    ::setsockopt(server, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
     std::lock_guard<std::mutex> lock(threads_mutex_);
     sockets_.push_back(client);
-    sockets_.push_back(server);
-    threads_.emplace_back([this, client, server] { Pump(client, server, false); });
-    threads_.emplace_back([this, client, server] { Pump(server, client, true); });
+    threads_.emplace_back([this, client] { Relay(client); });
   }
+}
+
+void ThrottledProxy::Relay(int client) {
+  const int server = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in address = LoopbackAddress(server_port_);
+  if (server < 0 || ::connect(server, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+    if (server >= 0) ::close(server);
+    ::shutdown(client, SHUT_RDWR);  // closed with the others when the proxy goes
+    return;
+  }
+  {
+    // The destructor shuts down every socket it finds here; one made after
+    // it looked is not relayed.
+    std::lock_guard<std::mutex> lock(threads_mutex_);
+    if (stopping_) {
+      ::close(server);
+      return;
+    }
+    sockets_.push_back(server);
+  }
+  const int yes = 1;
+  ::setsockopt(client, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+  ::setsockopt(server, IPPROTO_TCP, TCP_NODELAY, &yes, sizeof yes);
+  std::thread requests([this, client, server] { Pump(client, server, false); });
+  Pump(server, client, true);
+  requests.join();
 }
 
 Clock::time_point ThrottledProxy::Pace(std::size_t bytes) {

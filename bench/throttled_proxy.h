@@ -61,6 +61,8 @@ class ThrottledProxy {
 
  private:
   void AcceptLoop();
+  // One connection: connects to the server and relays both ways until both close.
+  void Relay(int client);
   void Pump(int from, int to, bool to_client);
   std::chrono::steady_clock::time_point Pace(std::size_t bytes);
 
