@@ -80,11 +80,6 @@ constexpr std::uint64_t kMaxChunkPoints = std::uint64_t{1} << 18;
 constexpr std::size_t kQueueWindowPerThread = 4;
 constexpr std::uint64_t kTailChunkFraction = 8;
 
-struct IdLeafRecord {
-  std::uint64_t key;  // particle ID
-  std::uint64_t leaf;
-};
-
 // Removes the output directory on failure, and when a signal ends the
 // program (base/interrupt_cleanup.h), but only if this run created it; in
 // a directory that was there before, only the unfinished store's files.

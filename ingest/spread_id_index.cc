@@ -69,13 +69,6 @@ void LeafIdsFile::ForEach(const std::function<void(NodeKey, std::span<const std:
 
 namespace {
 
-// A particle ID and what the index keeps of its leaf: the leaf's ordinal
-// in the leaf table (tables) or its key (pairs).
-struct IdLeaf {
-  std::uint64_t key;  // the ID; ExternalSorter sorts by `key`
-  std::uint64_t leaf;
-};
-
 Bytes Pack(std::span<const std::uint64_t> values) {
   const auto* bytes = reinterpret_cast<const std::uint8_t*>(values.data());
   return Bytes(bytes, bytes + values.size_bytes());
@@ -107,24 +100,24 @@ std::vector<std::uint64_t> AllGather(RankGroup& group, std::span<const std::uint
 void ExchangeToOwners(RankGroup& group, const LeafIdsFile& leaf_ids, std::size_t round_pairs,
                       const std::function<std::uint64_t(NodeKey)>& value_of,
                       const std::function<int(std::uint64_t)>& owner_of,
-                      const std::function<void(std::span<const IdLeaf>)>& receive) {
+                      const std::function<void(std::span<const IdLeafRecord>)>& receive) {
   const std::size_t ranks = static_cast<std::size_t>(group.size());
   round_pairs = std::max<std::size_t>(round_pairs, 1);
   std::uint64_t rounds = (leaf_ids.id_count() + round_pairs - 1) / round_pairs;
   group.Max(std::span<std::uint64_t>(&rounds, 1));
-  std::vector<std::vector<IdLeaf>> outgoing(ranks);
+  std::vector<std::vector<IdLeafRecord>> outgoing(ranks);
   std::size_t pending = 0;
   std::uint64_t round = 0;
   const auto exchange = [&] {
     std::vector<Bytes> messages(ranks);
     for (std::size_t q = 0; q < ranks; ++q) {
       const auto* bytes = reinterpret_cast<const std::uint8_t*>(outgoing[q].data());
-      messages[q].assign(bytes, bytes + outgoing[q].size() * sizeof(IdLeaf));
+      messages[q].assign(bytes, bytes + outgoing[q].size() * sizeof(IdLeafRecord));
       outgoing[q].clear();
     }
     pending = 0;
     ++round;
-    for (const Bytes& message : group.Exchange(messages)) receive(Unpack<IdLeaf>(message, leaf_ids.path().c_str()));
+    for (const Bytes& message : group.Exchange(messages)) receive(Unpack<IdLeafRecord>(message, leaf_ids.path().c_str()));
   };
   leaf_ids.ForEach([&](NodeKey leaf, std::span<const std::uint64_t> ids) {
     const std::uint64_t value = value_of(leaf);
@@ -208,8 +201,8 @@ void WriteTableShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
         const std::uint64_t bucket = (id - first) / per_bucket;
         return static_cast<int>(std::upper_bound(lowest.begin(), lowest.end() - 1, bucket) - lowest.begin()) - 1;
       },
-      [&](std::span<const IdLeaf> pairs) {
-        for (const IdLeaf& pair : pairs) {
+      [&](std::span<const IdLeafRecord> pairs) {
+        for (const IdLeafRecord& pair : pairs) {
           const std::uint64_t slot = pair.key - first - begin;
           if (pair.key < first + begin || slot >= slots.size() || pair.leaf == 0 || pair.leaf > leaves.size()) {
             throw Error::Corruption(what, "ID " + std::to_string(pair.key) + " reached a rank that does not hold it");
@@ -253,12 +246,12 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
     return static_cast<int>(std::upper_bound(cuts.begin(), cuts.end(), id) - cuts.begin());
   };
 
-  ExternalSorter<IdLeaf> sorter(options.temp_prefix,
-                                static_cast<std::size_t>(std::max<std::uint64_t>(options.sort_memory / sizeof(IdLeaf), 1)));
+  ExternalSorter<IdLeafRecord> sorter(options.temp_prefix,
+                                static_cast<std::size_t>(std::max<std::uint64_t>(options.sort_memory / sizeof(IdLeafRecord), 1)));
   ExchangeToOwners(
       group, leaf_ids, options.round_pairs, [](NodeKey leaf) { return leaf.value(); }, owner_of,
-      [&](std::span<const IdLeaf> pairs) {
-        for (const IdLeaf& pair : pairs) {
+      [&](std::span<const IdLeafRecord> pairs) {
+        for (const IdLeafRecord& pair : pairs) {
           if (owner_of(pair.key) != rank || !NodeKey::FromValue(pair.leaf).IsValid()) {
             throw Error::Corruption(what, "ID " + std::to_string(pair.key) + " reached a rank that does not hold it");
           }
@@ -285,7 +278,7 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
   }
 
   auto reader = sorter.Open();
-  IdLeaf pair{};
+  IdLeafRecord pair{};
   std::uint64_t previous = 0;
   std::uint64_t read = 0;
   std::optional<std::uint64_t> repeated;  // sorted: the first found is the smallest
@@ -294,14 +287,14 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
     if (read++ > 0 && pair.key == previous && !repeated) repeated = pair.key;
     previous = pair.key;
   };
-  std::vector<IdLeaf> head_pairs;
+  std::vector<IdLeafRecord> head_pairs;
   for (std::uint64_t k = 0; k < head; ++k) {
     next();
     head_pairs.push_back(pair);
   }
   std::vector<Bytes> outgoing(ranks);
   const auto* head_bytes = reinterpret_cast<const std::uint8_t*>(head_pairs.data());
-  outgoing[head_owner].assign(head_bytes, head_bytes + head_pairs.size() * sizeof(IdLeaf));
+  outgoing[head_owner].assign(head_bytes, head_bytes + head_pairs.size() * sizeof(IdLeafRecord));
   const std::vector<Bytes> incoming = group.Exchange(outgoing);
 
   IdIndexEpochWriter writer(ids, options.page_size, (offset + per_bucket - 1) / per_bucket);
@@ -310,7 +303,7 @@ void WritePairsShare(RankGroup& group, const LeafIdsFile& leaf_ids, StoreWriter&
     writer.Add(pair.key, NodeKey::FromValue(pair.leaf));
   }
   for (std::size_t from = static_cast<std::size_t>(rank) + 1; from < ranks; ++from) {
-    for (const IdLeaf& tail : Unpack<IdLeaf>(incoming[from], what)) {
+    for (const IdLeafRecord& tail : Unpack<IdLeafRecord>(incoming[from], what)) {
       if (read++ > 0 && tail.key < previous) throw Error::Corruption(what, "the ranks' sorted IDs are out of order");
       if (read > 1 && tail.key == previous && !repeated) repeated = tail.key;
       previous = tail.key;

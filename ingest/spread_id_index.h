@@ -29,6 +29,15 @@
 
 namespace octocosm {
 
+// A particle ID and what the ID index keeps of its leaf, as the index's
+// sorts (ExternalSorter, by `key`) and the ranks' messages carry it: the
+// leaf's key, or its ordinal in the leaf table where a spread epoch's index
+// is a table.
+struct IdLeafRecord {
+  std::uint64_t key;  // the particle ID
+  std::uint64_t leaf;
+};
+
 // The IDs of the leaves a rank builds, in a file of its own: per leaf its
 // key, the number of its IDs and the IDs. Leaves may be added from several
 // threads at once.
