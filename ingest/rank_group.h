@@ -22,7 +22,6 @@ class RankGroup {
   virtual void Sum(std::span<std::uint64_t> values) = 0;
   // The largest of every rank's values, element by element, on every rank.
   virtual void Max(std::span<std::uint64_t> values) = 0;
-  virtual void Max(std::span<float> values) = 0;
   // outgoing[q] goes to rank q (one entry per rank); returns what each rank
   // sent this one, by sender.
   virtual std::vector<Bytes> Exchange(const std::vector<Bytes>& outgoing) = 0;

@@ -106,15 +106,6 @@ class WorldGroup final : public RankGroup {
   int size() const override { return CommSize(MPI_COMM_WORLD); }
   void Sum(std::span<std::uint64_t> values) override { Reduce(values, MPI_SUM); }
   void Max(std::span<std::uint64_t> values) override { Reduce(values, MPI_MAX); }
-  void Max(std::span<float> values) override {
-    // In slices: an MPI count is an int, and a slice at a time keeps the
-    // library's own buffers small next to a table of 10^9 values.
-    constexpr std::size_t kSlice = std::size_t{1} << 22;
-    for (std::size_t done = 0; done < values.size(); done += kSlice) {
-      const int count = static_cast<int>(std::min(kSlice, values.size() - done));
-      MPI_Allreduce(MPI_IN_PLACE, values.data() + done, count, MPI_FLOAT, MPI_MAX, MPI_COMM_WORLD);
-    }
-  }
 
   std::vector<Bytes> Exchange(const std::vector<Bytes>& outgoing) override {
     const std::size_t ranks = static_cast<std::size_t>(size());

@@ -69,9 +69,6 @@ class ThreadRankGroup : public RankGroup {
   void Max(std::span<std::uint64_t> values) override {
     Reduce(values, [](std::uint64_t a, std::uint64_t b) { return std::max(a, b); });
   }
-  void Max(std::span<float> values) override {
-    Reduce(values, [](float a, float b) { return std::max(a, b); });
-  }
   std::vector<Bytes> Exchange(const std::vector<Bytes>& outgoing) override {
     hub_.mail[static_cast<std::size_t>(rank_)] = outgoing;
     hub_.Barrier();
