@@ -133,6 +133,15 @@ std::vector<NamedView> Views(const Dataset& dataset, const std::vector<std::stri
   return views;
 }
 
+// The view as `octocosm render` flags, to draw it again or hand it to
+// bench/lod_oracle.py.
+void PrintCameraFlags(const NamedView& view) {
+  const Camera& c = view.camera;
+  std::printf("%s: --camera %.17g,%.17g,%.17g --look-at %.17g,%.17g,%.17g --fov %g --near %.17g --far %.17g\n",
+              view.name.c_str(), c.position[0], c.position[1], c.position[2], c.look_at[0], c.look_at[1], c.look_at[2],
+              c.fov_y_degrees, c.near, c.far);
+}
+
 std::vector<std::string> Split(const std::string& text) {
   std::vector<std::string> parts;
   std::size_t start = 0;
@@ -611,7 +620,10 @@ void Run(const Flags& f) {
   const std::vector<Dataset> datasets = PrepareStores(f, snapshot, representations);
   const std::vector<NamedView> views = Views(datasets.front(), Split(f.views));
   std::vector<RenderView> render_views;
-  for (const NamedView& v : views) render_views.emplace_back(v.camera, f.width, f.height);
+  for (const NamedView& v : views) {
+    render_views.emplace_back(v.camera, f.width, f.height);
+    PrintCameraFlags(v);
+  }
   double reference_seconds = 0;
   const std::vector<HdrImage> references = PrepareReferences(f, snapshot, views, render_views, reference_seconds);
   if (f.reference) {
