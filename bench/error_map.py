@@ -38,13 +38,12 @@ def box_mean(image, k):
     return image[: h * k, : w * k].reshape(h, k, w, k).mean(axis=(1, 3))
 
 
-def main():
-    if len(sys.argv) < 3:
-        sys.exit(__doc__)
-    reference = read_pfm(sys.argv[1])
+def grey_scale(reference, name):
+    """The tone map of the comparisons: mass per pixel to a brightness in [0, 1],
+    log scale, 4 decades below the reference's 99.5th percentile."""
     lit = reference[reference > 0]
     if lit.size == 0:
-        sys.exit(f"{sys.argv[1]}: an empty picture")
+        sys.exit(f"{name}: an empty picture")
     exposure = np.percentile(lit, 99.5)
     floor = exposure * 1e-4
 
@@ -53,6 +52,14 @@ def main():
             b = np.log(np.maximum(mass, 1e-300) / floor) / np.log(exposure / floor)
         return np.clip(np.where(mass > 0, b, 0), 0, 1)
 
+    return brightness
+
+
+def main():
+    if len(sys.argv) < 3:
+        sys.exit(__doc__)
+    reference = read_pfm(sys.argv[1])
+    brightness = grey_scale(reference, sys.argv[1])
     truth = brightness(reference)
     bands = [(0.0, 0.2), (0.2, 0.4), (0.4, 0.6), (0.6, 0.8), (0.8, 1.01)]
     for path in sys.argv[2:]:

@@ -1,0 +1,306 @@
+#!/usr/bin/env python3
+"""How close a level of detail chosen for one view could come: an oracle.
+
+The store's levels of detail are built once for every view. This script builds,
+for one camera, the level of detail that knows the view: it projects every
+particle the full-detail frame draws (the store's leaves: positions, masses and
+the smoothing lengths the reference uses), merges them in screen space, and
+draws the merged points with the reference renderer, so that its pictures
+compare with the bench's frames on the same footing.
+
+Merging: a k-d tree on the screen, each cell cut across its wider axis at its
+mass-weighted mean, the cells whose blob would hide most of their members'
+spread cut first (priority M s^2 / (s^2 + v + p^2), as index/aggregator.h
+orders a node's cells, with s^2 the members' spread on the screen, v their
+blobs' mean variance and p half a pixel). Particles that lie apart in depth
+but on one line of sight merge for free, which no view-independent level can
+do. A merged point sits on the ray through its members' screen centroid at
+their mean depth and is drawn round, with the radius whose kernel variance is
+the members' spread plus their blobs' mean variance (moment matching).
+
+For each count asked for, the cut of the tree with that many points is written
+as a GADGET-2 snapshot with its own smoothing lengths (HSML), rendered with
+`octocosm render --reference` at the view, and compared with the reference
+picture on the grey log scale of bench/error_map.py (PSNR; its figure is close
+to the bench's, taken on the colour map). Frames the bench saved
+(--save-pictures) can be given to be measured on the same scale.
+
+  python3 bench/lod_oracle.py --store DIR/store-clusters --reference DIR/reference-mid.pfm \\
+      --view "$(grep '^mid:' bench.log | cut -d' ' -f2-)" --counts 0.02,0.05,0.1 \\
+      --work /tmp/oracle [DIR/picture-mid-clusters-t16-b0.pfm ...]
+"""
+import argparse
+import math
+import os
+import shlex
+import struct
+import subprocess
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import error_map  # noqa: E402  (read_pfm, the grey tone map)
+
+MIN_RADIUS, MAX_RADIUS = 1.0, 127.0  # render/splat_kernel.h
+PIXEL = 0.5  # p of the priority, in pixels
+
+
+def kernel_variance_per_axis():
+    """Per-axis variance of the 2-D M4 kernel of radius 1 (render/splat_kernel.h)."""
+    q = np.linspace(0, 1, 200001)
+    w = np.where(q < 0.5, 1 - 6 * q**2 + 6 * q**3, 2 * (1 - q) ** 3)
+    return 0.5 * np.trapz(w * q**3, q) / np.trapz(w * q, q)
+
+
+def parse_view(text):
+    flags = shlex.split(text)
+    view = {"fov": 60.0}
+    for name, value in zip(flags[::2], flags[1::2]):
+        key = name.lstrip("-").replace("-", "_")
+        view[key] = [float(x) for x in value.split(",")] if "," in value else float(value)
+    for key in ("camera", "look_at", "near", "far"):
+        if key not in view:
+            sys.exit(f"--view: {key} missing (give the bench's line for the view)")
+    return view, flags
+
+
+def camera_basis(view):
+    position = np.array(view["camera"])
+    forward = np.array(view["look_at"]) - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return position, forward, right, up
+
+
+def project(points, view, width, height):
+    position, forward, right, up = camera_basis(view)
+    focal = 0.5 * height / math.tan(math.radians(view["fov"]) / 2)
+    d = points["position"] - position
+    depth = d @ forward
+    keep = depth > view["near"]
+    d, depth = d[keep], depth[keep]
+    u = 0.5 * width + focal * (d @ right) / depth
+    v = 0.5 * height - focal * (d @ up) / depth
+    radius = np.clip(points["smoothing"][keep] * focal / depth, MIN_RADIUS, MAX_RADIUS)
+    inside = (u > -radius) & (u < width + radius) & (v > -radius) & (v < height + radius)
+    return {
+        "u": u[inside], "v": v[inside], "z": depth[inside], "radius": radius[inside],
+        "mass": points["weight"][keep][inside], "focal": focal,
+        "world": points["position"][keep][inside], "smoothing": points["smoothing"][keep][inside],
+    }
+
+
+def build_tree(p, k, grouping):
+    """The k-d tree down to single particles: per node its parent, priority and moments on the screen.
+
+    grouping "screen" cuts cells on the screen (u, v and the blob's width in
+    pixels); "world" cuts them in space (x, y, z and the blob's width in
+    length units), as a tree built once for every view would, and only the
+    priorities and the drawn blobs come from the view.
+    """
+    m, u, v, z = p["mass"], p["u"], p["v"], p["z"]
+    blob = k * p["radius"] ** 2
+    if grouping == "screen":
+        coords = [u, v, np.sqrt(blob)]
+    else:
+        coords = [p["world"][:, 0], p["world"][:, 1], p["world"][:, 2], math.sqrt(k) * p["smoothing"]]
+    width_px = np.sqrt(blob)
+    label = np.zeros(m.size, dtype=np.int64)
+    members = np.arange(m.size)
+    node_of_label = np.array([0])  # cells of the current level
+    nodes = {key: [] for key in ("parent", "mass", "u", "v", "z", "spread", "blob", "priority", "terminal")}
+    parents_next = np.array([-1])
+    next_id = 0
+    depth = 0
+    while members.size:
+        cells = node_of_label.size
+        w = m[members]
+        mass = np.bincount(label, w, cells)
+        safe = np.maximum(mass, 1e-300)
+
+        def mean_and_variance(values):
+            mean = np.bincount(label, w * values, cells) / safe
+            offset = values - mean[label]
+            return mean, offset, np.bincount(label, w * offset * offset, cells) / safe
+
+        mu, _, var_u = mean_and_variance(u[members])
+        mv, _, var_v = mean_and_variance(v[members])
+        _, _, var_width = mean_and_variance(width_px[members])
+        mz = np.bincount(label, w * z[members], cells) / safe
+        mean_blob = np.bincount(label, w * blob[members], cells) / safe
+        count = np.bincount(label, minlength=cells)
+        spread = 0.5 * (var_u + var_v)
+        priority = mass * (spread + var_width) / (spread + mean_blob + PIXEL**2)
+        cut_offsets, cut_variances = [], []
+        for values in coords:
+            _, offset, variance = mean_and_variance(values[members])
+            cut_offsets.append(offset)
+            cut_variances.append(variance)
+        cut_variances = np.stack(cut_variances)
+        terminal = (count <= 1) | (cut_variances.max(axis=0) <= 0) | (depth >= 80)
+        ids = np.arange(next_id, next_id + cells)
+        next_id += cells
+        for key, value in (("parent", parents_next), ("mass", mass), ("u", mu), ("v", mv), ("z", mz),
+                           ("spread", spread), ("blob", mean_blob), ("priority", priority), ("terminal", terminal)):
+            nodes[key].append(value)
+        # Cut every cell that is not terminal across its widest coordinate at its mean.
+        go = ~terminal[label]
+        axis = np.argmax(cut_variances, axis=0)[label[go]]
+        side = np.choose(axis, [offset[go] > 0 for offset in cut_offsets]).astype(np.int64)
+        members, label = members[go], label[go]
+        # The widest coordinate varies, so neither side is empty.
+        child = label * 2 + side
+        unique, label = np.unique(child, return_inverse=True)
+        parents_next = ids[unique // 2]
+        node_of_label = unique
+        depth += 1
+    tree = {key: np.concatenate(value) for key, value in nodes.items()}
+    tree["depth"] = np.concatenate([np.full(len(level), d) for d, level in enumerate(nodes["mass"])])
+    tree["level_sizes"] = [len(level) for level in nodes["mass"]]
+    return tree
+
+
+def allow_stops(tree, levels_per_step):
+    """Lets a cut stop only every `levels_per_step` levels (and at terminal
+    nodes): 3 makes a cell's refinement its about eight grandchildren, as an
+    octree level's clusters refine into the next level's points."""
+    tree["stop"] = (tree["depth"] % levels_per_step == 0) | tree["terminal"]
+    # The smallest priority among each node's ancestors where a cut may stop,
+    # level by level (a level's nodes follow the level above's).
+    ancestors_min = np.full(tree["mass"].size, np.inf)
+    start = 0
+    for size in tree["level_sizes"]:
+        sel = np.arange(start, start + size)
+        parent = tree["parent"][sel]
+        has = parent >= 0
+        parent = parent[has]
+        own = np.where(tree["stop"][parent], tree["priority"][parent], np.inf)
+        ancestors_min[sel[has]] = np.minimum(ancestors_min[parent], own)
+        start += size
+    tree["ancestors_min"] = ancestors_min
+
+
+def cut(tree, tau):
+    """The nodes drawn for threshold tau: every ancestor cut, the node itself not (or not cuttable)."""
+    return tree["stop"] & (tree["ancestors_min"] > tau) & ((tree["priority"] <= tau) | tree["terminal"])
+
+
+def cut_with_count(tree, target):
+    lo, hi = 0.0, float(tree["priority"].max()) * 2 + 1
+    for _ in range(80):
+        mid = math.sqrt(lo * hi) if lo > 0 else hi * 1e-12
+        n = int(cut(tree, mid).sum())
+        if n > target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-9 * hi:
+            break
+    return cut(tree, hi)
+
+
+def write_gadget2(path, positions, masses, smoothing):
+    """A format-2 GADGET file of gas particles with masses and smoothing lengths."""
+    n = positions.shape[0]
+
+    def block(f, label, payload):
+        f.write(struct.pack("<i4sii", 8, label.encode(), len(payload) + 8, 8))
+        f.write(struct.pack("<i", len(payload)))
+        f.write(payload)
+        f.write(struct.pack("<i", len(payload)))
+
+    header = struct.pack("<6i6dddii6Iii4d", n, 0, 0, 0, 0, 0, *([0.0] * 6), 1.0, 0.0, 0, 0,
+                         n, 0, 0, 0, 0, 0, 0, 1, 0.0, 0.3, 0.7, 0.7)
+    header += b"\0" * (256 - len(header))
+    with open(path, "wb") as f:
+        block(f, "HEAD", header)
+        block(f, "POS ", positions.astype("<f4").tobytes())
+        block(f, "VEL ", np.zeros((n, 3), "<f4").tobytes())
+        block(f, "ID  ", np.arange(1, n + 1, dtype="<u4").tobytes())
+        block(f, "MASS", masses.astype("<f4").tobytes())
+        block(f, "HSML", smoothing.astype("<f4").tobytes())
+
+
+def psnr(reference, picture):
+    brightness = error_map.grey_scale(reference, "the reference")
+    mse = np.mean((brightness(reference) - brightness(picture)) ** 2)
+    return 10 * math.log10(1.0 / max(mse, 1e-30))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--store", required=True)
+    parser.add_argument("--reference", required=True, help="the bench's reference-VIEW.pfm")
+    parser.add_argument("--view", required=True, help="the bench's camera flags for the view")
+    parser.add_argument("--counts", default="0.02,0.05,0.1",
+                        help="points to draw: counts, or fractions (< 1) of --full-detail")
+    parser.add_argument("--full-detail", type=int, default=0,
+                        help="points of the view's full-detail frame, as the bench counts them "
+                             "(default: the particles whose blobs reach into the view)")
+    parser.add_argument("--grouping", choices=("screen", "world"), default="screen",
+                        help="cut cells on the screen, or in space as a tree built once for every view")
+    parser.add_argument("--levels-per-step", default="1",
+                        help="binary levels between the places a cut may stop (3: refine a cell into ~8); "
+                             "several, comma-separated, cut one tree each way")
+    parser.add_argument("--width", type=int, default=1280)
+    parser.add_argument("--height", type=int, default=720)
+    parser.add_argument("--work", default="lod-oracle")
+    parser.add_argument("--octocosm", default=os.path.join(HERE, "..", "build", "tools", "octocosm"))
+    parser.add_argument("frames", nargs="*", help="the bench's saved frames of the view, measured alike")
+    args = parser.parse_args()
+    os.makedirs(args.work, exist_ok=True)
+    import octocosm
+
+    view, flags = parse_view(args.view)
+    store = octocosm.open(args.store)
+    # A wider frustum, so that the particles just outside the view whose blobs
+    # reach into it come too (the widest blob, 127 px, subtends less than the
+    # difference at these fields of view); project() keeps the ones that reach.
+    wide = min(2 * math.degrees(math.atan(math.tan(math.radians(view["fov"]) / 2)
+                                          + 2 * MAX_RADIUS / args.height)), 170.0)
+    camera = {"position": view["camera"], "look_at": view["look_at"], "fov_y_degrees": wide,
+              "near": view["near"], "far": view["far"]}
+    points = store.query(level=21, camera=camera, width=args.width, height=args.height, frustum=True,
+                         columns=["weight", "smoothing"])
+    p = project(points, view, args.width, args.height)
+    n = p["mass"].size
+    print(f"{n} particles in view (of {points['weight'].size} in the frustum's blocks)", flush=True)
+    full = args.full_detail or n
+    k = kernel_variance_per_axis()
+    tree = build_tree(p, k, args.grouping)
+    print(f"tree: {tree['mass'].size} nodes", flush=True)
+
+    reference = error_map.read_pfm(args.reference)
+    position, forward, right, up = camera_basis(view)
+    for step in (int(x) for x in args.levels_per_step.split(",")):
+        allow_stops(tree, step)
+        for text in args.counts.split(","):
+            target = float(text)
+            target = int(round(target * full)) if target < 1 else int(target)
+            drawn = cut_with_count(tree, target)
+            mass, u, v, z = (tree[key][drawn] for key in ("mass", "u", "v", "z"))
+            radius = np.clip(np.sqrt((tree["spread"][drawn] + tree["blob"][drawn]) / k), MIN_RADIUS, MAX_RADIUS)
+            focal = p["focal"]
+            positions = (position + z[:, None] * forward + ((u - 0.5 * args.width) * z / focal)[:, None] * right
+                         - ((v - 0.5 * args.height) * z / focal)[:, None] * up)
+            snapshot = os.path.join(args.work, f"oracle-{args.grouping}-{step}-{drawn.sum()}")
+            write_gadget2(snapshot, positions, mass, radius * z / focal)
+            picture = os.path.join(args.work, f"oracle-{args.grouping}-{step}-{drawn.sum()}.pfm")
+            subprocess.run([args.octocosm, "render", args.store, "--reference", snapshot, *flags,
+                            "--width", str(args.width), "--height", str(args.height), "-o", picture[:-4] + ".png",
+                            "--hdr", picture, "--quiet"],
+                           check=True)
+            image = error_map.read_pfm(picture)
+            print(f"oracle ({args.grouping}, a cut every {step} levels): {drawn.sum()} points "
+                  f"({100.0 * drawn.sum() / full:.2f}% of full detail): PSNR {psnr(reference, image):.1f} dB (grey log scale); mass {image.sum():.6g} "
+                  f"against the reference's {reference.sum():.6g}", flush=True)
+    for frame in args.frames:
+        print(f"{os.path.basename(frame)}: PSNR {psnr(reference, error_map.read_pfm(frame)):.1f} dB (grey log scale)")
+
+
+if __name__ == "__main__":
+    main()

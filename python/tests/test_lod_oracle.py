@@ -1,0 +1,45 @@
+"""bench/lod_oracle.py on a small clustered set: the oracle's merged points,
+drawn by the reference renderer, reproduce the reference when none are merged
+and lose detail, but no mass, when few are kept.
+
+Run by ctest (test python_module) with the module on PYTHONPATH and
+OCTOCOSM_PROGRAM naming the program.
+"""
+import os
+import pathlib
+import re
+import subprocess
+import sys
+
+import pytest
+
+PROGRAM = os.environ.get("OCTOCOSM_PROGRAM", "octocosm")
+ORACLE = pathlib.Path(__file__).resolve().parents[2] / "bench" / "lod_oracle.py"
+
+
+def run(*args):
+    return subprocess.run([*map(str, args)], check=True, capture_output=True, text=True).stdout
+
+
+@pytest.mark.parametrize("grouping, levels", [("screen", 1), ("world", 3)])
+def test_the_oracle_reproduces_the_reference_from_every_particle_and_keeps_the_mass(tmp_path, grouping, levels):
+    run(PROGRAM, "synth", "scale", "-n", 40000, "--box", 50, "-o", tmp_path / "snap")
+    run(PROGRAM, "ingest", tmp_path / "snap" / "snap", "-o", tmp_path / "store", "--capacity", 2000, "-q")
+    view = "--camera 30000,32000,40000 --look-at 25000,25000,25000 --fov 60 --near 1 --far 200000"
+    run(PROGRAM, "render", tmp_path / "store", "--reference", tmp_path / "snap" / "snap", *view.split(),
+        "--width", 320, "--height", 180, "-o", tmp_path / "reference.png", "--hdr", tmp_path / "reference.pfm", "-q")
+    out = run(sys.executable, ORACLE, "--store", tmp_path / "store", "--reference", tmp_path / "reference.pfm",
+              "--view", view, "--width", 320, "--height", 180, "--counts", "0.1,1e9", "--grouping", grouping,
+              "--levels-per-step", levels, "--work", tmp_path / "oracle", "--octocosm", PROGRAM)
+    rows = re.findall(r"oracle \(.*\): (\d+) points .*PSNR ([\d.]+) dB .*mass ([\d.e+]+) against the reference's ([\d.e+]+)",
+                      out)
+    assert len(rows) == 2, out
+    (few, few_db, few_mass, mass), (every, every_db, every_mass, _) = rows
+    in_view = int(re.search(r"(\d+) particles in view", out).group(1))
+    assert int(every) == in_view
+    assert float(every_db) > 80, out  # every particle its own point: the reference to float rounding
+    assert float(every_mass) == pytest.approx(float(mass), rel=1e-5)
+    assert int(few) == pytest.approx(0.1 * in_view, rel=0.05)
+    assert 15 < float(few_db) < float(every_db), out
+    # Merged blobs that reach past the image's edge move some mass across it.
+    assert float(few_mass) == pytest.approx(float(mass), rel=0.01)
