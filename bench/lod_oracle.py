@@ -1,33 +1,38 @@
 #!/usr/bin/env python3
-"""How close a level of detail chosen for one view could come: an oracle.
+"""What a level of detail cut for one view could reach: an oracle.
 
-The store's levels of detail are built once for every view. This script builds,
-for one camera, the level of detail that knows the view: it projects every
-particle the full-detail frame draws (the store's leaves: positions, masses and
-the smoothing lengths the reference uses), merges them in screen space, and
-draws the merged points with the reference renderer, so that its pictures
-compare with the bench's frames on the same footing.
+The store's levels of detail are built once for every view, and its frontier
+refines a node whole. This script takes every particle the view's full-detail
+frame draws (the store's leaves: positions, masses and the smoothing lengths
+the reference uses), builds a binary tree over them down to single particles,
+and cuts it for the view cell by cell, with one threshold over the whole
+picture, on the priority index/aggregator.h orders a node's cells by, measured
+on the screen: M (s^2 + w) / (s^2 + v + p^2), with s^2 the members' spread in
+pixels, w the spread of their blobs' widths, v their blobs' mean variance and
+p half a pixel. Each cell of the cut is drawn as one round blob on the ray
+through its members' screen centroid at their mean depth, with the radius
+whose kernel variance is their spread plus their blobs' mean variance
+(moment matching).
 
-Merging: a k-d tree on the screen, each cell cut across its wider axis at its
-mass-weighted mean, the cells whose blob would hide most of their members'
-spread cut first (priority M s^2 / (s^2 + v + p^2), as index/aggregator.h
-orders a node's cells, with s^2 the members' spread on the screen, v their
-blobs' mean variance and p half a pixel). Particles that lie apart in depth
-but on one line of sight merge for free, which no view-independent level can
-do. A merged point sits on the ray through its members' screen centroid at
-their mean depth and is drawn round, with the radius whose kernel variance is
-the members' spread plus their blobs' mean variance (moment matching).
+The tree (--grouping): "screen" cuts cells on the screen, across the widest of
+x, y and the blob's width in pixels, so that particles one behind the other
+merge (a tree for this camera only); "world" cuts them in space, across the
+widest of x, y, z and the blob's width, as a tree built once for every view
+would be, so that only the cut depends on the view. --levels-per-step 3 lets
+a cut stop only at every third level, so that a cell refines into about eight,
+as an octree level's clusters would refine into the next level's points.
 
-For each count asked for, the cut of the tree with that many points is written
-as a GADGET-2 snapshot with its own smoothing lengths (HSML), rendered with
+For each count asked for, the cut with that many points is written as a
+GADGET-2 snapshot with its own smoothing lengths (HSML), rendered with
 `octocosm render --reference` at the view, and compared with the reference
-picture on the grey log scale of bench/error_map.py (PSNR; its figure is close
-to the bench's, taken on the colour map). Frames the bench saved
-(--save-pictures) can be given to be measured on the same scale.
+picture on the grey log scale of bench/error_map.py (PSNR, 1.4-1.6 dB above
+the bench's, taken on the colour map). Frames the bench saved
+(--save-pictures) are measured on the same scale. docs/ACCURACY.md section 6
+has the figures.
 
   python3 bench/lod_oracle.py --store DIR/store-clusters --reference DIR/reference-mid.pfm \\
-      --view "$(grep '^mid:' bench.log | cut -d' ' -f2-)" --counts 0.02,0.05,0.1 \\
-      --work /tmp/oracle [DIR/picture-mid-clusters-t16-b0.pfm ...]
+      --view "$(grep '^mid:' bench.log | cut -d' ' -f2-)" --full-detail N --counts 0.02,0.05,0.1 \\
+      --grouping world --levels-per-step 1,3 --work /tmp/oracle [DIR/picture-mid-clusters-t16-b0.pfm ...]
 """
 import argparse
 import math
@@ -47,11 +52,9 @@ MIN_RADIUS, MAX_RADIUS = 1.0, 127.0  # render/splat_kernel.h
 PIXEL = 0.5  # p of the priority, in pixels
 
 
-def kernel_variance_per_axis():
-    """Per-axis variance of the 2-D M4 kernel of radius 1 (render/splat_kernel.h)."""
-    q = np.linspace(0, 1, 200001)
-    w = np.where(q < 0.5, 1 - 6 * q**2 + 6 * q**3, 2 * (1 - q) ** 3)
-    return 0.5 * np.trapz(w * q**3, q) / np.trapz(w * q, q)
+# Per-axis variance of the 2-D M4 kernel of radius 1 (render/splat_kernel.h;
+# index/aggregator.h's kKernelVariancePerH2).
+KERNEL_VARIANCE = 31.0 / 392.0
 
 
 def parse_view(text):
@@ -111,13 +114,12 @@ def build_tree(p, k, grouping):
     width_px = np.sqrt(blob)
     label = np.zeros(m.size, dtype=np.int64)
     members = np.arange(m.size)
-    node_of_label = np.array([0])  # cells of the current level
+    cells = 1  # of the current level
     nodes = {key: [] for key in ("parent", "mass", "u", "v", "z", "spread", "blob", "priority", "terminal")}
     parents_next = np.array([-1])
     next_id = 0
     depth = 0
     while members.size:
-        cells = node_of_label.size
         w = m[members]
         mass = np.bincount(label, w, cells)
         safe = np.maximum(mass, 1e-300)
@@ -156,7 +158,7 @@ def build_tree(p, k, grouping):
         child = label * 2 + side
         unique, label = np.unique(child, return_inverse=True)
         parents_next = ids[unique // 2]
-        node_of_label = unique
+        cells = unique.size
         depth += 1
     tree = {key: np.concatenate(value) for key, value in nodes.items()}
     tree["depth"] = np.concatenate([np.full(len(level), d) for d, level in enumerate(nodes["mass"])])
@@ -270,7 +272,7 @@ def main():
     n = p["mass"].size
     print(f"{n} particles in view (of {points['weight'].size} in the frustum's blocks)", flush=True)
     full = args.full_detail or n
-    k = kernel_variance_per_axis()
+    k = KERNEL_VARIANCE
     tree = build_tree(p, k, args.grouping)
     print(f"tree: {tree['mass'].size} nodes", flush=True)
 
