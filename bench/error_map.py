@@ -38,6 +38,22 @@ def box_mean(image, k):
     return image[: h * k, : w * k].reshape(h, k, w, k).mean(axis=(1, 3))
 
 
+def ssim(a, b):
+    """Mean SSIM of two images in [0, 1]: an 11-pixel Gaussian window of sigma
+    1.5 over the pixels it fits in, as render/image_metrics.cc computes it."""
+    taps = np.exp(-np.arange(-5, 6) ** 2 / (2 * 1.5**2))
+    taps /= taps.sum()
+
+    def filtered(image):
+        rows = sum(t * image[:, i : image.shape[1] - 10 + i] for i, t in enumerate(taps))
+        return sum(t * rows[i : image.shape[0] - 10 + i, :] for i, t in enumerate(taps))
+
+    mx, my = filtered(a), filtered(b)
+    vx, vy, cxy = filtered(a * a) - mx * mx, filtered(b * b) - my * my, filtered(a * b) - mx * my
+    c1, c2 = 0.01**2, 0.03**2
+    return float(np.mean((2 * mx * my + c1) * (2 * cxy + c2) / ((mx * mx + my * my + c1) * (vx + vy + c2))))
+
+
 def grey_scale(reference, name):
     """The tone map of the comparisons: mass per pixel to a brightness in [0, 1],
     log scale, 4 decades below the reference's 99.5th percentile."""

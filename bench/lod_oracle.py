@@ -227,10 +227,12 @@ def write_gadget2(path, positions, masses, smoothing):
         block(f, "HSML", smoothing.astype("<f4").tobytes())
 
 
-def psnr(reference, picture):
+def compare(reference, picture):
+    """PSNR and SSIM of `picture` against `reference` on the grey log scale."""
     brightness = error_map.grey_scale(reference, "the reference")
-    mse = np.mean((brightness(reference) - brightness(picture)) ** 2)
-    return 10 * math.log10(1.0 / max(mse, 1e-30))
+    truth, grey = brightness(reference), brightness(picture)
+    mse = np.mean((truth - grey) ** 2)
+    return f"PSNR {10 * math.log10(1.0 / max(mse, 1e-30)):.1f} dB, SSIM {error_map.ssim(truth, grey):.4f} (grey log scale)"
 
 
 def main():
@@ -298,10 +300,10 @@ def main():
                            check=True)
             image = error_map.read_pfm(picture)
             print(f"oracle ({args.grouping}, a cut every {step} levels): {drawn.sum()} points "
-                  f"({100.0 * drawn.sum() / full:.2f}% of full detail): PSNR {psnr(reference, image):.1f} dB (grey log scale); mass {image.sum():.6g} "
+                  f"({100.0 * drawn.sum() / full:.2f}% of full detail): {compare(reference, image)}; mass {image.sum():.6g} "
                   f"against the reference's {reference.sum():.6g}", flush=True)
     for frame in args.frames:
-        print(f"{os.path.basename(frame)}: PSNR {psnr(reference, error_map.read_pfm(frame)):.1f} dB (grey log scale)")
+        print(f"{os.path.basename(frame)}: {compare(reference, error_map.read_pfm(frame))}")
 
 
 if __name__ == "__main__":

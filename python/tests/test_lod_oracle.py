@@ -31,15 +31,17 @@ def test_the_oracle_reproduces_the_reference_from_every_particle_and_keeps_the_m
     out = run(sys.executable, ORACLE, "--store", tmp_path / "store", "--reference", tmp_path / "reference.pfm",
               "--view", view, "--width", 320, "--height", 180, "--counts", "0.1,1e9", "--grouping", grouping,
               "--levels-per-step", levels, "--work", tmp_path / "oracle", "--octocosm", PROGRAM)
-    rows = re.findall(r"oracle \(.*\): (\d+) points .*PSNR ([\d.]+) dB .*mass ([\d.e+]+) against the reference's ([\d.e+]+)",
-                      out)
+    rows = re.findall(r"oracle \(.*\): (\d+) points .*PSNR ([\d.]+) dB, SSIM ([\d.]+) .*"
+                      r"mass ([\d.e+]+) against the reference's ([\d.e+]+)", out)
     assert len(rows) == 2, out
-    (few, few_db, few_mass, mass), (every, every_db, every_mass, _) = rows
+    (few, few_db, few_ssim, few_mass, mass), (every, every_db, every_ssim, every_mass, _) = rows
     in_view = int(re.search(r"(\d+) particles in view", out).group(1))
     assert int(every) == in_view
     assert float(every_db) > 80, out  # every particle its own point: the reference to float rounding
+    assert float(every_ssim) > 0.9999
     assert float(every_mass) == pytest.approx(float(mass), rel=1e-5)
     assert int(few) == pytest.approx(0.1 * in_view, rel=0.05)
     assert 15 < float(few_db) < float(every_db), out
+    assert 0.5 < float(few_ssim) < float(every_ssim), out
     # Merged blobs that reach past the image's edge move some mass across it.
     assert float(few_mass) == pytest.approx(float(mass), rel=0.01)
