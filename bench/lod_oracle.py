@@ -30,7 +30,7 @@ the bench's, taken on the colour map). Frames the bench saved
 (--save-pictures) are measured on the same scale. docs/ACCURACY.md section 6
 has the figures.
 
-  python3 bench/lod_oracle.py --store DIR/store-clusters --reference DIR/reference-mid.pfm \\
+  PYTHONPATH=build/python python3 bench/lod_oracle.py --store DIR/store-clusters --reference DIR/reference-mid.pfm \\
       --view "$(grep '^mid:' bench.log | cut -d' ' -f2-)" --full-detail N --counts 0.02,0.05,0.1 \\
       --grouping world --levels-per-step 1,3 --work /tmp/oracle [DIR/picture-mid-clusters-t16-b0.pfm ...]
 """
@@ -47,6 +47,11 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import error_map  # noqa: E402  (read_pfm, the grey tone map)
+
+try:
+    import octocosm
+except ImportError:
+    octocosm = None
 
 MIN_RADIUS, MAX_RADIUS = 1.0, 127.0  # render/splat_kernel.h
 PIXEL = 0.5  # p of the priority, in pixels
@@ -257,9 +262,15 @@ def main():
     parser.add_argument("frames", nargs="*", help="the bench's saved frames of the view, measured alike")
     args = parser.parse_args()
     os.makedirs(args.work, exist_ok=True)
-    import octocosm
+    if octocosm is None:
+        sys.exit("lod_oracle.py needs the octocosm Python module: PYTHONPATH=build/python, or install it "
+                 "(docs/PYTHON.md)")
 
     view, flags = parse_view(args.view)
+    reference = error_map.read_pfm(args.reference)
+    if reference.shape != (args.height, args.width):
+        sys.exit(f"{args.reference}: {reference.shape[1]}x{reference.shape[0]} pixels, not the "
+                 f"{args.width}x{args.height} of --width and --height")
     store = octocosm.open(args.store)
     # A wider frustum, so that the particles just outside the view whose blobs
     # reach into it come too (the widest blob, 127 px, subtends less than the
@@ -272,13 +283,14 @@ def main():
                          columns=["weight", "smoothing"])
     p = project(points, view, args.width, args.height)
     n = p["mass"].size
+    if n == 0:
+        sys.exit(f"{args.store}: no particle reaches into the view {args.view}")
     print(f"{n} particles in view (of {points['weight'].size} in the frustum's blocks)", flush=True)
     full = args.full_detail or n
     k = KERNEL_VARIANCE
     tree = build_tree(p, k, args.grouping)
     print(f"tree: {tree['mass'].size} nodes", flush=True)
 
-    reference = error_map.read_pfm(args.reference)
     position, forward, right, up = camera_basis(view)
     for step in (int(x) for x in args.levels_per_step.split(",")):
         allow_stops(tree, step)
@@ -307,4 +319,13 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except subprocess.CalledProcessError as e:
+        sys.exit(f"lod_oracle.py: {' '.join(map(str, e.cmd[:2]))} failed (status {e.returncode}; its error above)")
+    except OSError as e:
+        sys.exit(f"lod_oracle.py: {e}")
+    except Exception as e:  # the module's errors name the store and what is wrong
+        if octocosm is None or not isinstance(e, octocosm.Error):
+            raise
+        sys.exit(f"lod_oracle.py: {e}")
