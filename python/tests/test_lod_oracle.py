@@ -21,16 +21,31 @@ def run(*args):
     return subprocess.run([*map(str, args)], check=True, capture_output=True, text=True).stdout
 
 
+VIEW = "--camera 30000,32000,40000 --look-at 25000,25000,25000 --fov 60 --near 1 --far 200000"
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """A small clustered set, its store and the reference picture of VIEW at 320x180."""
+    work = tmp_path_factory.mktemp("oracle")
+    run(PROGRAM, "synth", "scale", "-n", 40000, "--box", 50, "-o", work / "snap")
+    run(PROGRAM, "ingest", work / "snap" / "snap", "-o", work / "store", "--capacity", 2000, "-q")
+    run(PROGRAM, "render", work / "store", "--reference", work / "snap" / "snap", *VIEW.split(),
+        "--width", 320, "--height", 180, "-o", work / "reference.png", "--hdr", work / "reference.pfm", "-q")
+    return work
+
+
+def oracle(scene, view, *args):
+    return subprocess.run([sys.executable, ORACLE, "--store", scene / "store", "--reference", scene / "reference.pfm",
+                           "--view", view, "--width", "320", "--height", "180", "--work", scene / "oracle",
+                           "--octocosm", PROGRAM, *map(str, args)], capture_output=True, text=True)
+
+
 @pytest.mark.parametrize("grouping, levels", [("screen", 1), ("world", 3)])
-def test_the_oracle_reproduces_the_reference_from_every_particle_and_keeps_the_mass(tmp_path, grouping, levels):
-    run(PROGRAM, "synth", "scale", "-n", 40000, "--box", 50, "-o", tmp_path / "snap")
-    run(PROGRAM, "ingest", tmp_path / "snap" / "snap", "-o", tmp_path / "store", "--capacity", 2000, "-q")
-    view = "--camera 30000,32000,40000 --look-at 25000,25000,25000 --fov 60 --near 1 --far 200000"
-    run(PROGRAM, "render", tmp_path / "store", "--reference", tmp_path / "snap" / "snap", *view.split(),
-        "--width", 320, "--height", 180, "-o", tmp_path / "reference.png", "--hdr", tmp_path / "reference.pfm", "-q")
-    out = run(sys.executable, ORACLE, "--store", tmp_path / "store", "--reference", tmp_path / "reference.pfm",
-              "--view", view, "--width", 320, "--height", 180, "--counts", "0.1,1e9", "--grouping", grouping,
-              "--levels-per-step", levels, "--work", tmp_path / "oracle", "--octocosm", PROGRAM)
+def test_the_oracle_reproduces_the_reference_from_every_particle_and_keeps_the_mass(scene, grouping, levels):
+    result = oracle(scene, VIEW, "--counts", "0.1,1e9", "--grouping", grouping, "--levels-per-step", levels)
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
     rows = re.findall(r"oracle \(.*\): (\d+) points .*PSNR ([\d.]+) dB, SSIM ([\d.]+) .*"
                       r"mass ([\d.e+]+) against the reference's ([\d.e+]+)", out)
     assert len(rows) == 2, out
@@ -45,3 +60,10 @@ def test_the_oracle_reproduces_the_reference_from_every_particle_and_keeps_the_m
     assert 0.5 < float(few_ssim) < float(every_ssim), out
     # Merged blobs that reach past the image's edge move some mass across it.
     assert float(few_mass) == pytest.approx(float(mass), rel=0.01)
+
+
+def test_a_view_without_particles_is_an_error_naming_the_store(scene):
+    result = oracle(scene, "--camera 25000,25000,-90000 --look-at 25000,25000,-200000 --near 1 --far 1000")
+    assert result.returncode != 0
+    assert "no particle reaches into the view" in result.stderr and str(scene / "store") in result.stderr
+    assert "Traceback" not in result.stderr
