@@ -102,7 +102,7 @@ def project(points, view, width, height):
     }
 
 
-def build_tree(p, k, grouping):
+def build_tree(p, k, grouping, priority_from):
     """The k-d tree down to single particles: per node its parent, priority and moments on the screen.
 
     grouping "screen" cuts cells on the screen (u, v and the blob's width in
@@ -141,7 +141,10 @@ def build_tree(p, k, grouping):
         mean_blob = np.bincount(label, w * blob[members], cells) / safe
         count = np.bincount(label, minlength=cells)
         spread = 0.5 * (var_u + var_v)
-        priority = mass * (spread + var_width) / (spread + mean_blob + PIXEL**2)
+        if priority_from == "split":
+            priority = mass * (spread + var_width) / (spread + mean_blob + PIXEL**2)
+        else:  # what a drawn cluster carries: its mass and its blob's whole variance
+            priority = mass * (spread + mean_blob) / (spread + mean_blob + PIXEL**2)
         cut_offsets, cut_variances = [], []
         for values in coords:
             _, offset, variance = mean_and_variance(values[members])
@@ -252,6 +255,9 @@ def main():
                              "(default: the particles whose blobs reach into the view)")
     parser.add_argument("--grouping", choices=("screen", "world"), default="screen",
                         help="cut cells on the screen, or in space as a tree built once for every view")
+    parser.add_argument("--priority", choices=("split", "total"), default="split",
+                        help="a cell's priority from its members' spread and their blobs apart, or from its "
+                             "blob's whole variance only (what a stored cluster carries)")
     parser.add_argument("--levels-per-step", default="1",
                         help="binary levels between the places a cut may stop (3: refine a cell into ~8); "
                              "several, comma-separated, cut one tree each way")
@@ -288,7 +294,7 @@ def main():
     print(f"{n} particles in view (of {points['weight'].size} in the frustum's blocks)", flush=True)
     full = args.full_detail or n
     k = KERNEL_VARIANCE
-    tree = build_tree(p, k, args.grouping)
+    tree = build_tree(p, k, args.grouping, args.priority)
     print(f"tree: {tree['mass'].size} nodes", flush=True)
 
     position, forward, right, up = camera_basis(view)
