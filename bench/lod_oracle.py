@@ -67,7 +67,10 @@ def parse_view(text):
     view = {"fov": 60.0}
     for name, value in zip(flags[::2], flags[1::2]):
         key = name.lstrip("-").replace("-", "_")
-        view[key] = [float(x) for x in value.split(",")] if "," in value else float(value)
+        try:
+            view[key] = [float(x) for x in value.split(",")] if "," in value else float(value)
+        except ValueError:
+            sys.exit(f"--view: {name} {value}: not a number or a list of numbers")
     for key in ("camera", "look_at", "near", "far"):
         if key not in view:
             sys.exit(f"--view: {key} missing (give the bench's line for the view)")
@@ -267,6 +270,13 @@ def main():
     parser.add_argument("--octocosm", default=os.path.join(HERE, "..", "build", "tools", "octocosm"))
     parser.add_argument("frames", nargs="*", help="the bench's saved frames of the view, measured alike")
     args = parser.parse_args()
+    try:
+        steps = [int(x) for x in args.levels_per_step.split(",")]
+        counts = [float(x) for x in args.counts.split(",")]
+    except ValueError as e:
+        parser.error(f"--levels-per-step and --counts take comma-separated numbers ({e})")
+    if min(steps) < 1 or min(counts) <= 0:
+        parser.error("--levels-per-step must be at least 1, --counts above 0")
     os.makedirs(args.work, exist_ok=True)
     if octocosm is None:
         sys.exit("lod_oracle.py needs the octocosm Python module: PYTHONPATH=build/python, or install it "
@@ -298,28 +308,30 @@ def main():
     print(f"tree: {tree['mass'].size} nodes", flush=True)
 
     position, forward, right, up = camera_basis(view)
-    for step in (int(x) for x in args.levels_per_step.split(",")):
+    for step in steps:
         allow_stops(tree, step)
-        for text in args.counts.split(","):
-            target = float(text)
-            target = int(round(target * full)) if target < 1 else int(target)
+        label = f"{args.grouping}, a cut every {step} levels"
+        if args.priority == "total":
+            label += ", priority total"
+        for count in counts:
+            target = int(round(count * full)) if count < 1 else int(count)
             drawn = cut_with_count(tree, target)
             mass, u, v, z = (tree[key][drawn] for key in ("mass", "u", "v", "z"))
             radius = np.clip(np.sqrt((tree["spread"][drawn] + tree["blob"][drawn]) / k), MIN_RADIUS, MAX_RADIUS)
             focal = p["focal"]
             positions = (position + z[:, None] * forward + ((u - 0.5 * args.width) * z / focal)[:, None] * right
                          - ((v - 0.5 * args.height) * z / focal)[:, None] * up)
-            snapshot = os.path.join(args.work, f"oracle-{args.grouping}-{step}-{drawn.sum()}")
+            snapshot = os.path.join(args.work, f"oracle-{args.grouping}-{args.priority}-{step}-{drawn.sum()}")
             write_gadget2(snapshot, positions, mass, radius * z / focal)
-            picture = os.path.join(args.work, f"oracle-{args.grouping}-{step}-{drawn.sum()}.pfm")
+            picture = snapshot + ".pfm"
             subprocess.run([args.octocosm, "render", args.store, "--reference", snapshot, *flags,
                             "--width", str(args.width), "--height", str(args.height), "-o", picture[:-4] + ".png",
                             "--hdr", picture, "--quiet"],
                            check=True)
             image = error_map.read_pfm(picture)
-            print(f"oracle ({args.grouping}, a cut every {step} levels): {drawn.sum()} points "
-                  f"({100.0 * drawn.sum() / full:.2f}% of full detail): {compare(reference, image)}; mass {image.sum():.6g} "
-                  f"against the reference's {reference.sum():.6g}", flush=True)
+            print(f"oracle ({label}): {drawn.sum()} points ({100.0 * drawn.sum() / full:.2f}% of full detail): "
+                  f"{compare(reference, image)}; mass {image.sum():.6g} against the reference's {reference.sum():.6g}",
+                  flush=True)
     for frame in args.frames:
         print(f"{os.path.basename(frame)}: {compare(reference, error_map.read_pfm(frame))}")
 
