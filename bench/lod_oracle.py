@@ -243,7 +243,8 @@ def compare(reference, picture):
     brightness = error_map.grey_scale(reference, "the reference")
     truth, grey = brightness(reference), brightness(picture)
     mse = np.mean((truth - grey) ** 2)
-    return f"PSNR {10 * math.log10(1.0 / max(mse, 1e-30)):.1f} dB, SSIM {error_map.ssim(truth, grey):.4f} (grey log scale)"
+    psnr = 10 * math.log10(1.0 / max(mse, 1e-30))
+    return f"PSNR {psnr:.1f} dB, SSIM {error_map.ssim(truth, grey):.4f} (grey log scale)"
 
 
 def main():
