@@ -115,11 +115,9 @@ def build_tree(p, k, grouping, priority_from):
     """
     m, u, v, z = p["mass"], p["u"], p["v"], p["z"]
     blob = k * p["radius"] ** 2
-    if grouping == "screen":
-        coords = [u, v, np.sqrt(blob)]
-    else:
-        coords = [p["world"][:, 0], p["world"][:, 1], p["world"][:, 2], math.sqrt(k) * p["smoothing"]]
     width_px = np.sqrt(blob)
+    # Where cells are cut, besides the screen moments every grouping measures.
+    space = [p["world"][:, 0], p["world"][:, 1], p["world"][:, 2], math.sqrt(k) * p["smoothing"]]
     label = np.zeros(m.size, dtype=np.int64)
     members = np.arange(m.size)
     cells = 1  # of the current level
@@ -137,9 +135,9 @@ def build_tree(p, k, grouping, priority_from):
             offset = values - mean[label]
             return mean, offset, np.bincount(label, w * offset * offset, cells) / safe
 
-        mu, _, var_u = mean_and_variance(u[members])
-        mv, _, var_v = mean_and_variance(v[members])
-        _, _, var_width = mean_and_variance(width_px[members])
+        mu, offset_u, var_u = mean_and_variance(u[members])
+        mv, offset_v, var_v = mean_and_variance(v[members])
+        _, offset_width, var_width = mean_and_variance(width_px[members])
         mz = np.bincount(label, w * z[members], cells) / safe
         mean_blob = np.bincount(label, w * blob[members], cells) / safe
         count = np.bincount(label, minlength=cells)
@@ -148,11 +146,14 @@ def build_tree(p, k, grouping, priority_from):
             priority = mass * (spread + var_width) / (spread + mean_blob + PIXEL**2)
         else:  # what a drawn cluster carries: its mass and its blob's whole variance
             priority = mass * (spread + mean_blob) / (spread + mean_blob + PIXEL**2)
-        cut_offsets, cut_variances = [], []
-        for values in coords:
-            _, offset, variance = mean_and_variance(values[members])
-            cut_offsets.append(offset)
-            cut_variances.append(variance)
+        if grouping == "screen":
+            cut_offsets, cut_variances = [offset_u, offset_v, offset_width], [var_u, var_v, var_width]
+        else:
+            cut_offsets, cut_variances = [], []
+            for values in space:
+                _, offset, variance = mean_and_variance(values[members])
+                cut_offsets.append(offset)
+                cut_variances.append(variance)
         cut_variances = np.stack(cut_variances)
         terminal = (count <= 1) | (cut_variances.max(axis=0) <= 0) | (depth >= 80)
         ids = np.arange(next_id, next_id + cells)
