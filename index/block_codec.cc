@@ -47,8 +47,23 @@ std::uint64_t BytesPerPoint(ColumnId id, std::uint8_t encoding) {
     case ColumnId::kPrevVelocity: return 6;
     case ColumnId::kVelocityDispersion: return 2;
     case ColumnId::kShape: return 6;
+    case ColumnId::kChildCluster: return 0;  // its entries are the children's points (ColumnLength)
+    case ColumnId::kRefineBound: return 12;
   }
   return 0;
+}
+
+std::uint64_t ChildClusterEntryBytes(std::uint8_t encoding) { return encoding == kEncodingChildClusterU32 ? 4 : 2; }
+
+// A column's length in bytes for n points: the child_cluster column's
+// follows its entry count (its parameters' u64), kept below 2^40 entries so
+// that no product overflows.
+std::uint64_t ColumnLength(ColumnId id, std::uint8_t encoding, std::uint64_t n, const std::uint8_t* params) {
+  if (id == ColumnId::kChildCluster) {
+    const std::uint64_t entries = GetU64(params);
+    return entries < (std::uint64_t{1} << 40) ? ChildClusterEntryBytes(encoding) * entries : UINT64_MAX;
+  }
+  return BytesPerPoint(id, encoding) * n;
 }
 
 std::string ColumnWhat(ColumnId id, const std::string& what) {
@@ -466,7 +481,51 @@ void EncodeNonNegativeRanged1(const char* name, const std::vector<float>& values
   for (std::size_t i = 0; i < values.size(); ++i) PutU16(out + 2 * i, NearestCode((values[i] - double{lo}) * scale));
 }
 
+// The child_cluster column's contract (index/block_codec.h): every entry a
+// point of the node, every point named, octants non-decreasing.
+template <typename Fail>
+void CheckChildClusterEntries(std::span<const std::uint32_t> entries, std::uint32_t n,
+                              const std::array<std::uint32_t, 9>& octant_offsets, Fail&& fail) {
+  std::vector<bool> named(n, false);
+  int octant = 0;
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    const std::uint32_t c = entries[i];
+    if (c >= n) fail("entry " + std::to_string(i) + " names point " + std::to_string(c) + " of " + std::to_string(n));
+    int at = octant;
+    while (c >= octant_offsets[at + 1]) ++at;
+    if (c < octant_offsets[at]) {
+      fail("entry " + std::to_string(i) + " names a cluster in octant " + std::to_string(at) +
+           " before one in octant " + std::to_string(octant));
+    }
+    octant = at;
+    named[c] = true;
+  }
+  for (std::uint32_t c = 0; c < n; ++c) {
+    if (!named[c]) fail("point " + std::to_string(c) + " holds none of the children's points");
+  }
+}
+
+void CheckChildClusters(const NodePoints& points, NodeKey key) {
+  if (points.size() > std::numeric_limits<std::uint32_t>::max()) return;  // refused by the caller
+  CheckChildClusterEntries(points.child_cluster, static_cast<std::uint32_t>(points.size()), points.octant_offsets,
+                           [&](const std::string& what) {
+                             throw Error::InvalidArgument("EncodeBlock: column 'child_cluster' of node " + key.Path() +
+                                                          ": " + what);
+                           });
+}
+
 // ---- Decoding ---------------------------------------------------------------
+
+void DecodeChildClusters(const BlockHeader& header, const BlockColumn& column, std::span<const std::uint8_t> bytes,
+                         const std::string& where, std::vector<std::uint32_t>& out) {
+  const std::size_t entries = bytes.size() / ChildClusterEntryBytes(column.encoding);
+  out.resize(entries);
+  for (std::size_t i = 0; i < entries; ++i) {
+    out[i] = column.encoding == kEncodingChildClusterU32 ? GetU32(bytes.data() + 4 * i) : GetU16(bytes.data() + 2 * i);
+  }
+  CheckChildClusterEntries(out, header.point_count, header.octant_offsets,
+                           [&](const std::string& what) { throw Error::Corruption(where, ColumnWhat(column.id, what)); });
+}
 
 void DecodeRanged3(const BlockColumn& column, std::uint32_t n, std::span<const std::uint8_t> bytes,
                    const std::string& where, std::vector<float>& out) {
@@ -547,6 +606,8 @@ const char* ColumnName(ColumnId id) {
     case ColumnId::kPrevVelocity: return "prev_velocity";
     case ColumnId::kVelocityDispersion: return "velocity_dispersion";
     case ColumnId::kShape: return "shape";
+    case ColumnId::kChildCluster: return "child_cluster";
+    case ColumnId::kRefineBound: return "refine_bound";
   }
   return "unknown";
 }
@@ -557,6 +618,10 @@ std::string ColumnNames(ColumnSet columns) {
     if (columns & ColumnBit(id)) names += (names.empty() ? "" : ",") + std::string(ColumnName(id));
   }
   return names;
+}
+
+double StoredSmoothing(double h, double node_size) {
+  return node_size * std::exp2(kSmoothingLog2Min + SmoothingCode(h, node_size) / double{kSmoothingPerOctave});
 }
 
 const BlockColumn* BlockHeader::Find(ColumnId id) const {
@@ -591,6 +656,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
     CheckLength(ColumnName(ColumnId::kVelocityDispersion), points.velocity_dispersion.size(), n);
   }
   if (!points.shape.empty()) CheckLength(ColumnName(ColumnId::kShape), points.shape.size(), 6 * n);
+  if (!points.refine_bound.empty()) CheckLength(ColumnName(ColumnId::kRefineBound), points.refine_bound.size(), 3 * n);
   const auto& off = points.octant_offsets;
   if (off[0] != 0 || off[8] != n || !std::is_sorted(off.begin(), off.end())) {
     throw Error::InvalidArgument("EncodeBlock: octant_offsets of node " + key.Path() +
@@ -604,6 +670,8 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
                          : id == ColumnId::kId                     ? !points.id.empty()
                          : id == ColumnId::kVelocityDispersion     ? !points.velocity_dispersion.empty()
                          : id == ColumnId::kShape                  ? !points.shape.empty()
+                         : id == ColumnId::kChildCluster           ? !points.child_cluster.empty()
+                         : id == ColumnId::kRefineBound            ? !points.refine_bound.empty()
                                                                    : IsRequired(id);
     if (present) ids.push_back(id);
   }
@@ -618,11 +686,20 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
       id_encoding = kEncodingIdOffsets;
     }
   }
-  const auto encoding_of = [id_encoding](ColumnId id) { return id == ColumnId::kId ? id_encoding : kEncodingV1; };
+  // Cluster indices fit 16 bits while the node has at most 2^16 points.
+  if (!points.child_cluster.empty()) CheckChildClusters(points, key);
+  const std::uint8_t child_cluster_encoding = n <= 65536 ? kEncodingV1 : kEncodingChildClusterU32;
+  const auto encoding_of = [id_encoding, child_cluster_encoding](ColumnId id) {
+    return id == ColumnId::kId ? id_encoding : id == ColumnId::kChildCluster ? child_cluster_encoding : kEncodingV1;
+  };
+  const auto length_of = [&](ColumnId id) {
+    return id == ColumnId::kChildCluster ? ChildClusterEntryBytes(child_cluster_encoding) * points.child_cluster.size()
+                                         : BytesPerPoint(id, encoding_of(id)) * n;
+  };
 
   const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * ids.size() + 8;
   std::size_t block_size = header_size;
-  for (const ColumnId id : ids) block_size += BytesPerPoint(id, encoding_of(id)) * n;
+  for (const ColumnId id : ids) block_size += length_of(id);
   // Every column byte is written below; the header (with its unused
   // parameter bytes) is zeroed first.
   block.resize(block_size);
@@ -645,7 +722,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
     std::uint8_t* entry = b + kBlockFixedHeaderSize + kBlockDirectoryEntrySize * c;
     std::uint8_t* params = entry + 32;
     std::uint8_t* out = b + offset;
-    const std::size_t length = BytesPerPoint(id, encoding_of(id)) * n;
+    const std::size_t length = length_of(id);
     switch (id) {
       case ColumnId::kPosition: EncodePositions(points, key, cube, out); break;
       case ColumnId::kWeight:
@@ -678,6 +755,26 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
       case ColumnId::kShape: EncodeShapes(points.shape, out); break;
       case ColumnId::kVelocityDispersion:
         EncodeNonNegativeRanged1(ColumnName(id), points.velocity_dispersion, out, params);
+        break;
+      case ColumnId::kChildCluster:
+        PutU64(params, points.child_cluster.size());
+        for (std::size_t i = 0; i < points.child_cluster.size(); ++i) {
+          if (child_cluster_encoding == kEncodingV1) {
+            PutU16(out + 2 * i, static_cast<std::uint16_t>(points.child_cluster[i]));
+          } else {
+            PutU32(out + 4 * i, points.child_cluster[i]);
+          }
+        }
+        break;
+      case ColumnId::kRefineBound:
+        for (std::size_t i = 0; i < points.refine_bound.size(); ++i) {
+          const float x = points.refine_bound[i];
+          if (!std::isfinite(x) || !(x >= 0)) {
+            throw Error::InvalidArgument("EncodeBlock: column 'refine_bound' of point " + std::to_string(i / 3) +
+                                         " holds " + std::to_string(x) + ", must be finite and >= 0");
+          }
+          PutF32(out + 4 * i, x + 0.0f);  // + 0.0f: a -0 stored as +0
+        }
         break;
     }
     entry[0] = static_cast<std::uint8_t>(id);
@@ -763,7 +860,8 @@ BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key,
     if (seen & ColumnBit(column.id)) throw Error::Corruption(where, ColumnWhat(column.id, "listed twice"));
     seen |= ColumnBit(column.id);
     column.encoding = entry[1];
-    if (column.encoding != kEncodingV1 && !(column.id == ColumnId::kId && column.encoding == kEncodingIdOffsets)) {
+    if (column.encoding != kEncodingV1 && !(column.id == ColumnId::kId && column.encoding == kEncodingIdOffsets) &&
+        !(column.id == ColumnId::kChildCluster && column.encoding == kEncodingChildClusterU32)) {
       throw Error::Corruption(where, ColumnWhat(column.id, "unknown encoding " + std::to_string(entry[1])));
     }
     if (GetU16(entry + 2) != 0 || GetU32(entry + 4) != 0) {
@@ -777,11 +875,14 @@ BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key,
       throw Error::Corruption(where, ColumnWhat(column.id, "starts at byte " + std::to_string(column.offset) +
                                                                ", expected " + std::to_string(expected_offset)));
     }
-    const std::uint64_t expected_length = BytesPerPoint(column.id, column.encoding) * header.point_count;
+    const std::uint64_t expected_length =
+        ColumnLength(column.id, column.encoding, header.point_count, column.params.data());
     if (column.length != expected_length) {
-      throw Error::Corruption(where, ColumnWhat(column.id, std::to_string(column.length) + " bytes for " +
-                                                               std::to_string(header.point_count) + " points, expected " +
-                                                               std::to_string(expected_length)));
+      const std::string of = column.id == ColumnId::kChildCluster
+                                 ? std::to_string(GetU64(column.params.data())) + " entries"
+                                 : std::to_string(header.point_count) + " points";
+      throw Error::Corruption(where, ColumnWhat(column.id, std::to_string(column.length) + " bytes for " + of +
+                                                               ", expected " + std::to_string(expected_length)));
     }
     expected_offset += column.length;
     header.columns.push_back(column);
@@ -893,6 +994,18 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
       DecodeNonNegativeRanged1(*column, n, bytes, where, out.velocity_dispersion);
       break;
     case ColumnId::kShape: DecodeShapes(*column, n, bytes, where, out.shape); break;
+    case ColumnId::kChildCluster: DecodeChildClusters(header, *column, bytes, where, out.child_cluster); break;
+    case ColumnId::kRefineBound:
+      out.refine_bound.resize(3 * std::size_t{n});
+      for (std::size_t i = 0; i < out.refine_bound.size(); ++i) {
+        const float x = GetF32(in + 4 * i);
+        if (!std::isfinite(x) || !(x >= 0)) {
+          throw Error::Corruption(where, ColumnWhat(id, "point " + std::to_string(i / 3) + " holds " +
+                                                            std::to_string(x) + ", expected finite and >= 0"));
+        }
+        out.refine_bound[i] = x;
+      }
+      break;
   }
 }
 

@@ -77,11 +77,31 @@
 //                                      index/cluster_shape.h encodes it. No parameters. Inner
 //                                      nodes whose points are clusters carry it; leaves and
 //                                      samples never do (their blobs are round).
+//  13  child_cluster 2m/4m   no        per point of the node's children (m of them: child octant 0's
+//                                      points in its block's order, then octant 1's, ...), the
+//                                      index (< n) of the cluster of this node that holds it.
+//                                      Encoding 1: u16 per entry (n <= 65536); encoding 2: u32.
+//                                      Params: u64 m. Every point of the node has at least one
+//                                      entry, and the entries' clusters lie in non-decreasing
+//                                      octants (a cluster lies in the child octant of its members).
+//                                      Inner nodes whose points are clusters carry it.
+//  14  refine_bound  12n     no        3 x f32 per point, each finite and >= 0: R, a, r. R: the
+//                                      radius of a sphere about the point's decoded position
+//                                      that holds the spheres of every cluster below it (its
+//                                      members' and theirs); a and r: bounds, over the point
+//                                      and every cluster below it, of its mass times its blob's
+//                                      variance per axis (KernelVariance of its smoothing) and of
+//                                      its mass. A parent's three exceed its clusters' by a
+//                                      relative 2^-12 at least. What lets a renderer decide
+//                                      cluster by cluster, each on its own, which to draw
+//                                      (docs/FORMAT.md section 4). Inner nodes whose points are
+//                                      clusters carry it.
 //
-// Columns 8-12 were added to version 1 before any store left this project
+// Columns 8-14 were added to version 1 before any store left this project
 // (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
-// So was the id column's encoding 2: a reader from before reports such a
-// block as corrupt ("unknown encoding"); blocks with encoding 1 read as ever.
+// So were the id column's encoding 2 and the child_cluster column's: a reader
+// from before reports such a block as corrupt ("unknown encoding"); blocks
+// with encoding 1 read as ever.
 //
 // Decoding is safe for untrusted bytes: every offset, length, count and
 // parameter is checked, and any mismatch throws Error::Corruption naming the
@@ -116,6 +136,8 @@ enum class ColumnId : std::uint8_t {
   kPrevVelocity = 10,
   kVelocityDispersion = 11,
   kShape = 12,
+  kChildCluster = 13,
+  kRefineBound = 14,
 };
 
 // The block column of each vector column (index/particle_chunk.h), indexed by VectorColumn.
@@ -132,12 +154,17 @@ inline constexpr ColumnSet kAllColumns = ColumnBit(ColumnId::kPosition) | Column
                                          ColumnBit(ColumnId::kDisplacement) | ColumnBit(ColumnId::kNextVelocity) |
                                          ColumnBit(ColumnId::kPrevDisplacement) | ColumnBit(ColumnId::kPrevVelocity) |
                                          ColumnBit(ColumnId::kVelocityDispersion) | ColumnBit(ColumnId::kShape);
+// The columns that tie an inner node's clusters to its children's points for
+// a level of detail refined cluster by cluster: not attributes of a point that
+// a query returns (kAllColumns leaves them out).
+inline constexpr ColumnSet kClusterLinkColumns = ColumnBit(ColumnId::kChildCluster) | ColumnBit(ColumnId::kRefineBound);
 
 // Every column id, in the order blocks store them.
-inline constexpr std::array<ColumnId, 12> kColumnIds = {
+inline constexpr std::array<ColumnId, 14> kColumnIds = {
     ColumnId::kPosition,         ColumnId::kWeight,       ColumnId::kSmoothing,           ColumnId::kVelocity,
     ColumnId::kId,               ColumnId::kType,         ColumnId::kDisplacement,        ColumnId::kNextVelocity,
-    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity, ColumnId::kVelocityDispersion, ColumnId::kShape};
+    ColumnId::kPrevDisplacement, ColumnId::kPrevVelocity, ColumnId::kVelocityDispersion, ColumnId::kShape,
+    ColumnId::kChildCluster,     ColumnId::kRefineBound};
 
 const char* ColumnName(ColumnId id);
 // The names of the columns in `columns`, comma-separated, in block order.
@@ -160,12 +187,18 @@ inline constexpr std::size_t kBlockDirectoryEntrySize = 56;
 inline constexpr std::size_t kBlockMaxColumns = 16;
 inline constexpr std::size_t kBlockMaxHeaderSize = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * kBlockMaxColumns + 8;
 // Column encodings (the directory's byte 1): kEncodingV1 for every column,
-// kEncodingIdOffsets (u32 offsets from a u64 base) for the id column only.
+// kEncodingIdOffsets (u32 offsets from a u64 base) for the id column and
+// kEncodingChildClusterU32 for the child_cluster column only.
 inline constexpr std::uint8_t kEncodingV1 = 1;
 inline constexpr std::uint8_t kEncodingIdOffsets = 2;
+inline constexpr std::uint8_t kEncodingChildClusterU32 = 2;  // the child_cluster column's u32 entries
 inline constexpr std::uint64_t kWeightTotalUnits = (std::uint64_t{1} << 32) - (std::uint64_t{1} << 20);
 inline constexpr float kSmoothingLog2Min = -24;
 inline constexpr float kSmoothingPerOctave = 2048;
+
+// The smoothing length h of a node of edge node_size as its block stores
+// it (the nearest code's length): what a reader decodes.
+double StoredSmoothing(double h, double node_size);
 
 struct BlockColumn {
   ColumnId id{};

@@ -94,7 +94,8 @@ Dataset Dataset::Open(const std::string& directory) {
   dataset.backward_columns_ =
       flag(m.has_prev_displacement, ColumnId::kPrevDisplacement) | flag(m.has_prev_velocity, ColumnId::kPrevVelocity);
   dataset.cluster_columns_ =
-      flag(m.has_velocity_dispersion, ColumnId::kVelocityDispersion) | flag(m.has_shape, ColumnId::kShape);
+      flag(m.has_velocity_dispersion, ColumnId::kVelocityDispersion) | flag(m.has_shape, ColumnId::kShape) |
+      (m.has_cluster_links ? kClusterLinkColumns : 0);
   if (!m.id_index.empty()) dataset.id_index_ = (std::filesystem::path(directory) / m.id_index).string();
   return dataset;
 }

@@ -71,8 +71,9 @@ class Dataset {
   // The columns that the block of every inner node whose points are clusters
   // (index/aggregator.h) carries besides columns(epoch), in every epoch: the
   // blobs' shapes (the manifest's has_shape) and, in a dataset with
-  // velocities, the velocity dispersion (has_velocity_dispersion). Leaves,
-  // and inner nodes whose points are a sample, lack them.
+  // velocities, the velocity dispersion (has_velocity_dispersion), and the
+  // links to the children's points (has_cluster_links). Leaves, and inner
+  // nodes whose points are a sample, lack them.
   ColumnSet cluster_columns() const { return cluster_columns_; }
   // How `epoch` links to the next; empty for the last epoch and for a series
   // without IDs.

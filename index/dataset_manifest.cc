@@ -60,6 +60,7 @@ nlohmann::json DatasetManifest::ToJson() const {
           {"has_prev_velocity", has_prev_velocity},
           {"has_velocity_dispersion", has_velocity_dispersion},
           {"has_shape", has_shape},
+          {"has_cluster_links", has_cluster_links},
           {"id_index", id_index},
           {"epochs", std::move(epoch_list)}};
 }
@@ -114,6 +115,7 @@ DatasetManifest DatasetManifest::FromJson(const nlohmann::json& json, const std:
     m.has_prev_velocity = json.value("has_prev_velocity", false);
     m.has_velocity_dispersion = json.value("has_velocity_dispersion", false);
     m.has_shape = json.value("has_shape", false);
+    m.has_cluster_links = json.value("has_cluster_links", false);
     m.id_index = json.value("id_index", std::string());
     for (const auto& epoch : json.at("epochs")) m.epochs.push_back(EpochRecord::FromJson(epoch));
   } catch (const nlohmann::json::exception& e) {

@@ -80,6 +80,8 @@ struct DatasetManifest {
   bool has_displacement = false, has_next_velocity = false;
   bool has_prev_displacement = false, has_prev_velocity = false;
   bool has_velocity_dispersion = false, has_shape = false;
+  // Inner nodes of clusters carry child_cluster and refine_bound (index/block_codec.h).
+  bool has_cluster_links = false;
   std::string id_index;  // subdirectory of the ID index, empty without IDs
   std::vector<EpochRecord> epochs;
 

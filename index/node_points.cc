@@ -45,7 +45,11 @@ void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube) {
   for (std::vector<float>* column : VectorColumns(points)) *column = Gather(*column, order, 3);
   points.velocity_dispersion = Gather(points.velocity_dispersion, order, 1);
   points.shape = Gather(points.shape, order, 6);
+  points.refine_bound = Gather(points.refine_bound, order, 3);
   points.grid = Gather(points.grid, order, 1);
+  std::vector<std::uint32_t> moved_to(n);
+  for (std::size_t k = 0; k < n; ++k) moved_to[order[k]] = static_cast<std::uint32_t>(k);
+  for (std::uint32_t& cluster : points.child_cluster) cluster = moved_to[cluster];
 }
 
 NodePoints SelectRows(const NodePoints& points, std::span<const std::uint32_t> rows) {
@@ -60,6 +64,7 @@ NodePoints SelectRows(const NodePoints& points, std::span<const std::uint32_t> r
   for (std::size_t v = 0; v < from.size(); ++v) *to[v] = Gather(*from[v], rows, 3);
   out.velocity_dispersion = Gather(points.velocity_dispersion, rows, 1);
   out.shape = Gather(points.shape, rows, 6);
+  out.refine_bound = Gather(points.refine_bound, rows, 3);
   out.grid = Gather(points.grid, rows, 1);
   std::array<std::uint32_t, 9> offsets{};
   int octant = 0;

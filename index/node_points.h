@@ -40,6 +40,16 @@ struct NodePoints {
   // 6 * size(), or empty: each point's blob shape as stored (index/cluster_shape.h
   // codes; round where empty). Only inner nodes whose points are clusters carry it.
   std::vector<std::uint8_t> shape;
+  // Only inner nodes whose points are clusters carry these two (empty
+  // otherwise; index/block_codec.h, columns child_cluster and refine_bound).
+  // One entry per point of the node's children, child octant by octant, each
+  // child's points in its order: the index of the point of this node (the
+  // cluster) that holds it.
+  std::vector<std::uint32_t> child_cluster;
+  // 3 * size(): each cluster's R, a, r (the sphere about it that holds the
+  // clusters below it, and bounds of their mass times blob variance and of
+  // their mass).
+  std::vector<float> refine_bound;
   std::array<std::uint32_t, 9> octant_offsets{};
   // Empty, or each point's Cube::FinestGridCoords, kept beside the positions
   // by the octree builder so that sampling and encoding place each point
@@ -53,12 +63,14 @@ struct NodePoints {
 
 // Reorders `points` (every non-empty column together, stably) so that they
 // are grouped by the child octant of `key` that holds them, and fills
-// octant_offsets. Precondition: every point lies in `key` (Cube::Holds).
+// octant_offsets; child_cluster's indices follow their points. Precondition:
+// every point lies in `key` (Cube::Holds).
 void OrderByOctant(NodePoints& points, NodeKey key, const Cube& cube);
 
 // The points `rows` of `points` (ascending, each < points.size()), every
 // non-empty column, with octant_offsets counted from those of `points`: the
-// subset keeps the grouping by child octant.
+// subset keeps the grouping by child octant. It has no child_cluster (the
+// children's points would name clusters left out).
 NodePoints SelectRows(const NodePoints& points, std::span<const std::uint32_t> rows);
 
 }  // namespace octocosm

@@ -75,13 +75,117 @@ void ScanKeys(const Dataset& dataset, std::uint32_t e, FaultLog& faults, EpochTa
   }
 }
 
+// Checks the links between inner nodes of clusters and their children's
+// points (index/block_codec.h, child_cluster and refine_bound): each cluster's
+// mass is its members', each child point lies in its cluster's octant, and
+// each cluster's bounds hold its members' (the sphere about it holds theirs,
+// its error and mass bounds are at least theirs). Blocks come in depth-first
+// order, so the nodes whose children are still to come form a path from the
+// root: only their links are held.
+class ClusterLinkChecker {
+ public:
+  ClusterLinkChecker(const Dataset& dataset, std::uint32_t e, const EpochTally& tally, FaultLog& faults)
+      : dataset_(dataset), e_(e), faults_(faults) {
+    for (const IndexEntry& entry : tally.entries) point_count_[entry.key] = entry.point_count;
+  }
+
+  // A block's points, in depth-first order.
+  void Visit(NodeKey key, const NodePoints& points) {
+    while (!path_.empty() && !path_.back().key.IsAncestorOrSelf(key)) Finish();
+    if (!path_.empty() && path_.back().key == key.Parent()) CheckMembers(path_.back(), key, points);
+    if (!points.child_cluster.empty()) Start(key, points);
+  }
+
+  void FinishAll() {
+    while (!path_.empty()) Finish();
+  }
+
+ private:
+  struct Parent {
+    NodeKey key;
+    NodePoints points;
+    std::array<std::uint64_t, 9> child_first{};  // the first entry of each child octant's points
+    std::vector<double> member_mass;
+    std::uint64_t faults = 0;
+  };
+
+  void Start(NodeKey key, const NodePoints& points) {
+    Parent parent{key, points, {}, std::vector<double>(points.size(), 0.0)};
+    for (int o = 0; o < 8; ++o) {
+      const auto child = point_count_.find(key.Child(o).value());
+      parent.child_first[o + 1] = parent.child_first[o] + (child == point_count_.end() ? 0 : child->second);
+    }
+    if (parent.child_first[8] != points.child_cluster.size()) {
+      Fault(parent, "links " + std::to_string(points.child_cluster.size()) + " points of its children to clusters, "
+                    "its children hold " + std::to_string(parent.child_first[8]));
+    }
+    path_.push_back(std::move(parent));
+  }
+
+  void CheckMembers(Parent& parent, NodeKey child, const NodePoints& points) {
+    const int o = child.OctantInParent();
+    const std::uint64_t first = parent.child_first[o];
+    const NodePoints& clusters = parent.points;
+    if (first + points.size() > clusters.child_cluster.size()) return;  // the count is faulted already
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      const std::uint32_t c = clusters.child_cluster[first + k];
+      if (c < clusters.octant_offsets[o] || c >= clusters.octant_offsets[o + 1]) {
+        Fault(parent, "point " + std::to_string(k) + " of child " + child.Path() + " belongs to cluster " +
+                      std::to_string(c) + ", which lies in another octant");
+        continue;
+      }
+      parent.member_mass[c] += points.weight[k];
+      const float* bound = &clusters.refine_bound[3 * c];
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) d2 += std::pow(points.position[3 * k + a] - clusters.position[3 * c + a], 2);
+      const bool inner = !points.refine_bound.empty();
+      const double reach = std::sqrt(d2) + (inner ? double{points.refine_bound[3 * k]} : 0.0);
+      const bool holds = reach <= bound[0] && (!inner || (points.refine_bound[3 * k + 1] <= bound[1] &&
+                                                          points.refine_bound[3 * k + 2] <= bound[2]));
+      if (!holds) {
+        Fault(parent, "the refine bound of cluster " + std::to_string(c) + " (" + Text(bound[0]) + ", " +
+                      Text(bound[1]) + ", " + Text(bound[2]) + ") does not hold point " + std::to_string(k) +
+                      " of child " + child.Path() + " (reach " + Text(reach) +
+                      (inner ? ", " + Text(points.refine_bound[3 * k + 1]) + ", " + Text(points.refine_bound[3 * k + 2])
+                             : std::string()) +
+                      ")");
+      }
+    }
+  }
+
+  void Finish() {
+    Parent& parent = path_.back();
+    double node_mass = 0;
+    for (const double w : parent.points.weight) node_mass += w;
+    for (std::size_t c = 0; c < parent.points.size() && parent.faults == 0; ++c) {
+      // Each decoded weight is within a unit (2.3e-10 of its node's mass) of its value.
+      if (std::fabs(parent.member_mass[c] - parent.points.weight[c]) > 1e-8 * node_mass) {
+        Fault(parent, "cluster " + std::to_string(c) + " weighs " + Text(parent.points.weight[c]) +
+                      " but its members " + Text(parent.member_mass[c]));
+      }
+    }
+    path_.pop_back();
+  }
+
+  // One fault a node: a damaged link column would repeat for every point.
+  void Fault(Parent& parent, const std::string& what) {
+    if (parent.faults++ == 0) faults_.Add(dataset_.Where(e_, parent.key) + ": " + what);
+  }
+
+  const Dataset& dataset_;
+  std::uint32_t e_;
+  FaultLog& faults_;
+  std::unordered_map<std::uint64_t, std::uint64_t> point_count_;
+  std::vector<Parent> path_;
+};
+
 // Reads, checksums and decodes one block and adds it to the tally.
 void VerifyBlock(const Dataset& dataset, std::uint32_t e, const IndexEntry& entry, std::mt19937_64& rng,
-                 FaultLog& faults, EpochTally& tally) {
+                 FaultLog& faults, EpochTally& tally, ClusterLinkChecker& links) {
   const NodeKey key = NodeKey::FromValue(entry.key);
   const std::string where = dataset.Where(e, key);
   const Bytes bytes = dataset.store().ReadBlock({e, entry.key});
-  const DecodedBlock block = DecodeBlock(bytes, kAllColumns, key, dataset.cube(e), where);
+  const DecodedBlock block = DecodeBlock(bytes, kAllColumns | kClusterLinkColumns, key, dataset.cube(e), where);
   const std::size_t n = block.header.point_count;
   if (n != entry.point_count) {
     faults.Add(where + ": index says " + std::to_string(entry.point_count) + " points, block holds " + std::to_string(n));
@@ -111,6 +215,7 @@ void VerifyBlock(const Dataset& dataset, std::uint32_t e, const IndexEntry& entr
   if (key.level() > 0 && !tally.present.count(key.Parent().value())) {
     faults.Add(where + ": its parent " + key.Parent().Path() + " is missing");
   }
+  links.Visit(key, block.points);
   double mass = 0;
   for (double w : block.points.weight) mass += w;
   tally.node_mass[entry.key] = mass;
@@ -206,15 +311,25 @@ void VerifyEpoch(const Dataset& dataset, std::uint32_t e, const IdIndexReader* i
   EpochTally tally;
   ScanKeys(dataset, e, faults, tally);
   std::mt19937_64 rng(e);
-  for (const IndexEntry& entry : tally.entries) {
+  // Depth-first, so that the cluster links are checked holding one path of
+  // nodes (invalid keys, faulted already, last).
+  std::vector<IndexEntry> order = tally.entries;
+  std::stable_sort(order.begin(), order.end(), [](const IndexEntry& a, const IndexEntry& b) {
+    const NodeKey ka = NodeKey::FromValue(a.key), kb = NodeKey::FromValue(b.key);
+    if (ka.IsValid() != kb.IsValid()) return ka.IsValid();
+    return ka.IsValid() && PreorderLess{}(ka, kb);
+  });
+  ClusterLinkChecker links(dataset, e, tally, faults);
+  for (const IndexEntry& entry : order) {
     if (!NodeKey::FromValue(entry.key).IsValid()) continue;
     try {
-      VerifyBlock(dataset, e, entry, rng, faults, tally);
+      VerifyBlock(dataset, e, entry, rng, faults, tally, links);
       ++blocks_checked;
     } catch (const Error& error) {
       faults.Add(error.what());
     }
   }
+  links.FinishAll();
   CheckClusterColumns(dataset, e, tally, faults);
   CheckMassConservation(dataset, e, tally, faults);
   CheckEpochSummary(dataset, e, tally, faults);

@@ -349,6 +349,60 @@ ClusterMoments MeasureCluster(std::span<const std::uint32_t> members,
   return moments;
 }
 
+// A point's position as a block of level `level` decodes it (index/block_codec.h):
+// the centre of its quantum, to within rounding.
+std::array<double, 3> DecodedPosition(const Cube& cube, const GridPoint& grid, int level) {
+  const int bits = level + 16;
+  const double quantum = std::ldexp(cube.size, -bits);
+  std::array<double, 3> x{};
+  for (int a = 0; a < 3; ++a) x[a] = cube.origin[a] + (static_cast<double>(GridAxisAt(grid, a, bits)) + 0.5) * quantum;
+  return x;
+}
+
+// `x` rounded up to a float (the largest finite float at most), so that a
+// bound stays a bound once stored.
+float FloatAtLeast(double x) {
+  if (!(x < double{std::numeric_limits<float>::max()})) return std::numeric_limits<float>::max();
+  float f = static_cast<float>(x);
+  if (double{f} < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+// A parent's refine bounds exceed its clusters' by this much at least, so
+// that a renderer's float arithmetic, deciding for the parent and for each
+// cluster below it apart, never finds a cluster costlier than its parent.
+constexpr double kRefineBoundMargin = 1.0 / 4096;
+
+// The cluster `members` of node `key` (decoded position `centre`, mass,
+// smoothing length h as stored) as the refine_bound column holds it: R, a, r
+// (index/block_codec.h). Members of children without bounds (leaves) are
+// particles: their spheres are points, and they are never refined.
+std::array<float, 3> RefineBound(std::span<const std::uint32_t> members,
+                                 std::span<const std::pair<std::uint8_t, std::uint32_t>> from,
+                                 std::span<const GridPoint> grid, const std::array<NodePoints, 8>& children,
+                                 const Cube& cube, NodeKey key, const std::array<double, 3>& centre, double mass,
+                                 double h) {
+  double radius = 0, error = mass * KernelVariance(h), cap = mass;
+  for (const std::uint32_t m : members) {
+    const auto [o, k] = from[m];
+    const std::array<double, 3> x = DecodedPosition(cube, grid[m], key.level() + 1);
+    const double d = std::hypot(x[0] - centre[0], x[1] - centre[1], x[2] - centre[2]);
+    const std::vector<float>& bound = children[o].refine_bound;
+    if (bound.empty()) {
+      radius = std::max(radius, d);
+      continue;
+    }
+    radius = std::max(radius, d + double{bound[3 * k]});
+    error = std::max(error, double{bound[3 * k + 1]});
+    cap = std::max(cap, double{bound[3 * k + 2]});
+  }
+  // Two quanta of the members' level beside the margin: the renderer decodes
+  // positions with its own rounding.
+  const double slack = std::ldexp(cube.size, -(key.level() + 1 + 16)) * 2;
+  return {FloatAtLeast(radius * (1 + kRefineBoundMargin) + slack), FloatAtLeast(error * (1 + kRefineBoundMargin)),
+          FloatAtLeast(cap * (1 + kRefineBoundMargin))};
+}
+
 // The node `key` as clusters of its children's points (index/aggregator.h):
 // each cluster's mass, centre of mass and spread in one point, and with
 // velocities its mass-weighted mean velocity and velocity dispersion.
@@ -387,6 +441,8 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
   node.type.resize(n);
   node.grid.resize(n);
   node.shape.resize(6 * n);
+  node.child_cluster.resize(grid.size());
+  node.refine_bound.resize(3 * n);
   const bool has_id = first >= 0 && !children[first].id.empty();
   if (has_id) node.id.resize(n);
   std::array<bool, kVectorColumnCount> has_vector{};
@@ -443,6 +499,11 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
       const double sigma = std::sqrt(velocity_variance / (3 * mass));
       node.velocity_dispersion[c] = static_cast<float>(std::min(sigma, double{std::numeric_limits<float>::max()}));
     }
+    for (const std::uint32_t* m = begin; m != end; ++m) node.child_cluster[*m] = static_cast<std::uint32_t>(c);
+    const std::array<float, 3> bound = RefineBound({begin, end}, from, grid, children, cube, key,
+                                                   DecodedPosition(cube, centre_grid, key.level()), mass,
+                                                   StoredSmoothing(node.smoothing[c], edge));
+    std::copy(bound.begin(), bound.end(), node.refine_bound.begin() + static_cast<std::ptrdiff_t>(3 * c));
   }
   while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(n);
   return node;

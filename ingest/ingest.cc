@@ -165,6 +165,11 @@ nlohmann::json AttributeSchema(bool velocity, bool id, bool epoch_links, bool ve
   if (shapes) {
     add(ColumnId::kShape, "u8x6 covariance over trace / 3 (index/cluster_shape.h)",
         "shape of the blob of the particles a cluster stands for; inner nodes of clusters only");
+    add(ColumnId::kChildCluster, "u16 (u32 past 65536 points) per point of the children, u64 count",
+        "the cluster of this node that holds each of its children's points; inner nodes of clusters only");
+    add(ColumnId::kRefineBound, "f32x3",
+        "radius of the sphere holding the clusters below, bounds of their mass x blob variance and of their mass; "
+        "inner nodes of clusters only");
   }
   return {{"block_format", "index/block_codec.h, docs/FORMAT.md"}, {"columns", columns}};
 }
@@ -679,6 +684,7 @@ DatasetManifest ManifestFor(const IngestOptions& options, bool has_id, bool has_
   m.has_prev_velocity = join_epochs && has_velocity;
   m.has_velocity_dispersion = InnerNodesCarryVelocityDispersion(has_velocity, options.tree.coarse);
   m.has_shape = options.tree.coarse == CoarsePoints::kClusters;
+  m.has_cluster_links = m.has_shape;
   m.id_index = has_id ? "ids" : "";
   return m;
 }

@@ -129,6 +129,8 @@ Bytes PackNode(NodeKey key, const NodePoints& points) {
   for (const std::vector<float>* column : VectorColumns(points)) AppendColumn(*column, out);
   AppendColumn(points.velocity_dispersion, out);
   AppendColumn(points.shape, out);
+  AppendColumn(points.child_cluster, out);
+  AppendColumn(points.refine_bound, out);
   AppendRaw(points.octant_offsets.data(), sizeof points.octant_offsets, out);
   AppendColumn(points.grid, out);
   return out;
@@ -146,6 +148,8 @@ NodePoints UnpackNode(std::span<const std::uint8_t> message, NodeKey& key, const
   for (std::vector<float>* column : VectorColumns(points)) ReadColumn(in, *column);
   ReadColumn(in, points.velocity_dispersion);
   ReadColumn(in, points.shape);
+  ReadColumn(in, points.child_cluster);
+  ReadColumn(in, points.refine_bound);
   in.Read(points.octant_offsets.data(), sizeof points.octant_offsets);
   ReadColumn(in, points.grid);
   if (!in.done() || !key.IsValid()) throw Error::Corruption(what, "a node sent between ranks is malformed");

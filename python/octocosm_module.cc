@@ -56,7 +56,9 @@ py::array_t<T> OwningArray(std::vector<T>&& values, std::vector<py::ssize_t> sha
 }
 
 // The columns of the names given ("all" for every one); position always.
-ColumnSet ColumnsNamed(const std::vector<std::string>& names) {
+// The cluster links (child_cluster, refine_bound) are a block's, not a
+// point's: only Store.blocks returns them, and only when named.
+ColumnSet ColumnsNamed(const std::vector<std::string>& names, bool whole_blocks) {
   ColumnSet columns = ColumnBit(ColumnId::kPosition);
   for (const std::string& name : names) {
     if (name == "all") {
@@ -70,7 +72,14 @@ ColumnSet ColumnsNamed(const std::vector<std::string>& names) {
         known = true;
       }
     }
-    if (!known) throw Error::InvalidArgument("unknown column '" + name + "' (known: " + ColumnNames(kAllColumns) + ", all)");
+    if (!known) {
+      throw Error::InvalidArgument("unknown column '" + name + "' (known: " +
+                                   ColumnNames(kAllColumns | (whole_blocks ? kClusterLinkColumns : 0)) + ", all)");
+    }
+    if (!whole_blocks && (columns & kClusterLinkColumns)) {
+      throw Error::InvalidArgument("column '" + name + "' links a block's clusters to its children's points: "
+                                   "Store.blocks returns it, Store.query does not");
+    }
   }
   return columns;
 }
@@ -95,6 +104,7 @@ class ColumnCollector {
     }
     if (Wants(ColumnId::kVelocityDispersion)) dispersion_.reserve(points);
     if (Wants(ColumnId::kShape)) shape_.reserve(6 * points);
+    if (Wants(ColumnId::kRefineBound)) refine_bound_.reserve(3 * points);
   }
 
   void Add(const NodePoints& points, std::size_t count) {
@@ -116,6 +126,9 @@ class ColumnCollector {
         for (const double entry : shape) shape_.push_back(static_cast<float>(entry));
       }
     }
+    // A block's own, whole (Store.blocks): a leaf's are empty.
+    if (Wants(ColumnId::kChildCluster)) Append(child_cluster_, points.child_cluster, points.child_cluster.size());
+    if (Wants(ColumnId::kRefineBound)) Append(refine_bound_, points.refine_bound, 3 * count);
     count_ += count;
   }
 
@@ -132,6 +145,11 @@ class ColumnCollector {
     }
     if (Wants(ColumnId::kVelocityDispersion)) result["velocity_dispersion"] = OwningArray(std::move(dispersion_), {n});
     if (Wants(ColumnId::kShape)) result["shape"] = OwningArray(std::move(shape_), {n, 6});
+    if (Wants(ColumnId::kChildCluster)) {
+      const auto entries = static_cast<py::ssize_t>(child_cluster_.size());
+      result["child_cluster"] = OwningArray(std::move(child_cluster_), {entries});
+    }
+    if (Wants(ColumnId::kRefineBound)) result["refine_bound"] = OwningArray(std::move(refine_bound_), {n, 3});
     count_ = 0;
     return result;
   }
@@ -155,6 +173,8 @@ class ColumnCollector {
   std::array<std::vector<float>, kVectorColumnCount> vectors_;
   std::vector<float> shape_;  // xx, yy, zz, xy, xz, yz of each point's blob shape (trace 3)
   std::vector<float> dispersion_;
+  std::vector<std::uint32_t> child_cluster_;
+  std::vector<float> refine_bound_;
 };
 
 std::array<double, 3> Triple(const py::handle& value, const char* what) {
@@ -210,7 +230,7 @@ struct QuerySpec {
 
 QuerySpec MakeQuery(const Dataset& dataset, std::uint32_t epoch, const py::object& box, const py::object& sphere,
                     bool frustum, std::optional<int> level, std::optional<double> error, const py::object& camera,
-                    double width, double height, const std::vector<std::string>& columns) {
+                    double width, double height, const std::vector<std::string>& columns, bool whole_blocks) {
   if (epoch >= dataset.epoch_count()) {
     throw Error::InvalidArgument("epoch " + std::to_string(epoch) + ": the store has " +
                                  std::to_string(dataset.epoch_count()) + " epoch(s)");
@@ -222,7 +242,7 @@ QuerySpec MakeQuery(const Dataset& dataset, std::uint32_t epoch, const py::objec
   if (!camera.is_none()) view = CameraFrom(camera, cube, width / height);
   QuerySpec spec;
   spec.options.epoch = epoch;
-  spec.options.columns = ColumnsNamed(columns);
+  spec.options.columns = ColumnsNamed(columns, whole_blocks);
   if (level) {
     if (*level < 0 || *level > kMaxLevel) throw Error::InvalidArgument("level must be in [0, 21]");
     spec.options.level = *level;
@@ -335,7 +355,7 @@ class Store {
   py::dict Query(std::uint32_t epoch, const py::object& box, const py::object& sphere, bool frustum,
                  std::optional<int> level, std::optional<double> error, const py::object& camera, double width,
                  double height, const std::vector<std::string>& columns, bool with_stats) const {
-    QuerySpec spec = MakeQuery(*dataset_, epoch, box, sphere, frustum, level, error, camera, width, height, columns);
+    QuerySpec spec = MakeQuery(*dataset_, epoch, box, sphere, frustum, level, error, camera, width, height, columns, false);
     ColumnCollector collector(spec.options.columns);
     QueryStats stats;
     {
@@ -354,7 +374,7 @@ class Store {
   BlockIterator Blocks(std::uint32_t epoch, const py::object& box, const py::object& sphere, bool frustum,
                        std::optional<int> level, std::optional<double> error, const py::object& camera,
                        double width, double height, const std::vector<std::string>& columns) const {
-    QuerySpec spec = MakeQuery(*dataset_, epoch, box, sphere, frustum, level, error, camera, width, height, columns);
+    QuerySpec spec = MakeQuery(*dataset_, epoch, box, sphere, frustum, level, error, camera, width, height, columns, true);
     py::gil_scoped_release release;
     return BlockIterator(dataset_, std::move(spec));
   }

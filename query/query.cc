@@ -27,7 +27,9 @@ void KeepPoints(NodePoints& points, const std::vector<std::uint32_t>& keep) {
   for (std::vector<float>* column : VectorColumns(points)) KeepColumn(*column, 3, keep);
   KeepColumn(points.velocity_dispersion, 1, keep);
   KeepColumn(points.shape, 6, keep);
+  KeepColumn(points.refine_bound, 3, keep);
   KeepColumn(points.grid, 1, keep);
+  points.child_cluster.clear();  // would name points no longer kept
 }
 
 std::vector<IndexEntry> SelectNodes(const Dataset& dataset, const Region& region, const QueryOptions& options,
@@ -63,7 +65,8 @@ QueryCursor::QueryCursor(const Dataset& dataset, const Region& region, const Que
       blocks_(SelectAndCount(dataset, region, options, stats_),
               ReadsInFlight(dataset, options.epoch),
               [&dataset, epoch = options.epoch,
-               wanted = (options.columns & kAllColumns) | ColumnBit(ColumnId::kPosition)](const IndexEntry& entry) {
+               wanted = (options.columns & (kAllColumns | kClusterLinkColumns)) |
+                        ColumnBit(ColumnId::kPosition)](const IndexEntry& entry) {
                 Fetched fetched;
                 fetched.block = ReadBlockColumns(dataset, epoch, entry, wanted, fetched.counters);
                 return fetched;

@@ -27,6 +27,8 @@ GLuint ColumnBinding(ColumnId id) {
     case ColumnId::kPrevDisplacement: return 14;
     case ColumnId::kNextVelocity: return 15;
     case ColumnId::kPrevVelocity: return 16;
+    case ColumnId::kChildCluster:
+    case ColumnId::kRefineBound: return 0;  // never on the GPU (render/gpu_block.h)
   }
   return 0;
 }

@@ -79,6 +79,7 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
   u.node[0] = static_cast<float>(node.size / 65536.0);
   std::vector<GpuColumnBytes> columns;
   for (const BlockColumn& c : header.columns) {
+    if (kClusterLinkColumns & ColumnBit(c.id)) continue;  // not drawn: the level of detail's, not a point's
     if (c.offset > bytes.size() || c.length > bytes.size() - c.offset) {
       throw Error::Corruption(where, std::string("column '") + ColumnName(c.id) + "' lies outside the block's " +
                                          std::to_string(bytes.size()) + " bytes");
@@ -135,6 +136,8 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
         break;
       }
       case ColumnId::kShape: u.columns[2][3] = kPresent; break;
+      case ColumnId::kChildCluster:
+      case ColumnId::kRefineBound: break;  // skipped above
     }
   }
   const ColumnSet required = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |

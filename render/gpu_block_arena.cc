@@ -65,6 +65,8 @@ ColumnFormat FormatOf(ColumnId id, bool id_offsets) {
     case ColumnId::kShape:
       return {6, {{kShapeDiagonalAttribute, 3, GL_UNSIGNED_BYTE, false, 0},
                   {kShapeOffDiagonalAttribute, 3, GL_UNSIGNED_BYTE, false, 3}}};
+    case ColumnId::kChildCluster:
+    case ColumnId::kRefineBound: return {};  // never on the GPU (render/gpu_block.h)
   }
   return {};
 }

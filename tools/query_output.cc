@@ -248,6 +248,7 @@ ColumnSet ParseColumnList(const std::string& text) {
     bool known = false;
     std::string names;
     for (const ColumnId id : kColumnIds) {
+      if (kClusterLinkColumns & ColumnBit(id)) continue;  // a block's links, not a point's attributes
       names += std::string(ColumnName(id)) + ", ";
       if (item == ColumnName(id)) {
         columns |= ColumnBit(id);

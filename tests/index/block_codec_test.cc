@@ -371,10 +371,12 @@ TEST(BlockCodec, RangedDecodeEqualsFullDecode) {
   const std::size_t header_size = DecodeBlockHeaderSize(fixed, "ranged");
   const Bytes prefix(block.begin(), block.begin() + static_cast<std::ptrdiff_t>(header_size));
   const BlockHeader header = DecodeBlockHeader(prefix, key, "ranged");
-  EXPECT_EQ(header.columns.size(), kColumnIds.size());
-  for (ColumnSet wanted = 1; wanted < (1u << kColumnIds.size()); wanted += 5) {
+  // Every attribute column (the cluster links are a test of their own).
+  constexpr int kAttributes = std::popcount(kAllColumns);
+  EXPECT_EQ(header.columns.size(), static_cast<std::size_t>(kAttributes));
+  for (ColumnSet wanted = 1; wanted < (1u << kAttributes); wanted += 5) {
     NodePoints ranged;
-    for (int raw = 1; raw <= static_cast<int>(kColumnIds.size()); ++raw) {
+    for (int raw = 1; raw <= kAttributes; ++raw) {
       const auto id = static_cast<ColumnId>(raw);
       if (!(wanted & (1u << (raw - 1)))) continue;
       const BlockColumn* c = header.Find(id);
@@ -787,11 +789,11 @@ TEST(BlockCodec, EpochLinkColumnsAreCheckedLikeVelocity) {
     FixChecksums(bad);
     expect_corrupt(bad, kAllColumns, name);
   }
-  // Id 13 is not a column of version 1.
+  // Id 15 is not a column of version 1.
   Bytes bad = block;
-  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 11] = 13;
+  bad[kBlockFixedHeaderSize + kBlockDirectoryEntrySize * 11] = 15;
   FixChecksums(bad);
-  expect_corrupt(bad, kAllColumns, "unknown column id 13");
+  expect_corrupt(bad, kAllColumns, "unknown column id 15");
 }
 
 // Column 12: six byte codes a point, as given; an off-diagonal code of 255
@@ -821,6 +823,86 @@ TEST(BlockCodec, ShapeCodesAreStoredAsTheyAreAndChecked) {
   EXPECT_THROW(EncodeBlock(points, key, kCube), Error);
   points.shape.pop_back();
   EXPECT_THROW(EncodeBlock(points, key, kCube), Error);
+}
+
+// Columns 13 and 14, the cluster links: child_cluster as u16 entries while
+// the node has at most 2^16 points and u32 past it, its entry count in its
+// parameters; refine_bound as f32 triples. Entries that name no point, run
+// back to an earlier octant or leave a cluster without members, and bounds
+// that are negative or not finite, are refused by the encoder and reported
+// as corruption by the decoder.
+TEST(BlockCodec, ClusterLinksRoundTripAndAreChecked) {
+  std::mt19937_64 rng(43);
+  const NodeKey key = NodeKey::FromPath("r6");
+  for (const std::size_t n : {std::size_t{40}, std::size_t{70000}}) {
+    SCOPED_TRACE(n);
+    NodePoints points = RandomPoints(rng, n, key, kCube, kShapeBit);
+    // Three children's points a cluster, each in its cluster's octant.
+    for (std::uint32_t c = 0; c < n; ++c) points.child_cluster.insert(points.child_cluster.end(), {c, c, c});
+    for (std::size_t i = 0; i < 3 * n; ++i) points.refine_bound.push_back(static_cast<float>(i % 7) * 0.25f);
+    const Bytes block = EncodeBlock(points, key, kCube);
+    const BlockHeader header = DecodeBlockHeader(block, key, "links");
+    const BlockColumn& links = *header.Find(ColumnId::kChildCluster);
+    EXPECT_EQ(links.encoding, n <= 65536 ? kEncodingV1 : kEncodingChildClusterU32);
+    EXPECT_EQ(links.length, (n <= 65536 ? 2u : 4u) * 3 * n);
+    EXPECT_EQ(header.Find(ColumnId::kRefineBound)->length, 12u * n);
+    const NodePoints decoded = DecodeBlock(block, kClusterLinkColumns, key, kCube, "links").points;
+    EXPECT_EQ(decoded.child_cluster, points.child_cluster);
+    EXPECT_EQ(decoded.refine_bound, points.refine_bound);
+    EXPECT_TRUE(DecodeBlock(block, kAllColumns, key, kCube, "links").points.child_cluster.empty());
+  }
+
+  const std::size_t n = 12;
+  NodePoints points = RandomPoints(rng, n, key, kCube, kShapeBit);
+  for (std::uint32_t c = 0; c < n; ++c) points.child_cluster.insert(points.child_cluster.end(), {c, c});
+  points.refine_bound.assign(3 * n, 1.0f);
+  const Bytes block = EncodeBlock(points, key, kCube);
+  const BlockHeader header = DecodeBlockHeader(block, key, "links");
+  const BlockColumn& links = *header.Find(ColumnId::kChildCluster);
+  const auto expect_corrupt = [&](Bytes bad, const std::string& message) {
+    FixChecksums(bad);
+    try {
+      DecodeBlock(bad, kClusterLinkColumns, key, kCube, "links");
+      ADD_FAILURE() << message;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kCorruption) << e.what();
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  };
+  const auto with_entry = [&](std::size_t entry, std::uint16_t value) {
+    Bytes bad = block;
+    bad[links.offset + 2 * entry] = static_cast<std::uint8_t>(value);
+    bad[links.offset + 2 * entry + 1] = static_cast<std::uint8_t>(value >> 8);
+    return bad;
+  };
+  expect_corrupt(with_entry(5, 12), "column 'child_cluster': entry 5 names point 12 of 12");
+  ASSERT_GT(header.octant_offsets[1], 0u) << "point 0 lies in octant 0";
+  ASSERT_LT(header.octant_offsets[1], n) << "and the last point in another";
+  // The last entry names point 0: an earlier octant after a later one.
+  expect_corrupt(with_entry(2 * n - 1, 0), "before one in octant");
+  Bytes unnamed_bytes = with_entry(0, 1);
+  unnamed_bytes[links.offset + 2] = 1;  // entry 1 as well
+  expect_corrupt(unnamed_bytes, "point 0 holds none of the children's points");
+  Bytes count = block;
+  const std::size_t entry = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * (header.columns.size() - 2);
+  count[entry + 32] = static_cast<std::uint8_t>(count[entry + 32] + 1);  // one entry more than its bytes hold
+  expect_corrupt(count, "column 'child_cluster': " + std::to_string(2 * 2 * n) + " bytes for " +
+                            std::to_string(2 * n + 1) + " entries");
+  Bytes negative = block;
+  const BlockColumn& bounds = *header.Find(ColumnId::kRefineBound);
+  const float minus = -1;
+  std::memcpy(&negative[bounds.offset + 4 * 7], &minus, 4);
+  expect_corrupt(negative, "column 'refine_bound': point 2 holds -1");
+
+  NodePoints unnamed = points;
+  unnamed.child_cluster[0] = unnamed.child_cluster[1] = 1;
+  EXPECT_THROW(EncodeBlock(unnamed, key, kCube), Error);
+  NodePoints infinite = points;
+  infinite.refine_bound[4] = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(EncodeBlock(infinite, key, kCube), Error);
+  NodePoints short_bounds = points;
+  short_bounds.refine_bound.pop_back();
+  EXPECT_THROW(EncodeBlock(short_bounds, key, kCube), Error);
 }
 
 // Column 11: u16 codes between the block's f32 min and max dispersion, as

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "index/block_codec.h"
+#include "index/cluster_shape.h"
 #include "index/dataset.h"
 #include "base/error.h"
 #include "tests/support/temp_dir.h"
@@ -259,7 +260,7 @@ TEST_F(VerifyTest, ClusterNodesCarryVelocityDispersionsAndVerify) {
   EXPECT_TRUE(report.faults.empty()) << AllFaults(report);
   const Dataset dataset = Dataset::Open(store);
   const ColumnSet dispersion = ColumnBit(ColumnId::kVelocityDispersion);
-  EXPECT_EQ(dataset.cluster_columns(), dispersion | ColumnBit(ColumnId::kShape));
+  EXPECT_EQ(dataset.cluster_columns(), dispersion | ColumnBit(ColumnId::kShape) | kClusterLinkColumns);
   EXPECT_EQ(dataset.columns(0) & dispersion, 0u) << "not in every block: leaves lack it";
   EXPECT_EQ(dataset.columns() & dispersion, dispersion);
   std::size_t inner = 0, leaves = 0;
@@ -303,7 +304,8 @@ TEST_F(VerifyTest, DispersionsTheManifestDoesNotDeclareAreAFault) {
   std::ofstream(manifest) << json.dump();
   const VerifyReport report = VerifyStore(store);
   EXPECT_TRUE(AnyFaultMentions(report, "carries the columns position,weight,smoothing,velocity,id,type,"
-                                       "velocity_dispersion,shape, the manifest declares position,weight,smoothing,velocity,id,type"))
+                                       "velocity_dispersion,shape,child_cluster,refine_bound, the manifest declares "
+                                       "position,weight,smoothing,velocity,id,type"))
       << AllFaults(report);
 }
 
@@ -352,6 +354,49 @@ TEST_F(VerifyTest, DispersionsWhereThePointsCannotBeClustersAreAFault) {
                                        "id,type for a leaf"))
       << AllFaults(report);
   EXPECT_FALSE(AnyFaultMentions(report, "block r7")) << AllFaults(report);
+}
+
+// An ingested store's cluster links verify; a crafted root's two clusters
+// (one in octant 0, one in octant 7, over leaves of four points each) whose
+// masses or bounds disagree with their members are faults naming the node.
+TEST_F(VerifyTest, ClusterLinksThatDisagreeWithTheMembersAreAFault) {
+  const std::string ingested = IngestedStoreWithVelocities(CoarsePoints::kClusters);
+  const Dataset dataset = Dataset::Open(ingested);
+  EXPECT_EQ(dataset.cluster_columns() & kClusterLinkColumns, kClusterLinkColumns);
+  const DecodedBlock root_block =
+      DecodeBlock(dataset.store().ReadBlock({0, NodeKey::Root().value()}), kAllColumns | kClusterLinkColumns,
+                  NodeKey::Root(), dataset.cube(0), "root");
+  EXPECT_EQ(root_block.points.refine_bound.size(), 3 * root_block.points.size());
+  EXPECT_GE(root_block.points.child_cluster.size(), root_block.points.size());
+
+  const NodeKey root = NodeKey::Root();
+  const auto clusters = [](double mass_a, float radius) {
+    NodePoints p;
+    p.position = {0.25, 0.25, 0.25, 0.75, 0.75, 0.75};
+    p.weight = {mass_a, 10.0 - mass_a};
+    p.smoothing = {0.1, 0.1};
+    p.type = {1, 1};
+    p.id = {1, 2};
+    for (int c = 0; c < 2; ++c) p.shape.insert(p.shape.end(), kRoundShapeCode.begin(), kRoundShapeCode.end());
+    p.child_cluster = {0, 0, 0, 0, 1, 1, 1, 1};
+    p.refine_bound = {radius, 1.0f, 20.0f, radius, 1.0f, 20.0f};
+    p.octant_offsets = {0, 1, 1, 1, 1, 1, 1, 1, 2};
+    return p;
+  };
+  const nlohmann::json flags = {{"has_shape", true}, {"has_cluster_links", true}};
+  const auto crafted = [&](const NodePoints& root_points) {
+    fs::remove_all(dir_ / "crafted");
+    return VerifyStore(CraftedStore({{root, root_points},
+                                     {root.Child(0), PointsIn(root.Child(0), 4, 5.0)},
+                                     {root.Child(7), PointsIn(root.Child(7), 4, 5.0)}},
+                                    100, 8, flags));
+  };
+  const VerifyReport sound = crafted(clusters(5.0, 1.0f));
+  EXPECT_TRUE(sound.faults.empty()) << AllFaults(sound);
+  const VerifyReport heavy = crafted(clusters(6.0, 1.0f));
+  EXPECT_TRUE(AnyFaultMentions(heavy, "block r: cluster 0 weighs 6 but its members 5")) << AllFaults(heavy);
+  const VerifyReport small = crafted(clusters(5.0, 0.01f));
+  EXPECT_TRUE(AnyFaultMentions(small, "block r: the refine bound of cluster 0")) << AllFaults(small);
 }
 
 TEST_F(VerifyTest, ADamagedIdIndexIsAFault) {
