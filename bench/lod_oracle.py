@@ -87,6 +87,20 @@ def camera_basis(view):
     return position, forward, right, up
 
 
+def reaches_view(positions, smoothing, view, width, height):
+    """Which points' blobs reach into the view (as project() keeps them)."""
+    position, forward, right, up = camera_basis(view)
+    focal = 0.5 * height / math.tan(math.radians(view["fov"]) / 2)
+    d = positions - position
+    depth = d @ forward
+    front = depth > view["near"]
+    safe = np.where(front, depth, 1.0)
+    u = 0.5 * width + focal * (d @ right) / safe
+    v = 0.5 * height - focal * (d @ up) / safe
+    radius = np.clip(smoothing * focal / safe, MIN_RADIUS, MAX_RADIUS)
+    return front & (u > -radius) & (u < width + radius) & (v > -radius) & (v < height + radius)
+
+
 def project(points, view, width, height):
     position, forward, right, up = camera_basis(view)
     focal = 0.5 * height / math.tan(math.radians(view["fov"]) / 2)
@@ -217,6 +231,114 @@ def cut_with_count(tree, target):
     return cut(tree, hi)
 
 
+def node_cubes(keys, origin, size):
+    """The lower corner and edge of each node (index/morton.h: a marker bit, then an octant of three
+    bits, x | y << 1 | z << 2, per level from the root)."""
+    keys = np.asarray(keys, dtype=np.uint64)
+    levels = np.array([(int(k).bit_length() - 1) // 3 for k in keys])
+    cell = np.zeros((keys.size, 3), dtype=np.int64)
+    for i, (key, level) in enumerate(zip(keys, levels)):
+        k = int(key)
+        for shift in range(3 * (level - 1), -1, -3):
+            octant = (k >> shift) & 7
+            cell[i] = 2 * cell[i] + [octant & 1, (octant >> 1) & 1, (octant >> 2) & 1]
+    edge = size / 2.0 ** levels
+    return np.asarray(origin) + cell * edge[:, None], edge, levels
+
+
+def store_cut_tree(store, view, width, height):
+    """The store's own clusters as a tree, for the renderer's cluster-by-cluster rule (docs/FORMAT.md
+    section 4): every point of every node whose cube may reach into the view, each with its parent
+    (the cluster of the node above that holds it, by the child_cluster column) and its bound E of the
+    error of drawing it instead of what lies below it."""
+    info = store.info()["epochs"][0]
+    origin, size = np.array(info["cube_origin"]), float(info["cube_size"])
+    position, forward, right, up = camera_basis(view)
+    focal = 0.5 * height / math.tan(math.radians(view["fov"]) / 2)
+    tan_v = 0.5 * height / focal
+    tan_h = 0.5 * width / focal
+    # Inward side planes of the view's frustum through the camera: a sphere (c, r) may reach in
+    # when m . (c - camera) <= r for each outward normal m, and its depth is within near and far.
+    outward = [(s * axis - t * forward) / math.sqrt(1 + t * t)
+               for axis, t in ((right, tan_h), (up, tan_v)) for s in (1, -1)]
+    counts, kept = {}, {}
+    for level in range(22):
+        found = False
+        for block in store.blocks(level=level, columns=["weight", "smoothing", "child_cluster", "refine_bound"]):
+            key = int(block["node"])
+            counts[key] = block["weight"].size
+            if block["level"] != level or key in kept:
+                continue
+            found = True
+            if level > 0 and (key >> 3) not in kept:
+                continue  # its parent is out of view, so it is too
+            corner, edge, _ = node_cubes([key], origin, size)
+            centre = corner[0] + 0.5 * edge[0] - position
+            # The node's sphere, grown by the widest blob of its points.
+            radius = edge[0] * math.sqrt(3) / 2 + float(block["smoothing"].max(initial=0.0))
+            depth = centre @ forward
+            if depth + radius < view["near"] or depth - radius > view["far"]:
+                continue
+            if any(m @ centre > radius for m in outward):
+                continue
+            kept[key] = block
+        if not found:
+            break
+    keys = sorted(kept, key=lambda k: ((k.bit_length() - 1) // 3, k))
+    base, total = {}, 0
+    for key in keys:
+        base[key] = total
+        total += kept[key]["weight"].size
+    parent = np.full(total, -1, dtype=np.int64)
+    for key in keys:
+        links = kept[key]["child_cluster"]
+        if links.size == 0:
+            continue
+        start = 0
+        for octant in range(8):
+            child = (key << 3) | octant
+            n = counts.get(child, 0)
+            if child in kept:
+                parent[base[child]:base[child] + n] = base[key] + links[start:start + n]
+            start += n
+    tree = {"position": np.concatenate([kept[k]["position"] for k in keys]),
+            "weight": np.concatenate([kept[k]["weight"] for k in keys]),
+            "smoothing": np.concatenate([kept[k]["smoothing"] for k in keys]),
+            "bound": np.concatenate([kept[k]["refine_bound"] for k in keys]).astype(np.float64),
+            "inner": np.concatenate([np.full(kept[k]["weight"].size, kept[k]["child_cluster"].size > 0)
+                                     for k in keys]),
+            "parent": parent, "focal": focal, "nodes": len(keys)}
+    distance = np.linalg.norm(tree["position"] - position, axis=1)
+    gap = np.maximum(distance - tree["bound"][:, 0], 0.0)
+    a, r = tree["bound"][:, 1], tree["bound"][:, 2]
+    q = (PIXEL / focal) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        error = np.where(tree["inner"] & (a > 0), a / (a / np.maximum(r, 1e-300) + q * gap * gap), 0.0)
+    tree["error"] = error
+    has_parent = parent >= 0
+    tree["parent_error"] = np.where(has_parent, error[np.maximum(parent, 0)], np.inf)
+    return tree
+
+
+def store_cut(tree, tau):
+    """The points the renderer's rule draws for threshold tau: E <= tau, the parent's E > tau."""
+    return (tree["error"] <= tau) & (tree["parent_error"] > tau)
+
+
+def store_cut_with_count(tree, target, in_view):
+    """The cut whose points in view come nearest `target` from below."""
+    lo, hi = 0.0, float(tree["error"].max()) * 2 + 1
+    for _ in range(100):
+        mid = math.sqrt(lo * hi) if lo > 0 else hi * 1e-15
+        if int((store_cut(tree, mid) & in_view).sum()) > target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-9 * hi:
+            break
+    return store_cut(tree, hi)
+
+
 def write_gadget2(path, positions, masses, smoothing):
     """A format-2 GADGET file of gas particles with masses and smoothing lengths."""
     n = positions.shape[0]
@@ -248,6 +370,39 @@ def compare(reference, picture):
     return f"PSNR {psnr:.1f} dB, SSIM {error_map.ssim(truth, grey):.4f} (grey log scale)"
 
 
+def render_and_compare(snapshot, positions, masses, smoothing, flags, reference, args):
+    """Writes a cut as a snapshot, draws it as the reference is drawn, and compares."""
+    write_gadget2(snapshot, positions, masses, smoothing)
+    picture = snapshot + ".pfm"
+    subprocess.run([args.octocosm, "render", args.store, "--reference", snapshot, *flags,
+                    "--width", str(args.width), "--height", str(args.height), "-o", picture[:-4] + ".png",
+                    "--hdr", picture, "--quiet"],
+                   check=True)
+    image = error_map.read_pfm(picture)
+    return f"{compare(reference, image)}; mass {image.sum():.6g} against the reference's {reference.sum():.6g}"
+
+
+def measure_store_cut(store, view, flags, reference, counts, args):
+    tree = store_cut_tree(store, view, args.width, args.height)
+    if not tree["inner"].any():
+        sys.exit(f"{args.store}: no inner node carries cluster links (child_cluster, refine_bound): "
+                 "ingest it again with --coarse clusters")
+    in_view = reaches_view(tree["position"], tree["smoothing"], view, args.width, args.height)
+    leaves_in_view = int((in_view & ~tree["inner"]).sum())
+    print(f"store: {tree['nodes']} nodes in view, {tree['weight'].size} points, {leaves_in_view} particles in view",
+          flush=True)
+    full = args.full_detail or leaves_in_view
+    for count in counts:
+        target = int(round(count * full)) if count < 1 else int(count)
+        drawn = store_cut_with_count(tree, target, in_view)
+        shown = int((drawn & in_view).sum())
+        snapshot = os.path.join(args.work, f"oracle-store-{shown}")
+        result = render_and_compare(snapshot, tree["position"][drawn], tree["weight"][drawn],
+                                    tree["smoothing"][drawn], flags, reference, args)
+        print(f"store cut cluster by cluster: {shown} points in view ({100.0 * shown / full:.2f}% of full detail): "
+              f"{result}", flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--store", required=True)
@@ -258,8 +413,10 @@ def main():
     parser.add_argument("--full-detail", type=int, default=0,
                         help="points of the view's full-detail frame, as the bench counts them "
                              "(default: the particles whose blobs reach into the view)")
-    parser.add_argument("--grouping", choices=("screen", "world"), default="screen",
-                        help="cut cells on the screen, or in space as a tree built once for every view")
+    parser.add_argument("--grouping", choices=("screen", "world", "store"), default="screen",
+                        help="cut cells on the screen, or in space as a tree built once for every view; or cut "
+                             "the store's own clusters cluster by cluster with the renderer's bound of their "
+                             "error (docs/FORMAT.md section 4)")
     parser.add_argument("--priority", choices=("split", "total"), default="split",
                         help="a cell's priority from its members' spread and their blobs apart, or from its "
                              "blob's whole variance only (what a stored cluster carries)")
@@ -290,6 +447,11 @@ def main():
         sys.exit(f"{args.reference}: {reference.shape[1]}x{reference.shape[0]} pixels, not the "
                  f"{args.width}x{args.height} of --width and --height")
     store = octocosm.open(args.store)
+    if args.grouping == "store":
+        measure_store_cut(store, view, flags, reference, counts, args)
+        for frame in args.frames:
+            print(f"{os.path.basename(frame)}: {compare(reference, error_map.read_pfm(frame))}")
+        return
     # A wider frustum, so that the particles just outside the view whose blobs
     # reach into it come too (the widest blob, 127 px, subtends less than the
     # difference at these fields of view); project() keeps the ones that reach.
@@ -324,16 +486,9 @@ def main():
             positions = (position + z[:, None] * forward + ((u - 0.5 * args.width) * z / focal)[:, None] * right
                          - ((v - 0.5 * args.height) * z / focal)[:, None] * up)
             snapshot = os.path.join(args.work, f"oracle-{args.grouping}-{args.priority}-{step}-{drawn.sum()}")
-            write_gadget2(snapshot, positions, mass, radius * z / focal)
-            picture = snapshot + ".pfm"
-            subprocess.run([args.octocosm, "render", args.store, "--reference", snapshot, *flags,
-                            "--width", str(args.width), "--height", str(args.height), "-o", picture[:-4] + ".png",
-                            "--hdr", picture, "--quiet"],
-                           check=True)
-            image = error_map.read_pfm(picture)
+            result = render_and_compare(snapshot, positions, mass, radius * z / focal, flags, reference, args)
             print(f"oracle ({label}): {drawn.sum()} points ({100.0 * drawn.sum() / full:.2f}% of full detail): "
-                  f"{compare(reference, image)}; mass {image.sum():.6g} against the reference's {reference.sum():.6g}",
-                  flush=True)
+                  f"{result}", flush=True)
     for frame in args.frames:
         print(f"{os.path.basename(frame)}: {compare(reference, error_map.read_pfm(frame))}")
 

@@ -48,7 +48,7 @@ std::uint64_t BytesPerPoint(ColumnId id, std::uint8_t encoding) {
     case ColumnId::kVelocityDispersion: return 2;
     case ColumnId::kShape: return 6;
     case ColumnId::kChildCluster: return 0;  // its entries are the children's points (ColumnLength)
-    case ColumnId::kRefineBound: return 12;
+    case ColumnId::kRefineBound: return 6;
   }
   return 0;
 }
@@ -481,6 +481,64 @@ void EncodeNonNegativeRanged1(const char* name, const std::vector<float>& values
   for (std::size_t i = 0; i < values.size(); ++i) PutU16(out + 2 * i, NearestCode((values[i] - double{lo}) * scale));
 }
 
+// Column 14's log2 codes: 256 to an octave, above a per-component base
+// chosen so that every value of the block has a code.
+constexpr double kRefineBoundCodesPerOctave = 256;
+constexpr std::int32_t kRefineBoundLowestBase = -160;  // below the smallest float
+constexpr std::int32_t kRefineBoundHighestBase = 128;
+
+float RefineBoundValue(std::int32_t base, std::uint16_t code) {
+  if (code == 0) return 0.0f;
+  return static_cast<float>(std::exp2(base + code / kRefineBoundCodesPerOctave));
+}
+
+// The smallest code whose value is at least x (> 0), or 65535: unique, so
+// that a value that is a code's (rounded to a float) comes back as that code.
+std::uint16_t RefineBoundCode(std::int32_t base, float x) {
+  const double estimate = (std::log2(double{x}) - base) * kRefineBoundCodesPerOctave;
+  auto c = static_cast<std::uint16_t>(std::clamp(std::ceil(estimate), 1.0, 65535.0));
+  while (c < 65535 && RefineBoundValue(base, c) < x) ++c;
+  while (c > 1 && RefineBoundValue(base, c - 1) >= x) --c;
+  // Past FLT_MAX (only for values within a code of it), the largest finite code.
+  while (c > 1 && !std::isfinite(RefineBoundValue(base, c))) --c;
+  return c;
+}
+
+// Per component, the base that gives the block's smallest positive value a
+// code (an octave to spare below it), or, when the values span more octaves
+// than the codes do, the base that gives its largest one (smaller values
+// then round up).
+std::array<std::int32_t, 3> RefineBoundBases(const std::vector<float>& bounds) {
+  std::array<float, 3> lo{INFINITY, INFINITY, INFINITY}, hi{0, 0, 0};
+  for (std::size_t i = 0; i < bounds.size(); ++i) {
+    const float x = bounds[i];
+    if (!std::isfinite(x) || !(x >= 0)) {
+      throw Error::InvalidArgument("refine_bound of point " + std::to_string(i / 3) + " holds " + std::to_string(x) +
+                                   ", must be finite and >= 0");
+    }
+    if (x > 0) {
+      lo[i % 3] = std::min(lo[i % 3], x);
+      hi[i % 3] = std::max(hi[i % 3], x);
+    }
+  }
+  std::array<std::int32_t, 3> base{};
+  for (int k = 0; k < 3; ++k) {
+    if (!(hi[k] > 0)) continue;
+    const auto low = static_cast<std::int32_t>(std::floor(std::log2(double{lo[k]}))) - 1;
+    const auto high = static_cast<std::int32_t>(std::ceil(std::log2(double{hi[k]}))) + 1 - 65535 / 256;
+    base[k] = std::clamp(std::max(low, high), kRefineBoundLowestBase, kRefineBoundHighestBase);
+  }
+  return base;
+}
+
+void EncodeRefineBounds(const std::vector<float>& bounds, std::uint8_t* out, std::uint8_t* params) {
+  const std::array<std::int32_t, 3> base = RefineBoundBases(bounds);
+  for (int k = 0; k < 3; ++k) PutU32(params + 4 * k, static_cast<std::uint32_t>(base[k]));
+  for (std::size_t i = 0; i < bounds.size(); ++i) {
+    PutU16(out + 2 * i, bounds[i] > 0 ? RefineBoundCode(base[i % 3], bounds[i]) : 0);
+  }
+}
+
 // The child_cluster column's contract (index/block_codec.h): every entry a
 // point of the node, every point named, octants non-decreasing.
 template <typename Fail>
@@ -618,6 +676,13 @@ std::string ColumnNames(ColumnSet columns) {
     if (columns & ColumnBit(id)) names += (names.empty() ? "" : ",") + std::string(ColumnName(id));
   }
   return names;
+}
+
+void QuantizeRefineBounds(std::vector<float>& bounds) {
+  const std::array<std::int32_t, 3> base = RefineBoundBases(bounds);
+  for (std::size_t i = 0; i < bounds.size(); ++i) {
+    if (bounds[i] > 0) bounds[i] = RefineBoundValue(base[i % 3], RefineBoundCode(base[i % 3], bounds[i]));
+  }
 }
 
 double StoredSmoothing(double h, double node_size) {
@@ -766,16 +831,7 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
           }
         }
         break;
-      case ColumnId::kRefineBound:
-        for (std::size_t i = 0; i < points.refine_bound.size(); ++i) {
-          const float x = points.refine_bound[i];
-          if (!std::isfinite(x) || !(x >= 0)) {
-            throw Error::InvalidArgument("EncodeBlock: column 'refine_bound' of point " + std::to_string(i / 3) +
-                                         " holds " + std::to_string(x) + ", must be finite and >= 0");
-          }
-          PutF32(out + 4 * i, x + 0.0f);  // + 0.0f: a -0 stored as +0
-        }
-        break;
+      case ColumnId::kRefineBound: EncodeRefineBounds(points.refine_bound, out, params); break;
     }
     entry[0] = static_cast<std::uint8_t>(id);
     entry[1] = encoding_of(id);
@@ -995,17 +1051,27 @@ void DecodeColumn(const BlockHeader& header, ColumnId id, std::span<const std::u
       break;
     case ColumnId::kShape: DecodeShapes(*column, n, bytes, where, out.shape); break;
     case ColumnId::kChildCluster: DecodeChildClusters(header, *column, bytes, where, out.child_cluster); break;
-    case ColumnId::kRefineBound:
+    case ColumnId::kRefineBound: {
+      std::array<std::int32_t, 3> base{};
+      for (int k = 0; k < 3; ++k) {
+        base[k] = static_cast<std::int32_t>(GetU32(params + 4 * k));
+        if (base[k] < kRefineBoundLowestBase || base[k] > kRefineBoundHighestBase) {
+          throw Error::Corruption(where, ColumnWhat(id, "base " + std::to_string(k) + " is 2^" +
+                                                            std::to_string(base[k]) + ", outside the float range"));
+        }
+      }
       out.refine_bound.resize(3 * std::size_t{n});
       for (std::size_t i = 0; i < out.refine_bound.size(); ++i) {
-        const float x = GetF32(in + 4 * i);
-        if (!std::isfinite(x) || !(x >= 0)) {
-          throw Error::Corruption(where, ColumnWhat(id, "point " + std::to_string(i / 3) + " holds " +
-                                                            std::to_string(x) + ", expected finite and >= 0"));
+        const std::uint16_t code = GetU16(in + 2 * i);
+        const float x = RefineBoundValue(base[i % 3], code);
+        if (!std::isfinite(x)) {
+          throw Error::Corruption(where, ColumnWhat(id, "point " + std::to_string(i / 3) + " holds code " +
+                                                            std::to_string(code) + ", beyond the float range"));
         }
         out.refine_bound[i] = x;
       }
       break;
+    }
   }
 }
 

@@ -85,17 +85,20 @@
 //                                      entry, and the entries' clusters lie in non-decreasing
 //                                      octants (a cluster lies in the child octant of its members).
 //                                      Inner nodes whose points are clusters carry it.
-//  14  refine_bound  12n     no        3 x f32 per point, each finite and >= 0: R, a, r. R: the
+//  14  refine_bound  6n      no        3 x u16 per point, log2 codes of R, a, r: component k is
+//                                      2^(base[k] + code / 256), or 0 for code 0. Params: i32
+//                                      base[3]. The writer stores each value rounded up to a
+//                                      code (QuantizeRefineBounds), so a bound stays one. R: the
 //                                      radius of a sphere about the point's decoded position
 //                                      that holds the spheres of every cluster below it (its
 //                                      members' and theirs); a and r: bounds, over the point
 //                                      and every cluster below it, of its mass times its blob's
 //                                      variance per axis (KernelVariance of its smoothing) and of
 //                                      its mass. A parent's three exceed its clusters' by a
-//                                      relative 2^-12 at least. What lets a renderer decide
-//                                      cluster by cluster, each on its own, which to draw
-//                                      (docs/FORMAT.md section 4). Inner nodes whose points are
-//                                      clusters carry it.
+//                                      relative 2^-12 at least (before rounding up to a code).
+//                                      What lets a renderer decide cluster by cluster, each on
+//                                      its own, which to draw (docs/FORMAT.md section 4). Inner
+//                                      nodes whose points are clusters carry it.
 //
 // Columns 8-14 were added to version 1 before any store left this project
 // (docs/FORMAT.md section 4): a block without them is unchanged byte for byte.
@@ -199,6 +202,13 @@ inline constexpr float kSmoothingPerOctave = 2048;
 // The smoothing length h of a node of edge node_size as its block stores
 // it (the nearest code's length): what a reader decodes.
 double StoredSmoothing(double h, double node_size);
+
+// Rounds each value of a refine_bound column (3 per point, finite, >= 0) up
+// to the nearest the column stores (a power of 2^(1/256), or 0): the values
+// the block then holds exactly. A parent's bounds are computed from its
+// clusters' bounds as stored. Throws Error::InvalidArgument on a value that
+// is not finite and >= 0.
+void QuantizeRefineBounds(std::vector<float>& bounds);
 
 struct BlockColumn {
   ColumnId id{};

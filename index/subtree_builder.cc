@@ -506,6 +506,8 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
     std::copy(bound.begin(), bound.end(), node.refine_bound.begin() + static_cast<std::ptrdiff_t>(3 * c));
   }
   while (octant < 8) node.octant_offsets[++octant] = static_cast<std::uint32_t>(n);
+  // As the block will hold them, so that the node above bounds these values.
+  QuantizeRefineBounds(node.refine_bound);
   return node;
 }
 

@@ -645,7 +645,9 @@ PYBIND11_MODULE(octocosm, m) {
            py::arg("error") = py::none(), py::arg("camera") = py::none(), py::arg("width") = 1920.0,
            py::arg("height") = 1080.0, py::arg("columns") = std::vector<std::string>{},
            "As query, block by block: an iterator of dicts (the block's columns, its node key and level),\n"
-           "for results larger than memory.")
+           "for results larger than memory. Besides query's columns, an inner node's cluster links:\n"
+           "child_cluster (each of its children's points' cluster in it, children in octant order) and\n"
+           "refine_bound (R, a, r of each cluster; docs/FORMAT.md section 4), of blocks the region holds whole.")
       .def("follow", &Store::Follow, py::arg("ids"),
            "Particles followed through every epoch by ID: a dict of numpy arrays id, epoch, time,\n"
            "position (m, 3) and velocity (m, 3) when stored, one row per (id, epoch) found.")

@@ -95,7 +95,7 @@ void AddVerifyCommand(CLI::App& app) {
                                               std::to_string(report.blocks_checked) + " readable blocks");
     }
     std::printf("verified %s: %llu blocks in %u epoch(s): checksums, columns, key structure, capacities, weight "
-                "sums, leaf counts%s all good\n",
+                "sums, cluster links, leaf counts%s all good\n",
                 directory->c_str(), static_cast<unsigned long long>(report.blocks_checked), report.epochs,
                 report.id_index_checked ? ", ID index samples" : "");
   });

@@ -839,13 +839,26 @@ TEST(BlockCodec, ClusterLinksRoundTripAndAreChecked) {
     NodePoints points = RandomPoints(rng, n, key, kCube, kShapeBit);
     // Three children's points a cluster, each in its cluster's octant.
     for (std::uint32_t c = 0; c < n; ++c) points.child_cluster.insert(points.child_cluster.end(), {c, c, c});
-    for (std::size_t i = 0; i < 3 * n; ++i) points.refine_bound.push_back(static_cast<float>(i % 7) * 0.25f);
+    // Zeros, and values over 2^-40 .. 2^40 (each component's base follows its smallest).
+    std::uniform_real_distribution<double> octaves(-40, 40);
+    for (std::size_t i = 0; i < 3 * n; ++i) {
+      points.refine_bound.push_back(i % 11 == 0 ? 0.0f : static_cast<float>(std::exp2(octaves(rng))));
+    }
+    const std::vector<float> exact = points.refine_bound;
+    QuantizeRefineBounds(points.refine_bound);
+    for (std::size_t i = 0; i < exact.size(); ++i) {
+      ASSERT_GE(points.refine_bound[i], exact[i]) << i;
+      ASSERT_LE(points.refine_bound[i], exact[i] * 1.0028f) << i << ": more than a code (2^(1/256)) above";
+    }
+    std::vector<float> twice = points.refine_bound;
+    QuantizeRefineBounds(twice);
+    EXPECT_EQ(twice, points.refine_bound) << "stored values stay as they are";
     const Bytes block = EncodeBlock(points, key, kCube);
     const BlockHeader header = DecodeBlockHeader(block, key, "links");
     const BlockColumn& links = *header.Find(ColumnId::kChildCluster);
     EXPECT_EQ(links.encoding, n <= 65536 ? kEncodingV1 : kEncodingChildClusterU32);
     EXPECT_EQ(links.length, (n <= 65536 ? 2u : 4u) * 3 * n);
-    EXPECT_EQ(header.Find(ColumnId::kRefineBound)->length, 12u * n);
+    EXPECT_EQ(header.Find(ColumnId::kRefineBound)->length, 6u * n);
     const NodePoints decoded = DecodeBlock(block, kClusterLinkColumns, key, kCube, "links").points;
     EXPECT_EQ(decoded.child_cluster, points.child_cluster);
     EXPECT_EQ(decoded.refine_bound, points.refine_bound);
@@ -876,8 +889,12 @@ TEST(BlockCodec, ClusterLinksRoundTripAndAreChecked) {
     return bad;
   };
   expect_corrupt(with_entry(5, 12), "column 'child_cluster': entry 5 names point 12 of 12");
-  ASSERT_GT(header.octant_offsets[1], 0u) << "point 0 lies in octant 0";
-  ASSERT_LT(header.octant_offsets[1], n) << "and the last point in another";
+  const auto octant_of = [&](std::uint32_t point) {
+    int o = 0;
+    while (point >= header.octant_offsets[o + 1]) ++o;
+    return o;
+  };
+  ASSERT_LT(octant_of(0), octant_of(n - 1)) << "the first and last points lie in different octants";
   // The last entry names point 0: an earlier octant after a later one.
   expect_corrupt(with_entry(2 * n - 1, 0), "before one in octant");
   Bytes unnamed_bytes = with_entry(0, 1);
@@ -888,11 +905,17 @@ TEST(BlockCodec, ClusterLinksRoundTripAndAreChecked) {
   count[entry + 32] = static_cast<std::uint8_t>(count[entry + 32] + 1);  // one entry more than its bytes hold
   expect_corrupt(count, "column 'child_cluster': " + std::to_string(2 * 2 * n) + " bytes for " +
                             std::to_string(2 * n + 1) + " entries");
-  Bytes negative = block;
+  // A base beyond the float range, and a code beyond it.
   const BlockColumn& bounds = *header.Find(ColumnId::kRefineBound);
-  const float minus = -1;
-  std::memcpy(&negative[bounds.offset + 4 * 7], &minus, 4);
-  expect_corrupt(negative, "column 'refine_bound': point 2 holds -1");
+  const std::size_t bounds_entry = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * (header.columns.size() - 1);
+  Bytes far = block;
+  const std::int32_t base = 200;
+  std::memcpy(&far[bounds_entry + 32 + 4], &base, 4);
+  expect_corrupt(far, "column 'refine_bound': base 1 is 2^200");
+  Bytes huge = block;
+  huge[bounds.offset + 2 * 7] = 0xFF;
+  huge[bounds.offset + 2 * 7 + 1] = 0xFF;
+  expect_corrupt(huge, "column 'refine_bound': point 2 holds code 65535");
 
   NodePoints unnamed = points;
   unnamed.child_cluster[0] = unnamed.child_cluster[1] = 1;
