@@ -67,3 +67,34 @@ def test_a_view_without_particles_is_an_error_naming_the_store(scene):
     assert result.returncode != 0
     assert "no particle reaches into the view" in result.stderr and str(scene / "store") in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_the_store_cut_draws_each_particle_once_and_every_particle_at_the_finest(scene):
+    """--grouping store: the renderer's cluster-by-cluster rule on the store's own clusters."""
+    result = oracle(scene, VIEW, "--counts", "0.1,1e9", "--grouping", "store")
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    rows = re.findall(r"store cut cluster by cluster: (\d+) points in view .*PSNR ([\d.]+) dB, SSIM ([\d.]+) .*"
+                      r"mass ([\d.e+]+) against the reference's ([\d.e+]+)", out)
+    assert len(rows) == 2, out
+    (few, few_db, _, few_mass, mass), (every, every_db, every_ssim, every_mass, _) = rows
+    in_view = int(re.search(r"(\d+) particles in view", out).group(1))
+    assert int(every) == in_view
+    assert float(every_db) > 80, out  # the leaves carry the reference's smoothing lengths
+    assert float(every_ssim) > 0.9999
+    assert float(every_mass) == pytest.approx(float(mass), rel=1e-5)
+    assert 0.08 * in_view < int(few) <= 0.1 * in_view
+    assert 15 < float(few_db) < float(every_db), out
+    assert float(few_mass) == pytest.approx(float(mass), rel=0.01)
+
+
+def test_the_store_cut_of_a_store_without_cluster_links_is_an_error(scene):
+    run(PROGRAM, "ingest", scene / "snap" / "snap", "-o", scene / "sampled", "--capacity", 2000, "--coarse", "sample",
+        "-q")
+    result = subprocess.run([sys.executable, ORACLE, "--store", scene / "sampled", "--reference",
+                             scene / "reference.pfm", "--view", VIEW, "--width", "320", "--height", "180",
+                             "--work", scene / "oracle", "--octocosm", PROGRAM, "--grouping", "store"],
+                            capture_output=True, text=True)
+    assert result.returncode != 0
+    assert "no inner node carries cluster links" in result.stderr and str(scene / "sampled") in result.stderr
+    assert "Traceback" not in result.stderr
