@@ -47,7 +47,7 @@ void DecodeEveryWay(std::span<const std::uint8_t> block, const Cube& cube) {
       column_bytes.push_back(block.subspan(column.offset, column.length));
       DecodeColumn(header, column.id, column_bytes.back(), cube, where, columns);
     }
-    const DecodedBlock decoded = DecodeBlock(block, kAllColumns, key, cube, where);
+    const DecodedBlock decoded = DecodeBlock(block, kAllColumns | kClusterLinkColumns, key, cube, where);
     Require(decoded.points.size() == decoded.header.point_count, "DecodeBlock's weights differ from its point count");
     Require(decoded.points.position.size() == 3 * decoded.header.point_count,
             "DecodeBlock's positions differ from its point count");

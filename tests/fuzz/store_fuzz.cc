@@ -85,7 +85,8 @@ void ReadEveryBlock(const Dataset& dataset) {
         const auto found = dataset.store().Lookup({epoch, entry.key});
         Require(found.has_value() && *found == entry, "Lookup disagrees with Scan");
         ReadCounters counters;
-        const DecodedBlock whole = ReadBlockColumns(dataset, epoch, entry, kAllColumns, counters);
+        const DecodedBlock whole =
+            ReadBlockColumns(dataset, epoch, entry, kAllColumns | kClusterLinkColumns, counters);
         Require(whole.points.size() == whole.header.point_count, "a decoded block's weights differ from its count");
         ReadBlockColumns(dataset, epoch, entry, few | dataset.columns(epoch), counters);
         const Bytes subset = ReadBlockSubset(dataset, epoch, entry, few, counters);
@@ -136,6 +137,7 @@ std::string SeedStore(const std::string& name, std::uint32_t epochs, std::size_t
     if (velocity) {
       dataset["has_velocity_dispersion"] = true;
       dataset["has_shape"] = true;
+      dataset["has_cluster_links"] = true;
     }
     writer.SetDataset(dataset);
     writer.Finish();

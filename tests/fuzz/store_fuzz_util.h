@@ -33,7 +33,8 @@ namespace octocosm::fuzz {
 
 // `n` points spread over the cube of node `key`, ordered by octant as
 // EncodeBlock wants them, with IDs from `first_id`; velocities when
-// `velocity`, and a cluster's velocity dispersion and shape when `cluster`.
+// `velocity`, and a cluster's velocity dispersion, shape and links (two
+// children's points a cluster, rounded bounds) when `cluster`.
 inline NodePoints SeedPoints(NodeKey key, const Cube& cube, std::size_t n, std::uint64_t first_id, bool velocity,
                              bool cluster) {
   const NodeCube node = cube.NodeCubeOf(key);
@@ -54,6 +55,11 @@ inline NodePoints SeedPoints(NodeKey key, const Cube& cube, std::size_t n, std::
     }
   }
   OrderByOctant(points, key, cube);
+  if (cluster) {
+    for (std::uint32_t c = 0; c < n; ++c) points.child_cluster.insert(points.child_cluster.end(), {c, c});
+    for (std::size_t i = 0; i < 3 * n; ++i) points.refine_bound.push_back(static_cast<float>(node.size) * (1 + i % 5));
+    QuantizeRefineBounds(points.refine_bound);
+  }
   return points;
 }
 
