@@ -217,18 +217,23 @@ def cut(tree, tau):
     return tree["stop"] & (tree["ancestors_min"] > tau) & ((tree["priority"] <= tau) | tree["terminal"])
 
 
-def cut_with_count(tree, target):
-    lo, hi = 0.0, float(tree["priority"].max()) * 2 + 1
-    for _ in range(80):
-        mid = math.sqrt(lo * hi) if lo > 0 else hi * 1e-12
-        n = int(cut(tree, mid).sum())
-        if n > target:
+def threshold_for_count(count_at, highest, target):
+    """The smallest threshold (bisected on a log scale up to twice `highest`) whose cut counts at most
+    `target` points by count_at(threshold)."""
+    lo, hi = 0.0, float(highest) * 2 + 1
+    for _ in range(100):
+        mid = math.sqrt(lo * hi) if lo > 0 else hi * 1e-15
+        if count_at(mid) > target:
             lo = mid
         else:
             hi = mid
         if hi - lo <= 1e-9 * hi:
             break
-    return cut(tree, hi)
+    return hi
+
+
+def cut_with_count(tree, target):
+    return cut(tree, threshold_for_count(lambda tau: int(cut(tree, tau).sum()), tree["priority"].max(), target))
 
 
 def node_cubes(keys, origin, size):
@@ -327,16 +332,8 @@ def store_cut(tree, tau):
 
 def store_cut_with_count(tree, target, in_view):
     """The cut whose points in view come nearest `target` from below."""
-    lo, hi = 0.0, float(tree["error"].max()) * 2 + 1
-    for _ in range(100):
-        mid = math.sqrt(lo * hi) if lo > 0 else hi * 1e-15
-        if int((store_cut(tree, mid) & in_view).sum()) > target:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-9 * hi:
-            break
-    return store_cut(tree, hi)
+    tau = threshold_for_count(lambda t: int((store_cut(tree, t) & in_view).sum()), tree["error"].max(), target)
+    return store_cut(tree, tau)
 
 
 def write_gadget2(path, positions, masses, smoothing):
