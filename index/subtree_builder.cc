@@ -511,6 +511,11 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
   return node;
 }
 
+// Once a node is written, the node above needs its clusters but not which of
+// its children's points each holds (4 bytes a child point, held along the
+// path of open nodes otherwise).
+void ReleaseChildClusters(NodePoints& node) { std::vector<std::uint32_t>().swap(node.child_cluster); }
+
 // The node above `children`: clusters or a sample, as the options say.
 NodePoints MakeParent(NodeKey key, const std::array<NodePoints, 8>& children, const Cube& cube,
                       const SubtreeOptions& options) {
@@ -540,6 +545,7 @@ class SubtreeBuild {
       node = MakeParent(key, children, cube_, options_);
     }
     sink_(key, node);
+    ReleaseChildClusters(node);
     return node;
   }
 
@@ -671,6 +677,7 @@ void TopLevelMerger::CloseDeepest() {
   open_.pop_back();
   NodePoints node = MakeParent(closing.key, closing.children, cube_, options_);
   sink_(closing.key, node);
+  ReleaseChildClusters(node);
   if (open_.empty()) {
     root_ = std::move(node);
   } else {

@@ -100,7 +100,8 @@ struct SubtreeWorkspace {
 // `particles` (id and the vector columns) are carried into every node: a
 // kept point keeps its particle's values. Given smoothing lengths go to the
 // leaves (above). The particles are left as they are. Returns the region's own node (the same
-// points the sink received for it), for BuildTopLevels; an empty input
+// points the sink received for it, without child_cluster, which only its
+// block needs), for BuildTopLevels; an empty input
 // returns an empty node and calls no sink. Throws Error::InvalidArgument on
 // input that breaks these rules (naming the first offending particle) or on
 // bad options.
