@@ -67,12 +67,21 @@ int RanksOnThisNode() {
   return size;
 }
 
-// Ends the whole job: this rank's error first, where a user sees it.
-[[noreturn]] void AbortWith(int rank, const std::string& message) {
+// This rank's error, where a user sees it.
+void ReportFailure(int rank, const std::string& message) {
   std::fprintf(stderr, "octocosm: ingest rank %d: %s\n", rank, message.c_str());
   std::fflush(stderr);
+}
+
+[[noreturn]] void EndJob() {
   MPI_Abort(MPI_COMM_WORLD, 1);
   std::abort();  // MPI_Abort does not return
+}
+
+// Ends the whole job: this rank's error first.
+[[noreturn]] void AbortWith(int rank, const std::string& message) {
+  ReportFailure(rank, message);
+  EndJob();
 }
 
 // Every rank's text on rank 0, in rank order.
@@ -234,10 +243,11 @@ std::optional<IngestReport> IngestOnRanks(IngestOptions options) {
     part_json = part.ToJson().dump();
   } catch (const std::exception& e) {
     // MPI_Abort runs no destructors: rank 0 removes the output, and the
-    // parts other ranks may have finished in it, before it ends the job.
-    const std::string message = e.what();
+    // parts other ranks may have finished in it, before it ends the job;
+    // its error goes out first, for a rank still writing there fails next.
+    ReportFailure(rank, e.what());
     assembly.reset();
-    AbortWith(rank, message);
+    EndJob();
   }
 
   const std::vector<std::string> texts = GatherText(part_json, ranks);
