@@ -487,16 +487,39 @@ constexpr double kRefineBoundCodesPerOctave = 256;
 constexpr std::int32_t kRefineBoundLowestBase = -160;  // below the smallest float
 constexpr std::int32_t kRefineBoundHighestBase = 128;
 
+// 2^(j / 256) for j < 256: a code's value is one of them times a power of
+// two, so that coding a value costs no exp2 call.
+const std::array<double, 256>& OctaveSteps() {
+  static const std::array<double, 256> steps = [] {
+    std::array<double, 256> s{};
+    for (int j = 0; j < 256; ++j) s[static_cast<std::size_t>(j)] = std::exp2(j / kRefineBoundCodesPerOctave);
+    return s;
+  }();
+  return steps;
+}
+
 float RefineBoundValue(std::int32_t base, std::uint16_t code) {
   if (code == 0) return 0.0f;
-  return static_cast<float>(std::exp2(base + code / kRefineBoundCodesPerOctave));
+  // 2^k built from its bits (k = base + code / 256 lies in [-160, 384): a
+  // normal double), as ldexp would give it.
+  const std::int64_t k = std::int64_t{base} + (code >> 8);
+  const auto power = std::bit_cast<double>(static_cast<std::uint64_t>(k + 1023) << 52);
+  return static_cast<float>(OctaveSteps()[code & 255] * power);
 }
 
 // The smallest code whose value is at least x (> 0), or 65535: unique, so
 // that a value that is a code's (rounded to a float) comes back as that code.
 std::uint16_t RefineBoundCode(std::int32_t base, float x) {
-  const double estimate = (std::log2(double{x}) - base) * kRefineBoundCodesPerOctave;
-  auto c = static_cast<std::uint16_t>(std::clamp(std::ceil(estimate), 1.0, 65535.0));
+  // x = f 2^e with f in [1, 2): the first step at least f, in the octave of e.
+  int e = 0;
+  const double f = 2 * std::frexp(double{x}, &e);
+  --e;
+  const std::array<double, 256>& steps = OctaveSteps();
+  auto j = static_cast<std::int64_t>(std::lower_bound(steps.begin(), steps.end(), f) - steps.begin());
+  const std::int64_t exact = (std::int64_t{e} - base) * 256 + j;  // j == 256: the next octave's first
+  auto c = static_cast<std::uint16_t>(std::clamp<std::int64_t>(exact, 1, 65535));
+  // The step's value rounds to a float at least x; so may the one before it
+  // (a value a float rounded up to x), which is then the smallest.
   while (c < 65535 && RefineBoundValue(base, c) < x) ++c;
   while (c > 1 && RefineBoundValue(base, c - 1) >= x) --c;
   // Past FLT_MAX (only for values within a code of it), the largest finite code.

@@ -383,10 +383,19 @@ std::array<float, 3> RefineBound(std::span<const std::uint32_t> members,
                                  const Cube& cube, NodeKey key, const std::array<double, 3>& centre, double mass,
                                  double h) {
   double radius = 0, error = mass * KernelVariance(h), cap = mass;
+  // The members' decoded positions (DecodedPosition) relative to the centre.
+  const int bits = key.level() + 1 + 16;
+  const double quantum = std::ldexp(cube.size, -bits);
+  double offset[3];
+  for (int a = 0; a < 3; ++a) offset[a] = cube.origin[a] + 0.5 * quantum - centre[a];
   for (const std::uint32_t m : members) {
     const auto [o, k] = from[m];
-    const std::array<double, 3> x = DecodedPosition(cube, grid[m], key.level() + 1);
-    const double d = std::hypot(x[0] - centre[0], x[1] - centre[1], x[2] - centre[2]);
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double x = static_cast<double>(GridAxisAt(grid[m], a, bits)) * quantum + offset[a];
+      d2 += x * x;
+    }
+    const double d = std::sqrt(d2);
     const std::vector<float>& bound = children[o].refine_bound;
     if (bound.empty()) {
       radius = std::max(radius, d);
