@@ -56,12 +56,11 @@ std::uint64_t BytesPerPoint(ColumnId id, std::uint8_t encoding) {
 std::uint64_t ChildClusterEntryBytes(std::uint8_t encoding) { return encoding == kEncodingChildClusterU32 ? 4 : 2; }
 
 // A column's length in bytes for n points: the child_cluster column's
-// follows its entry count (its parameters' u64), kept below 2^40 entries so
-// that no product overflows.
-std::uint64_t ColumnLength(ColumnId id, std::uint8_t encoding, std::uint64_t n, const std::uint8_t* params) {
+// follows its entry count (below 2^40, so that no product overflows).
+std::uint64_t ColumnLength(ColumnId id, std::uint8_t encoding, std::uint64_t n, std::uint64_t child_cluster_entries) {
   if (id == ColumnId::kChildCluster) {
-    const std::uint64_t entries = GetU64(params);
-    return entries < (std::uint64_t{1} << 40) ? ChildClusterEntryBytes(encoding) * entries : UINT64_MAX;
+    return child_cluster_entries < (std::uint64_t{1} << 40) ? ChildClusterEntryBytes(encoding) * child_cluster_entries
+                                                            : UINT64_MAX;
   }
   return BytesPerPoint(id, encoding) * n;
 }
@@ -774,16 +773,13 @@ void EncodeBlock(const NodePoints& points, NodeKey key, const Cube& cube, Bytes&
       id_encoding = kEncodingIdOffsets;
     }
   }
-  // Cluster indices fit 16 bits while the node has at most 2^16 points.
   if (!points.child_cluster.empty()) CheckChildClusters(points, key);
+  // Cluster indices fit 16 bits while the node has at most 2^16 points.
   const std::uint8_t child_cluster_encoding = n <= 65536 ? kEncodingV1 : kEncodingChildClusterU32;
   const auto encoding_of = [id_encoding, child_cluster_encoding](ColumnId id) {
     return id == ColumnId::kId ? id_encoding : id == ColumnId::kChildCluster ? child_cluster_encoding : kEncodingV1;
   };
-  const auto length_of = [&](ColumnId id) {
-    return id == ColumnId::kChildCluster ? ChildClusterEntryBytes(child_cluster_encoding) * points.child_cluster.size()
-                                         : BytesPerPoint(id, encoding_of(id)) * n;
-  };
+  const auto length_of = [&](ColumnId id) { return ColumnLength(id, encoding_of(id), n, points.child_cluster.size()); };
 
   const std::size_t header_size = kBlockFixedHeaderSize + kBlockDirectoryEntrySize * ids.size() + 8;
   std::size_t block_size = header_size;
@@ -955,7 +951,8 @@ BlockHeader DecodeBlockHeader(std::span<const std::uint8_t> prefix, NodeKey key,
                                                                ", expected " + std::to_string(expected_offset)));
     }
     const std::uint64_t expected_length =
-        ColumnLength(column.id, column.encoding, header.point_count, column.params.data());
+        ColumnLength(column.id, column.encoding, header.point_count,
+                     column.id == ColumnId::kChildCluster ? GetU64(column.params.data()) : 0);
     if (column.length != expected_length) {
       const std::string of = column.id == ColumnId::kChildCluster
                                  ? std::to_string(GetU64(column.params.data())) + " entries"

@@ -349,15 +349,27 @@ ClusterMoments MeasureCluster(std::span<const std::uint32_t> members,
   return moments;
 }
 
-// A point's position as a block of level `level` decodes it (index/block_codec.h):
-// the centre of its quantum, to within rounding.
-std::array<double, 3> DecodedPosition(const Cube& cube, const GridPoint& grid, int level) {
-  const int bits = level + 16;
-  const double quantum = std::ldexp(cube.size, -bits);
-  std::array<double, 3> x{};
-  for (int a = 0; a < 3; ++a) x[a] = cube.origin[a] + (static_cast<double>(GridAxisAt(grid, a, bits)) + 0.5) * quantum;
-  return x;
-}
+// Positions as a block of level `level` decodes them (index/block_codec.h):
+// the centre of their quantum, to within rounding.
+class PositionDecoder {
+ public:
+  PositionDecoder(const Cube& cube, int level) : bits_(level + 16), quantum_(std::ldexp(cube.size, -bits_)) {
+    for (int a = 0; a < 3; ++a) corner_[a] = cube.origin[a] + 0.5 * quantum_;
+  }
+  std::array<double, 3> operator()(const GridPoint& grid) const {
+    std::array<double, 3> x{};
+    for (int a = 0; a < 3; ++a) x[a] = static_cast<double>(GridAxisAt(grid, a, bits_)) * quantum_ + corner_[a];
+    return x;
+  }
+  // The largest difference between two decodings of one position (the
+  // block codec's rounding and this one's), with room to spare.
+  double slack() const { return 2 * quantum_; }
+
+ private:
+  int bits_;
+  double quantum_;
+  double corner_[3];
+};
 
 // `x` rounded up to a float (the largest finite float at most), so that a
 // bound stays a bound once stored.
@@ -383,19 +395,12 @@ std::array<float, 3> RefineBound(std::span<const std::uint32_t> members,
                                  const Cube& cube, NodeKey key, const std::array<double, 3>& centre, double mass,
                                  double h) {
   double radius = 0, error = mass * KernelVariance(h), cap = mass;
-  // The members' decoded positions (DecodedPosition) relative to the centre.
-  const int bits = key.level() + 1 + 16;
-  const double quantum = std::ldexp(cube.size, -bits);
-  double offset[3];
-  for (int a = 0; a < 3; ++a) offset[a] = cube.origin[a] + 0.5 * quantum - centre[a];
+  const PositionDecoder member_position(cube, key.level() + 1);
   for (const std::uint32_t m : members) {
     const auto [o, k] = from[m];
-    double d2 = 0;
-    for (int a = 0; a < 3; ++a) {
-      const double x = static_cast<double>(GridAxisAt(grid[m], a, bits)) * quantum + offset[a];
-      d2 += x * x;
-    }
-    const double d = std::sqrt(d2);
+    const std::array<double, 3> x = member_position(grid[m]);
+    const double d = std::sqrt((x[0] - centre[0]) * (x[0] - centre[0]) + (x[1] - centre[1]) * (x[1] - centre[1]) +
+                               (x[2] - centre[2]) * (x[2] - centre[2]));
     const std::vector<float>& bound = children[o].refine_bound;
     if (bound.empty()) {
       radius = std::max(radius, d);
@@ -405,10 +410,8 @@ std::array<float, 3> RefineBound(std::span<const std::uint32_t> members,
     error = std::max(error, double{bound[3 * k + 1]});
     cap = std::max(cap, double{bound[3 * k + 2]});
   }
-  // Two quanta of the members' level beside the margin: the renderer decodes
-  // positions with its own rounding.
-  const double slack = std::ldexp(cube.size, -(key.level() + 1 + 16)) * 2;
-  return {FloatAtLeast(radius * (1 + kRefineBoundMargin) + slack), FloatAtLeast(error * (1 + kRefineBoundMargin)),
+  // The renderer decodes positions with its own rounding.
+  return {FloatAtLeast(radius * (1 + kRefineBoundMargin) + member_position.slack()), FloatAtLeast(error * (1 + kRefineBoundMargin)),
           FloatAtLeast(cap * (1 + kRefineBoundMargin))};
 }
 
@@ -510,7 +513,7 @@ NodePoints AggregateParent(NodeKey key, const std::array<NodePoints, 8>& childre
     }
     for (const std::uint32_t* m = begin; m != end; ++m) node.child_cluster[*m] = static_cast<std::uint32_t>(c);
     const std::array<float, 3> bound = RefineBound({begin, end}, from, grid, children, cube, key,
-                                                   DecodedPosition(cube, centre_grid, key.level()), mass,
+                                                   PositionDecoder(cube, key.level())(centre_grid), mass,
                                                    StoredSmoothing(node.smoothing[c], edge));
     std::copy(bound.begin(), bound.end(), node.refine_bound.begin() + static_cast<std::ptrdiff_t>(3 * c));
   }
