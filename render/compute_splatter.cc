@@ -27,8 +27,8 @@ GLuint ColumnBinding(ColumnId id) {
     case ColumnId::kPrevDisplacement: return 14;
     case ColumnId::kNextVelocity: return 15;
     case ColumnId::kPrevVelocity: return 16;
-    case ColumnId::kChildCluster:
-    case ColumnId::kRefineBound: return 0;  // never on the GPU (render/gpu_block.h)
+    case ColumnId::kRefineBound: return 19;  // the cluster cut's entries (render/cluster_links.h)
+    case ColumnId::kChildCluster: return 0;  // never on the GPU (render/gpu_block.h)
   }
   return 0;
 }
@@ -42,12 +42,17 @@ std::vector<ColumnId> ColumnsRead(const ComputeColumns& c) {
   if (c.id) ids.push_back(ColumnId::kId);
   if (c.links) ids.insert(ids.end(), {ColumnId::kDisplacement, ColumnId::kPrevDisplacement});
   if (c.hermite) ids.insert(ids.end(), {ColumnId::kNextVelocity, ColumnId::kPrevVelocity});
+  if (c.cut) ids.push_back(ColumnId::kRefineBound);
   return ids;
 }
 
+// The storage buffers a program binds: the selection, the blocks' parameters,
+// the draws, the accumulation and the large blobs, and its columns.
+int StorageBuffersOf(const ComputeColumns& c) { return 5 + static_cast<int>(ColumnsRead(c).size()); }
+
 unsigned KeyOf(const ComputeColumns& c) {
   return (c.velocity ? 1u : 0u) | (c.dispersion ? 2u : 0u) | (c.type ? 4u : 0u) | (c.id ? 8u : 0u) |
-         (c.links ? 16u : 0u) | (c.hermite ? 32u : 0u);
+         (c.links ? 16u : 0u) | (c.hermite ? 32u : 0u) | (c.cut ? 64u : 0u);
 }
 
 constexpr std::size_t kLargeBlobBytes = 48;  // LargeBlob in shaders/splat_comp.glsl
@@ -74,6 +79,7 @@ ComputeSplatter::ComputeSplatter() {
         {kAtomicFloat, shaders::kShaderSplatCommon, shaders::kShaderSplatAccumulate, shaders::kShaderSplatLargeComp}}});
   resolve_ = BuildGlProgram("accumulation resolve", {{GL_COMPUTE_SHADER, {shaders::kShaderAccumulationResolveComp}}});
   absent_column_ = MakeGlBuffer(16, nullptr, 0);
+  glGetIntegerv(GL_MAX_COMPUTE_SHADER_STORAGE_BLOCKS, &max_storage_buffers_);
   GLint64 max_block = 0;
   glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &max_block);
   max_block_bytes_ = static_cast<std::uint64_t>(std::max<GLint64>(max_block, 1 << 24));
@@ -129,11 +135,16 @@ const GlProgram& ComputeSplatter::ProgramFor(const ComputeColumns& columns) {
   if (columns.id) defines += "#define HAS_ID 1\n";
   if (columns.links) defines += "#define HAS_LINKS 1\n";
   if (columns.hermite) defines += "#define HAS_HERMITE 1\n";
+  if (columns.cut) defines += "#define HAS_CUT 1\n";
   GlProgram program = BuildGlProgram(
       "compute splat", {{GL_COMPUTE_SHADER,
                          {defines.c_str(), shaders::kShaderSplatCommon, shaders::kShaderSplatPoint, shaders::kShaderSplatAccumulate,
                           shaders::kShaderSplatComp}}});
   return programs_.emplace(key, std::move(program)).first->second;
+}
+
+bool ComputeSplatter::CanSplat(const ComputeColumns& columns) const {
+  return StorageBuffersOf(columns) <= max_storage_buffers_;
 }
 
 void ComputeSplatter::Splat(const GpuBlockArena& arena, std::uint32_t pool, std::uint32_t first_draw,

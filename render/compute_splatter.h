@@ -35,6 +35,7 @@ struct ComputeColumns {
   bool id = false;          // highlighting the points of selected IDs
   bool links = false;       // interpolation: displacements
   bool hermite = false;     // Hermite interpolation: the neighbours' velocities
+  bool cut = false;         // the cluster cut's entries (render/cluster_links.h)
 };
 
 class ComputeSplatter {
@@ -62,6 +63,11 @@ class ComputeSplatter {
   std::uint32_t max_span_points() const { return max_span_points_; }
   std::uint32_t base_alignment() const { return base_alignment_; }
 
+  // Whether a program reading these columns binds no more storage buffers
+  // than a compute shader may (16 on some GPUs: with the cluster cut, every
+  // optional column at once would need 17). Where not, the raster path draws
+  // those points; both add into the same image.
+  bool CanSplat(const ComputeColumns& columns) const;
   // Adds the points of draws [first_draw, first_draw + draw_count) of the
   // bound Draws buffer, all of `pool`, whose block.y/z/w give each draw's
   // first point in the pool, its count and the points before it in this
@@ -93,6 +99,7 @@ class ComputeSplatter {
   float compute_radius_ = 4;
   std::uint64_t max_block_bytes_ = 0;
   std::uint32_t max_span_points_ = 0;
+  GLint max_storage_buffers_ = 16;
   std::uint32_t base_alignment_ = 256;
   bool pending_ = false;
 };

@@ -110,4 +110,39 @@ DrawPlan PlanDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
   return plan;
 }
 
+DrawPlan PlanClusterDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
+                          const std::function<bool(std::int32_t)>& loaded,
+                          const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets,
+                          const std::function<std::uint8_t(std::int32_t)>& octants_in_view) {
+  DrawPlan plan;
+  // By node: 1 reached, 2 reached and drawn. Parents come before their
+  // children in `selected`.
+  std::vector<std::uint8_t> state(hierarchy.nodes().size(), 0);
+  const auto drawn = [&state](std::int32_t n) { return state[static_cast<std::size_t>(n)] == 2; };
+  for (std::int32_t n : frontier.selected) {
+    const std::int32_t parent = hierarchy.node(n).parent;
+    state[static_cast<std::size_t>(n)] = loaded(n) && (parent < 0 || drawn(parent)) ? 2 : 1;
+  }
+  for (std::int32_t n : frontier.selected) {
+    if (!drawn(n)) continue;
+    const std::array<std::uint32_t, 9> offsets = octant_offsets(n);
+    const std::uint8_t octants = octants_in_view ? octants_in_view(n) : 0xFF;
+    for (int o = 0; o < 8; ++o) {
+      if (!((octants >> o) & 1) || offsets[o + 1] <= offsets[o]) continue;
+      const std::int32_t child = hierarchy.node(n).children[static_cast<std::size_t>(o)];
+      const CutRole cut = child >= 0 && drawn(child) ? CutRole::kCut : CutRole::kCutFinal;
+      const std::uint32_t first = offsets[o], count = offsets[o + 1] - offsets[o];
+      DrawRange* last = plan.ranges.empty() ? nullptr : &plan.ranges.back();
+      if (last != nullptr && last->node == n && last->cut == cut && last->first + last->count == first) {
+        last->count += count;
+      } else {
+        plan.ranges.push_back({n, first, count, cut});
+      }
+      plan.points += count;
+      plan.stand_ins += cut == CutRole::kCutFinal && child >= 0 && state[static_cast<std::size_t>(child)] == 1 ? 1 : 0;
+    }
+  }
+  return plan;
+}
+
 }  // namespace octocosm

@@ -26,6 +26,7 @@
 
 #include "index/node_hierarchy.h"
 #include "query/lod_frontier.h"
+#include "render/cluster_links.h"
 
 namespace octocosm {
 
@@ -33,6 +34,7 @@ struct DrawRange {
   std::int32_t node = -1;   // hierarchy index
   std::uint32_t first = 0;  // first point of the node's block
   std::uint32_t count = 0;  // points to draw
+  CutRole cut = CutRole::kNone;
 };
 
 struct DrawPlan {
@@ -49,5 +51,17 @@ DrawPlan PlanDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
                    const std::function<bool(std::int32_t)>& loaded,
                    const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets,
                    const std::function<std::uint8_t(std::int32_t)>& octants_in_view = {});
+
+// The draws of a cluster frontier (query/cluster_frontier.h), whose nodes
+// are all drawn, each taking its part in the cut: every loaded node
+// reached, in the octants in view, its points drawn with CutRole::kCut
+// where the child of the octant is drawn too and kCutFinal where it is not
+// (not reached, not loaded, or absent). A node reached whose parent is not
+// drawn is not drawn either (the frontier reaches none such: a child is
+// reached through its loaded parent).
+DrawPlan PlanClusterDraws(const NodeHierarchy& hierarchy, const LodFrontier& frontier,
+                          const std::function<bool(std::int32_t)>& loaded,
+                          const std::function<std::array<std::uint32_t, 9>(std::int32_t)>& octant_offsets,
+                          const std::function<std::uint8_t(std::int32_t)>& octants_in_view = {});
 
 }  // namespace octocosm

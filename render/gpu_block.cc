@@ -63,10 +63,14 @@ std::array<double, 8> OctantReach(std::span<const std::uint8_t> bytes, const Blo
   return reach;
 }
 
+// One function for a node's and its parent's: the cut compares a cluster's
+// error in its own draw and in its children's, which must agree to the bit.
+float NodeQuantum(const NodeCube& node) { return static_cast<float>(node.size / 65536.0); }
+
 }  // namespace
 
 GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> bytes, const BlockHeader& header,
-                          const NodeCube& node, const std::string& where) {
+                          const NodeCube& node, const std::string& where, const ClusterCutUpload* cut) {
   GpuBlock block;
   block.point_count_ = header.point_count;
   block.octant_offsets_ = header.octant_offsets;
@@ -76,7 +80,7 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
   for (auto& row : u.columns) {
     for (std::int32_t& c : row) c = -1;
   }
-  u.node[0] = static_cast<float>(node.size / 65536.0);
+  u.node[0] = NodeQuantum(node);
   std::vector<GpuColumnBytes> columns;
   for (const BlockColumn& c : header.columns) {
     if (kClusterLinkColumns & ColumnBit(c.id)) continue;  // not drawn: the level of detail's, not a point's
@@ -140,6 +144,27 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
       case ColumnId::kRefineBound: break;  // skipped above
     }
   }
+  block.links_ = ClusterLinks::FromBlock(bytes, header, node, where);
+  std::vector<ClusterCutEntry> cut_entries;
+  if (cut != nullptr) {
+    cut_entries.resize(header.point_count);
+    SetOwnBounds(bytes, header, cut_entries);
+    if (cut->parent != nullptr) cut->parent->GatherParents(cut->first_entry, cut_entries, where);
+    block.has_cut_ = true;
+    block.has_parent_ = cut->parent != nullptr;
+    block.parent_node_ = cut->parent != nullptr ? cut->parent_node : node;
+    if (block.links_) {
+      for (int k = 0; k < 3; ++k) u.refine[0][k] = static_cast<float>(block.links_->bases()[static_cast<std::size_t>(k)]);
+    }
+    u.refine[0][3] = NodeQuantum(node);
+    if (cut->parent != nullptr) {
+      for (int k = 0; k < 3; ++k) u.refine[1][k] = static_cast<float>(cut->parent->bases()[static_cast<std::size_t>(k)]);
+    }
+    u.refine[1][3] = NodeQuantum(block.parent_node_);
+    columns.push_back({ColumnId::kRefineBound, kEncodingV1,
+                       std::span(reinterpret_cast<const std::uint8_t*>(cut_entries.data()),
+                                 cut_entries.size() * sizeof(ClusterCutEntry))});
+  }
   const ColumnSet required = ColumnBit(ColumnId::kPosition) | ColumnBit(ColumnId::kWeight) |
                              ColumnBit(ColumnId::kSmoothing) | ColumnBit(ColumnId::kType);
   if ((block.columns_ & required) != required) {
@@ -166,7 +191,11 @@ GpuBlock::GpuBlock(GpuBlock&& other) noexcept
       octant_reach_(other.octant_reach_),
       node_(other.node_),
       columns_(other.columns_),
-      gpu_bytes_(other.gpu_bytes_) {}
+      gpu_bytes_(other.gpu_bytes_),
+      links_(std::move(other.links_)),
+      has_cut_(other.has_cut_),
+      has_parent_(other.has_parent_),
+      parent_node_(other.parent_node_) {}
 
 GpuBlock& GpuBlock::operator=(GpuBlock&& other) noexcept {
   if (this != &other) {
@@ -179,6 +208,10 @@ GpuBlock& GpuBlock::operator=(GpuBlock&& other) noexcept {
     node_ = other.node_;
     columns_ = other.columns_;
     gpu_bytes_ = other.gpu_bytes_;
+    links_ = std::move(other.links_);
+    has_cut_ = other.has_cut_;
+    has_parent_ = other.has_parent_;
+    parent_node_ = other.parent_node_;
   }
   return *this;
 }

@@ -26,6 +26,8 @@ enum Attribute : GLuint {
   kShapeDiagonalAttribute,
   kShapeOffDiagonalAttribute,
   kDrawIndexAttribute,
+  kOwnBoundAttribute,
+  kParentClusterAttribute,
 };
 constexpr GLuint kDrawIndexBinding = 15;
 
@@ -65,8 +67,10 @@ ColumnFormat FormatOf(ColumnId id, bool id_offsets) {
     case ColumnId::kShape:
       return {6, {{kShapeDiagonalAttribute, 3, GL_UNSIGNED_BYTE, false, 0},
                   {kShapeOffDiagonalAttribute, 3, GL_UNSIGNED_BYTE, false, 3}}};
-    case ColumnId::kChildCluster:
-    case ColumnId::kRefineBound: return {};  // never on the GPU (render/gpu_block.h)
+    case ColumnId::kRefineBound:  // the cut's entries (render/cluster_links.h), not the stored column
+      return {20, {{kOwnBoundAttribute, 3, GL_UNSIGNED_SHORT, false, 0},
+                   {kParentClusterAttribute, 3, GL_UNSIGNED_INT, true, 8}}};
+    case ColumnId::kChildCluster: return {};  // never on the GPU (render/gpu_block.h)
   }
   return {};
 }

@@ -40,8 +40,11 @@ struct GpuBlockParameters {
   float ranges[5][2][4];  // velocity, displacement, next_velocity, prev_displacement, prev_velocity: min, step
   std::uint32_t id_base[4];  // the id column's base (encoding 2), low word first; 0 for u64 IDs
   float dispersion[4];       // the velocity dispersion column's minimum and step
+  // The cluster cut (render/cluster_links.h): the bases of the block's own
+  // refine_bound codes and its node's quantum; its parent's bases and quantum.
+  float refine[2][4];
 };
-static_assert(sizeof(GpuBlockParameters) == 256);
+static_assert(sizeof(GpuBlockParameters) == 288);
 
 // One column's bytes of a block, as stored.
 struct GpuColumnBytes {

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "base/error.h"
+#include "query/cluster_frontier.h"
 
 namespace octocosm {
 namespace {
@@ -109,6 +110,7 @@ ColumnSet SceneRenderer::ColumnsFor(Interpolation interpolation, bool complete) 
   if (interpolation == Interpolation::kHermite) {
     c |= ColumnBit(ColumnId::kVelocity) | ColumnBit(ColumnId::kNextVelocity) | ColumnBit(ColumnId::kPrevVelocity);
   }
+  if (cluster_cut()) c |= kClusterLinkColumns;
   return c & (dataset_.columns() | kCoreColumns);
 }
 
@@ -197,7 +199,10 @@ const SceneRenderer::Resident* SceneRenderer::Upload(NodeRef ref, const Bytes& b
     throw Error::Corruption(where, "a cached block of " + std::to_string(bytes.size()) + " bytes says it has " +
                                        std::to_string(header.block_size));
   }
-  GpuBlock block = GpuBlock::Upload(splat_.blocks(), bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where);
+  ClusterCutUpload cut;
+  const bool with_cut = cluster_cut() && ParentOf(ref, cut);
+  GpuBlock block = GpuBlock::Upload(splat_.blocks(), bytes, header, dataset_.cube(id.epoch).NodeCubeOf(key), where,
+                                    with_cut ? &cut : nullptr);
   auto resident = std::make_unique<Resident>(Resident{std::move(block), frame_});
   EpochResidents& epoch = gpu_[ref.epoch];
   if (epoch.by_node.empty()) epoch.by_node.resize(hierarchy(ref.epoch).nodes().size());
@@ -211,6 +216,23 @@ const SceneRenderer::Resident* SceneRenderer::Upload(NodeRef ref, const Bytes& b
   gpu_bytes_ += resident->block.gpu_bytes();
   slot = std::move(resident);
   return slot.get();
+}
+
+bool SceneRenderer::ParentOf(NodeRef ref, ClusterCutUpload& cut) {
+  const NodeHierarchy& h = hierarchy(ref.epoch);
+  const std::int32_t parent = h.node(ref.node).parent;
+  if (parent < 0) return true;  // the root
+  const Resident* resident = FindResident({ref.epoch, parent});
+  if (resident == nullptr || resident->block.links() == nullptr) return false;
+  cut.parent = resident->block.links();
+  cut.parent_node = resident->block.node();
+  // The parent's links list its children's points octant by octant.
+  cut.first_entry = 0;
+  for (std::int32_t sibling : h.node(parent).children) {
+    if (sibling == ref.node) break;
+    if (sibling >= 0) cut.first_entry += h.node(sibling).entry.point_count;
+  }
+  return true;
 }
 
 void SceneRenderer::EvictGpuBlocks() {
@@ -255,19 +277,33 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   auto clock = std::chrono::steady_clock::now();
   std::vector<Copy> copies = PlanCopies(time, stats);
   if (!complete) StartLoadingNear(copies);
-  const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), options_.lod.pixel_threshold};
-  SelectFrontiers(error_view, copies, stats);
+  stats.cluster_cut = cluster_cut();
+  SelectFrontiers(view, copies, stats);
   UseColumns(ColumnsFor(stats.interpolation, complete));
-  const std::vector<NodeRef> needed = RequestBlocks(error_view, copies, complete, look_ahead);
+  std::vector<NodeRef> needed = RequestBlocks(view, copies, complete, look_ahead);
   stats.select_ms = Milliseconds(clock);
 
   clock = std::chrono::steady_clock::now();
   UploadArrived(needed, complete, stats);
+  // The cluster frontier reaches a level further through each level of
+  // blocks that arrives: select again until nothing new is reached (a
+  // streamed frame: nothing new has arrived).
+  double reselect_ms = 0;
+  while (stats.cluster_cut) {
+    const std::uint64_t reached = stats.nodes_selected, uploaded = stats.blocks_uploaded;
+    const auto select_clock = std::chrono::steady_clock::now();
+    SelectFrontiers(view, copies, stats);
+    needed = RequestBlocks(view, copies, complete, look_ahead);
+    reselect_ms += Milliseconds(select_clock);
+    UploadArrived(needed, complete, stats);
+    if (stats.nodes_selected == reached && stats.blocks_uploaded == uploaded) break;
+  }
   const std::vector<const SelectionOverlay*> overlays = ReadyOverlays(copies, complete, stats);
-  stats.upload_ms = Milliseconds(clock);
+  stats.upload_ms = Milliseconds(clock) - reselect_ms;
+  stats.select_ms += reselect_ms;
 
   clock = std::chrono::steady_clock::now();
-  DrawCopies(view, copies, overlays, stats);
+  DrawCopies(view, copies, overlays, complete, stats);
   stats.draw_ms = Milliseconds(clock);
 
   EvictGpuBlocks();
@@ -278,7 +314,34 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   return stats;
 }
 
-void SceneRenderer::SelectFrontiers(const ScreenErrorView& error_view, std::vector<Copy>& copies, FrameStats& stats) {
+bool SceneRenderer::cluster_cut() const {
+  return options_.cluster_error > 0 && (dataset_.cluster_columns() & kClusterLinkColumns) == kClusterLinkColumns;
+}
+
+LodFrontier SceneRenderer::SelectFrontier(const RenderView& view, std::uint32_t epoch, const LodOptions& lod) {
+  if (!cluster_cut()) {
+    const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), lod.pixel_threshold};
+    return SelectLodFrontier(hierarchy(epoch), dataset_.cube(epoch), error_view, lod);
+  }
+  ClusterLodOptions cut;
+  const EpochSummary& summary = dataset_.summary(epoch);
+  const double mean_mass = summary.points > 0 ? summary.mass.value_or(0) / static_cast<double>(summary.points) : 0;
+  cut.threshold = options_.cluster_error * mean_mass;
+  cut.focal_pixels = view.focal_pixels();
+  cut.point_budget = lod.point_budget;
+  cut.cull_margin = lod.cull_margin;
+  return SelectClusterFrontier(hierarchy(epoch), dataset_.cube(epoch), view.camera(), cut,
+                               [&](std::int32_t node) -> const OctantRefineBounds* {
+                                 const Resident* r = FindResident({epoch, node});
+                                 if (r == nullptr || !r->block.has_cut() || r->block.links() == nullptr) return nullptr;
+                                 return &r->block.links()->octant_bounds();
+                               });
+}
+
+void SceneRenderer::SelectFrontiers(const RenderView& view, std::vector<Copy>& copies, FrameStats& stats) {
+  stats.nodes_selected = 0;
+  stats.points_selected = 0;
+  stats.budget_reached = false;
   for (Copy& copy : copies) {
     LodOptions lod = options_.lod;
     if (lod.point_budget > 0) {
@@ -289,7 +352,7 @@ void SceneRenderer::SelectFrontiers(const ScreenErrorView& error_view, std::vect
       const std::optional<EpochLink>& link = dataset_.link_to_next(from);
       lod.cull_margin = link ? link->max_excursion : 0;
     }
-    copy.frontier = SelectLodFrontier(hierarchy(copy.epoch), dataset_.cube(copy.epoch), error_view, lod);
+    copy.frontier = SelectFrontier(view, copy.epoch, lod);
     stats.nodes_selected += copy.frontier.selected.size();
     stats.points_selected += copy.frontier.points;
     stats.budget_reached |= copy.frontier.budget_reached;
@@ -297,7 +360,7 @@ void SceneRenderer::SelectFrontiers(const ScreenErrorView& error_view, std::vect
   stats.epochs_drawn = static_cast<std::uint32_t>(copies.size());
 }
 
-std::vector<SceneRenderer::NodeRef> SceneRenderer::RequestBlocks(const ScreenErrorView& error_view,
+std::vector<SceneRenderer::NodeRef> SceneRenderer::RequestBlocks(const RenderView& view,
                                                                   const std::vector<Copy>& copies, bool complete,
                                                                   bool look_ahead) {
   // Blocks wanted, most important first: coarse before fine, the two copies
@@ -324,7 +387,7 @@ std::vector<SceneRenderer::NodeRef> SceneRenderer::RequestBlocks(const ScreenErr
     const NodeHierarchy* next_hierarchy = ahead < dataset_.epoch_count() ? HierarchyIfLoaded(ahead) : nullptr;
     if (next_hierarchy != nullptr) {
       overlay_epochs.push_back(ahead);
-      const LodFrontier next = SelectLodFrontier(*next_hierarchy, dataset_.cube(ahead), error_view, options_.lod);
+      const LodFrontier next = SelectFrontier(view, ahead, options_.lod);
       for (std::int32_t node : next.load_order) {
         if (FindResident({ahead, node}) == nullptr) wanted.push_back(IdOf({ahead, node}));
       }
@@ -397,12 +460,20 @@ std::vector<const SelectionOverlay*> SceneRenderer::ReadyOverlays(const std::vec
 constexpr std::size_t kDrawLookahead = 8;
 
 void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& copies,
-                               const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats) {
+                               const std::vector<const SelectionOverlay*>& overlays, bool complete, FrameStats& stats) {
   FrameSettings settings;
   settings.color = options_.color;
   settings.path = options_.splat_path;
   settings.compute_radius = options_.compute_radius;
   settings.mass_unit = mass_unit_;
+  const bool cut = stats.cluster_cut;
+  if (cut) {
+    // Every copy's epoch has its own mean mass; the threshold is the first's
+    // (the epochs of one interval share their particles).
+    const EpochSummary& summary = dataset_.summary(copies[0].epoch);
+    settings.cut_threshold = summary.points > 0 ? options_.cluster_error * summary.mass.value_or(0) / static_cast<double>(summary.points) : 0;
+    settings.count_cut = complete;
+  }
   settings.interpolation = stats.interpolation;
   settings.t = copies.size() == 2 ? copies[1].weight : 0;
   if (stats.interpolation == Interpolation::kHermite) settings.hermite_scale = dataset_.link_to_next(copies[0].epoch)->velocity_scale;
@@ -417,13 +488,17 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
     const Copy& c = copies[copy];
     const auto resident = [&](std::int32_t node) -> const Resident* { return FindResident({c.epoch, node}); };
     for (std::int32_t node : c.frontier.selected) stats.blocks_missing += resident(node) == nullptr;
-    const DrawPlan plan = PlanDraws(
-        hierarchy(c.epoch), c.frontier, [&](std::int32_t node) { return resident(node) != nullptr; },
-        [&](std::int32_t node) { return resident(node)->block.octant_offsets(); },
-        [&](std::int32_t node) {
-          const GpuBlock& block = resident(node)->block;
-          return c.frontier.culler.OctantsInView(block.node(), block.octant_reach());
-        });
+    const auto loaded = [&](std::int32_t node) {
+      const Resident* r = resident(node);
+      return r != nullptr && (!cut || r->block.has_cut());
+    };
+    const auto offsets = [&](std::int32_t node) { return resident(node)->block.octant_offsets(); };
+    const auto in_view = [&](std::int32_t node) {
+      const GpuBlock& block = resident(node)->block;
+      return c.frontier.culler.OctantsInView(block.node(), block.octant_reach());
+    };
+    const DrawPlan plan = cut ? PlanClusterDraws(hierarchy(c.epoch), c.frontier, loaded, offsets, in_view)
+                              : PlanDraws(hierarchy(c.epoch), c.frontier, loaded, offsets, in_view);
     splat_.SetCopy(c.direction, c.weight);
     for (std::size_t i = 0; i < plan.ranges.size(); ++i) {
       if (i + kDrawLookahead < plan.ranges.size()) {
@@ -433,7 +508,7 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
         __builtin_prefetch(ahead + 64);
       }
       const DrawRange& range = plan.ranges[i];
-      splat_.Draw(resident(range.node)->block, range.first, range.count);
+      splat_.Draw(resident(range.node)->block, range.first, range.count, range.cut);
     }
     stats.points_drawn += plan.points;
     stats.draws += plan.ranges.size();
@@ -446,6 +521,7 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
       stats.draws += overlays[copy]->blocks().size();
     }
   }
+  if (settings.count_cut) stats.points_drawn = splat_.CutPointsCounted();
 }
 
 ReadCounters SceneRenderer::disk_reads() const {

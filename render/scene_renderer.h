@@ -58,6 +58,12 @@ namespace octocosm {
 
 struct SceneOptions {
   LodOptions lod;                       // pixel threshold, point budget
+  // > 0, where the store links its clusters to their children's points
+  // (Dataset::cluster_columns): the level of detail refines cluster by
+  // cluster (query/cluster_frontier.h) with the threshold tau = cluster_error
+  // x the epoch's mean particle mass, instead of node by node by the pixel
+  // threshold; the point budget still holds. 0: node by node.
+  double cluster_error = 0;
   ColorMode color = ColorMode::kDensity;
   Interpolation interpolation = Interpolation::kHermite;  // the best the store supports, at most this
   // Clusters drawn with their shapes (index/cluster_shape.h), where the store
@@ -83,7 +89,11 @@ struct FrameStats {
   std::uint32_t epochs_drawn = 0;
   std::uint64_t nodes_selected = 0;
   std::uint64_t points_selected = 0;  // in the selected nodes
-  std::uint64_t points_drawn = 0;     // what was drawn (with stand-ins, while loading)
+  // What was drawn (with stand-ins, while loading). Refining cluster by
+  // cluster: the points the cut took, counted on the GPU, in a complete
+  // frame; those of the draws (an upper bound) in a streamed one.
+  std::uint64_t points_drawn = 0;
+  bool cluster_cut = false;           // the frame refined cluster by cluster
   std::uint64_t draws = 0;
   std::uint64_t stand_ins = 0;        // parent octants drawn for children not loaded yet
   std::uint64_t blocks_missing = 0;   // selected blocks not on the GPU yet
@@ -122,6 +132,9 @@ class SceneRenderer {
   std::size_t selection_size() const { return selection_ ? selection_->size() : 0; }
   void SetColorMode(ColorMode color);
   void SetLod(const LodOptions& lod) { options_.lod = lod; }
+  void SetClusterError(double cluster_error) { options_.cluster_error = cluster_error; }
+  // Whether frames refine cluster by cluster: asked for, and the store can.
+  bool cluster_cut() const;
   void SetSplatPath(SplatPath path) { options_.splat_path = path; }
   const SceneOptions& options() const { return options_; }
 
@@ -164,20 +177,24 @@ class SceneRenderer {
   FrameStats Render(const RenderView& view, double time, bool complete, bool look_ahead);
   // The steps of Render, in order.
   std::vector<Copy> PlanCopies(double time, FrameStats& stats) const;
-  void SelectFrontiers(const ScreenErrorView& error_view, std::vector<Copy>& copies, FrameStats& stats);
+  void SelectFrontiers(const RenderView& view, std::vector<Copy>& copies, FrameStats& stats);
+  LodFrontier SelectFrontier(const RenderView& view, std::uint32_t epoch, const LodOptions& lod);
   // Submits the blocks wanted to the prefetcher and starts the selection
   // overlays; returns the blocks this frame draws.
-  std::vector<NodeRef> RequestBlocks(const ScreenErrorView& error_view, const std::vector<Copy>& copies, bool complete,
+  std::vector<NodeRef> RequestBlocks(const RenderView& view, const std::vector<Copy>& copies, bool complete,
                                      bool look_ahead);
   void UploadArrived(const std::vector<NodeRef>& needed, bool complete, FrameStats& stats);
   std::vector<const SelectionOverlay*> ReadyOverlays(const std::vector<Copy>& copies, bool complete, FrameStats& stats);
   void DrawCopies(const RenderView& view, const std::vector<Copy>& copies,
-                  const std::vector<const SelectionOverlay*>& overlays, FrameStats& stats);
+                  const std::vector<const SelectionOverlay*>& overlays, bool complete, FrameStats& stats);
   BlockId IdOf(NodeRef ref);
   Resident* FindResident(NodeRef ref);
   ColumnSet ColumnsFor(Interpolation interpolation, bool complete) const;
   void UseColumns(ColumnSet columns);
   const Resident* Upload(NodeRef ref, const Bytes& bytes);
+  // What a block drawn by the cluster cut takes from its parent; false when
+  // the parent is not on the GPU with its links.
+  bool ParentOf(NodeRef ref, ClusterCutUpload& cut);
   void EvictGpuBlocks();
   // The selection overlay of `epoch` in the current columns, started if
   // need be; null when there is no selection to draw that way.

@@ -47,6 +47,7 @@ SplatRenderer::SplatRenderer() {
   glCreateVertexArrays(1, &vao);
   empty_vao_ = GlVertexArray(vao);
   frame_uniforms_ = MakeGlBuffer(sizeof(FrameUniforms), nullptr, GL_DYNAMIC_STORAGE_BIT);
+  cut_counter_ = MakeGlBuffer(4, nullptr, GL_DYNAMIC_STORAGE_BIT);
   statistics_work_ = MakeGlBuffer(kStatisticsWords * 4, nullptr, GL_DYNAMIC_STORAGE_BIT);
   constexpr GLbitfield kMapped = GL_MAP_READ_BIT | GL_MAP_PERSISTENT_BIT | GL_MAP_COHERENT_BIT;
   for (PendingStatistics& pending : measures_) {
@@ -135,6 +136,9 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   if (!(settings.compute_radius >= 0) || !std::isfinite(settings.compute_radius)) {
     throw Error::InvalidArgument("the compute path's blob radius must be finite and >= 0");
   }
+  if (!(settings.cut_threshold >= 0) || !std::isfinite(settings.cut_threshold)) {
+    throw Error::InvalidArgument("the cluster cut's threshold must be finite and >= 0");
+  }
   if (!(settings.box_size >= 0) || !std::isfinite(settings.box_size) ||
       !std::all_of(settings.box_origin.begin(), settings.box_origin.end(), [](double x) { return std::isfinite(x); })) {
     throw Error::InvalidArgument("the periodic box must be finite, of size >= 0");
@@ -183,6 +187,13 @@ void SplatRenderer::BeginFrame(const RenderView& view, const FrameSettings& sett
   uniforms_.time[0] = static_cast<float>(settings.t);
   uniforms_.time[2] = static_cast<float>(settings.hermite_scale);
   uniforms_.wrap[0] = settings.box_size > 0 && settings.interpolation != Interpolation::kNone ? 1 : 0;
+  const double half_pixel = 0.5 / view.focal_pixels();
+  uniforms_.cut[0] = static_cast<float>(settings.cut_threshold);
+  uniforms_.cut[1] = static_cast<float>(half_pixel * half_pixel);
+  uniforms_.cut[2] = settings.count_cut ? 1.0f : 0.0f;
+  const std::uint32_t no_points = 0;
+  glClearNamedBufferSubData(cut_counter_.get(), GL_R32UI, 0, 4, GL_RED_INTEGER, GL_UNSIGNED_INT, &no_points);
+  glBindBufferBase(GL_ATOMIC_COUNTER_BUFFER, 0, cut_counter_.get());
   highlight_only_ = false;
   SetSelection(nullptr);
   SetCopy(1, 1);
@@ -222,7 +233,7 @@ void SplatRenderer::SetHighlightOnly(bool on) {
   UploadFrameUniforms();
 }
 
-void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count) {
+void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count, CutRole cut) {
   if (!in_frame_) throw Error::InvalidArgument("SplatRenderer::Draw outside a frame (call BeginFrame first)");
   if (count == 0) return;
   if (first > block.point_count() || count > block.point_count() - first) {
@@ -242,6 +253,13 @@ void SplatRenderer::Draw(const GpuBlock& block, std::uint32_t first, std::uint32
     SetDifference(record.origin_above, node.origin, size, camera_position_);
   }
   record.block[0] = placement.slot;
+  if (cut != CutRole::kNone) {
+    if (!block.has_cut()) throw Error::InvalidArgument("SplatRenderer::Draw: a cut role for a block uploaded without the cut's entries");
+    constexpr std::uint32_t kApplies = 1, kFinal = 2, kHasParent = 4;  // kCut* of shaders/splat_point.glsl
+    record.cut[0] = kApplies | (cut == CutRole::kCutFinal ? kFinal : 0) | (block.has_parent() ? kHasParent : 0);
+    // As the parent's own draw sets its origin: the same doubles, the same float.
+    SetDifference(record.parent_origin, block.parent_node().origin, 0, camera_position_);
+  }
   if (queued_.size() <= placement.pool) queued_.resize(placement.pool + 1);
   queued_[placement.pool].push_back({record, placement.first + first, count});
 }
@@ -263,6 +281,14 @@ void SplatRenderer::Flush() {
     draw_state_set_ = true;
   }
   if (compute_frame_) {
+    // Pools whose columns need more storage buffers than a compute shader
+    // may bind are drawn by the raster path, into the same image.
+    std::vector<std::vector<QueuedDraw>> compute_queued(queued_.size());
+    for (std::uint32_t pool = 0; pool < queued_.size(); ++pool) {
+      if (!queued_[pool].empty() && compute_->CanSplat(ComputeColumnsOf(pool))) std::swap(compute_queued[pool], queued_[pool]);
+    }
+    if (std::any_of(queued_.begin(), queued_.end(), [](const auto& pool) { return !pool.empty(); })) FlushRaster();
+    std::swap(queued_, compute_queued);
     FlushCompute();
   } else {
     FlushRaster();
@@ -351,6 +377,13 @@ void SplatRenderer::FlushCompute() {
     queued.clear();
   }
   UploadRecords();
+  for (const Dispatch& d : dispatches) {
+    compute_->Splat(arena_, d.pool, d.first_draw, d.draw_count, d.points, d.base, ComputeColumnsOf(d.pool));
+  }
+  draw_state_set_ = false;  // the compute path bound its own programs
+}
+
+ComputeColumns SplatRenderer::ComputeColumnsOf(std::uint32_t pool) const {
   const int mode = uniforms_.modes[0], interpolation = uniforms_.modes[1];
   ComputeColumns columns;
   columns.velocity = (mode >= 1 && mode <= 3) || interpolation == 2;
@@ -359,10 +392,19 @@ void SplatRenderer::FlushCompute() {
   columns.id = uniforms_.modes[2] == 1;
   columns.links = interpolation != 0;
   columns.hermite = interpolation == 2;
-  for (const Dispatch& d : dispatches) {
-    compute_->Splat(arena_, d.pool, d.first_draw, d.draw_count, d.points, d.base, columns);
-  }
-  draw_state_set_ = false;  // the compute path bound its own programs
+  const std::vector<GpuBlockArena::ColumnBuffer> buffers = arena_.column_buffers(pool);
+  columns.cut = std::any_of(buffers.begin(), buffers.end(),
+                            [](const GpuBlockArena::ColumnBuffer& b) { return b.id == ColumnId::kRefineBound; });
+  return columns;
+}
+
+std::uint64_t SplatRenderer::CutPointsCounted() {
+  Flush();
+  glMemoryBarrier(GL_ATOMIC_COUNTER_BARRIER_BIT | GL_BUFFER_UPDATE_BARRIER_BIT);
+  std::uint32_t count = 0;
+  glGetNamedBufferSubData(cut_counter_.get(), 0, 4, &count);
+  CheckGlError("reading the cluster cut's count");
+  return count;
 }
 
 void SplatRenderer::Resolve() {

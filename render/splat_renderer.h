@@ -63,6 +63,11 @@ struct FrameSettings {
   // particle crossing a face appears at the opposite face, inside the box.
   std::array<double, 3> box_origin{};
   double box_size = 0;  // 0: not periodic
+  // The cluster cut (render/cluster_links.h): the threshold tau (mass units,
+  // >= 0) of the draws that take part in it, and whether to count the points
+  // it takes (CutPointsCounted).
+  double cut_threshold = 0;
+  bool count_cut = false;
 };
 
 class SplatRenderer {
@@ -104,7 +109,13 @@ class SplatRenderer {
   // Draws points [first, first + count) of `block`: queued, and issued with
   // the other draws queued since, as one multi-draw per pool, before the next
   // change of settings, measure, tone map or read-back.
-  void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count);
+  // Throws Error::InvalidArgument for a cut role on a block without the
+  // cut's entries.
+  void Draw(const GpuBlock& block, std::uint32_t first, std::uint32_t count, CutRole cut = CutRole::kNone);
+  // The points the cluster cut took in this frame's draws so far (with
+  // FrameSettings::count_cut; highlight-only draws not counted). Waits for
+  // the GPU.
+  std::uint64_t CutPointsCounted();
 
   // Starts measuring the frame so far (ImageStatistics: two compute passes
   // into an 8 KiB buffer, copied where the CPU reads it) without waiting for
@@ -141,6 +152,8 @@ class SplatRenderer {
   void Flush();
   void FlushRaster();
   void FlushCompute();
+  // The columns the compute shader reads for the draws of `pool` this frame.
+  ComputeColumns ComputeColumnsOf(std::uint32_t pool) const;
   // Adds what the compute path accumulated into the accumulation texture.
   void Resolve();
   void ToneMap(const ToneMapParameters& parameters, int x, int y);
@@ -172,6 +185,7 @@ class SplatRenderer {
   std::optional<ImageStatistics> latest_statistics_;
   GpuStageTimer timer_;
   GlBuffer no_selection_;
+  GlBuffer cut_counter_;  // atomic counter binding 0: the points the cut took
   // A texture and the framebuffer that draws into it.
   struct RenderTarget {
     GlTexture texture;
@@ -200,6 +214,7 @@ class SplatRenderer {
     std::int32_t modes[4];
     float time[4];
     std::int32_t wrap[4];
+    float cut[4];
   } uniforms_{};
 
   // The frame's draws ("Draws" and the indirect commands of
@@ -207,8 +222,10 @@ class SplatRenderer {
   struct DrawRecord {
     float origin[4], box_low[4], box_high[4], origin_below[4], origin_above[4];
     std::uint32_t block[4];
+    float parent_origin[4];
+    std::uint32_t cut[4];
   };
-  static_assert(sizeof(DrawRecord) == 96);
+  static_assert(sizeof(DrawRecord) == 128);
   struct DrawCommand {
     GLuint count, instance_count, first, base_instance;
   };

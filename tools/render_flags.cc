@@ -25,6 +25,11 @@ void AddSceneFlags(CLI::App& cmd, SceneFlags& f) {
   scale_factor->excludes(time);
   scale_factor->excludes(redshift);
   cmd.add_option("--error", f.error, "level of detail: refine while points are more than this many pixels apart")->default_val(1);
+  cmd.add_option("--cluster-error", f.cluster_error,
+                 "level of detail cluster by cluster, where the store links its clusters: draw a cluster where its "
+                 "error bound (the mass its blob spreads over more than a pixel) is at most this many mean particle "
+                 "masses, instead of refining by --error (0: by --error)")
+      ->default_val(0);
   cmd.add_option("--budget", f.budget, "most points to draw (0: no limit)")->default_val(0);
   cmd.add_flag("--full", f.full, "draw every particle (every leaf in view), ignoring --error and --budget");
   cmd.add_option("--color", f.color, "colour: density, speed, los-velocity, dispersion (line-of-sight velocity dispersion) or type")
@@ -87,6 +92,11 @@ SceneOptions SceneOptionsFrom(const SceneFlags& f) {
   SceneOptions options;
   options.lod.pixel_threshold = f.full ? 1e-9 : f.error;
   options.lod.point_budget = f.full ? 0 : f.budget;
+  if (!(f.cluster_error >= 0) || !std::isfinite(f.cluster_error)) {
+    throw Error::InvalidArgument("--cluster-error must be finite and >= 0");
+  }
+  // Every particle: the cut with the threshold 0 (or the leaves, node by node).
+  options.cluster_error = f.full && f.cluster_error > 0 ? 1e-300 : f.cluster_error;
   options.color = ParseColorMode(f.color);
   options.splat_path = ParseSplatPath(f.splat);
   if (!(f.compute_radius >= 0) || !std::isfinite(f.compute_radius)) {

@@ -28,6 +28,7 @@ struct SceneFlags {
   std::optional<double> redshift, scale_factor;
   // Level of detail.
   double error = 1;
+  double cluster_error = 0;
   std::uint64_t budget = 0;
   bool full = false;
   // Colours and tone curve.

@@ -9,8 +9,8 @@
 // Before this file the program defines which columns it reads (the frame's
 // colour mode, interpolation and selection decide): HAS_VELOCITY,
 // HAS_DISPERSION, HAS_TYPE, HAS_ID, HAS_LINKS (displacements), HAS_HERMITE
-// (the neighbours' velocities). The others are not bound and read as zero,
-// so a program binds at most 16 storage buffers.
+// (the neighbours' velocities), HAS_CUT (the cluster cut's entries). The
+// others are not bound and read as zero.
 
 layout(local_size_x = 256) in;
 
@@ -44,6 +44,9 @@ layout(std430, binding = 12) readonly buffer IdColumn { uint id_words[]; };
 #ifdef HAS_LINKS
 layout(std430, binding = 13) readonly buffer DisplacementColumn { uint displacement_words[]; };
 layout(std430, binding = 14) readonly buffer PrevDisplacementColumn { uint prev_displacement_words[]; };
+#endif
+#ifdef HAS_CUT
+layout(std430, binding = 19) readonly buffer CutColumn { uint cut_words[]; };
 #endif
 #ifdef HAS_HERMITE
 layout(std430, binding = 15) readonly buffer NextVelocityColumn { uint next_velocity_words[]; };
@@ -88,6 +91,16 @@ Point Load(uint draw, uint i) {
     pt.shape_off_diagonal = vec3(float(U8(shape_words, 6u * i + 3u)), float(U8(shape_words, 6u * i + 4u)),
                                  float(U8(shape_words, 6u * i + 5u)));
   }
+  pt.own_bound = vec3(0.0);
+  pt.parent = uvec3(0u);
+#ifdef HAS_CUT
+  // Only draws that take part in the cut have the column (in pools without
+  // it a placeholder is bound). A 20-byte entry (render/cluster_links.h, ClusterCutEntry): 3 x u16, a spare u16, 3 x u32.
+  if ((draws[draw].cut.x & kCutApplies) != 0u) {
+    pt.own_bound = vec3(float(U16(cut_words, 10u * i)), float(U16(cut_words, 10u * i + 1u)), float(U16(cut_words, 10u * i + 2u)));
+    pt.parent = uvec3(cut_words[5u * i + 2u], cut_words[5u * i + 3u], cut_words[5u * i + 4u]);
+  }
+#endif
 #ifdef HAS_VELOCITY
   if (b_columns1.x >= 0) pt.velocity = U16X3(velocity_words, i);
 #endif

@@ -24,7 +24,11 @@ layout(std140, binding = 0) uniform Frame {
   ivec4 u_modes;    // colour mode, interpolation (0 none, 1 linear, 2 Hermite), highlight (0 none, 1 selected IDs, 2 every point, alone), copy direction (+1 / -1)
   vec4 u_time;      // t in [0, 1], weight of this copy, Hermite velocity scale, unused
   ivec4 u_wrap;     // 1: moved points are wrapped into the periodic box (the draw's box_*), 0: not; unused x 3
+  vec4 u_cut;       // the cluster cut: threshold tau (mass), (half a pixel / focal length)^2, 1: count the points it takes, unused
 };
+
+// The points the cluster cut takes that are drawn, counted where u_cut.z is 1.
+layout(binding = 0, offset = 0) uniform atomic_uint cut_points;
 
 // A block's decode parameters (render/gpu_block_arena.h, GpuBlockParameters).
 struct BlockParams {
@@ -39,6 +43,7 @@ struct BlockParams {
   vec4 prev_velocity[2];
   uvec4 id_base;    // added to the id column: its base (u32 offsets), 0 for whole u64 IDs; low word first
   vec4 dispersion;  // velocity dispersion: minimum, step
+  vec4 refine[2];   // the cluster cut: the bases of the block's bound codes, its quantum; its parent's
 };
 layout(std430, binding = 3) readonly buffer Blocks { BlockParams blocks[]; };
 
@@ -55,8 +60,15 @@ struct DrawParams {
   vec4 origin_below;
   vec4 origin_above;
   uvec4 block;  // x: the block's slot in Blocks; compute path: y first point in its pool, z count, w points before it in its dispatch
+  vec4 parent_origin;  // the cluster cut: the parent node's corner minus the camera
+  uvec4 cut;    // x: the draw's part in the cluster cut (kCut*)
 };
 layout(std430, binding = 4) readonly buffer Draws { DrawParams draws[]; };
+
+// A draw's part in the cluster cut (render/splat_renderer.h, CutRole).
+const uint kCutApplies = 1u;     // the points are drawn only where the cut takes them
+const uint kCutFinal = 2u;       // their own error is not asked: nothing below them is drawn
+const uint kCutHasParent = 4u;   // their parent's error is asked (all but the root)
 
 layout(std430, binding = 1) readonly buffer Selection {
   uint selection_mask;   // slots - 1 (slots a power of two)
@@ -85,6 +97,8 @@ struct Point {
   float velocity_dispersion;
   vec3 shape_diagonal;      // xx, yy, zz codes
   vec3 shape_off_diagonal;  // xy, xz, yz codes
+  vec3 own_bound;           // the cluster cut: its bound codes (R, a, r; 0 for a particle)
+  uvec3 parent;             // its parent cluster's position code | bound code << 16, per axis / bound
   uint draw;                // its draw's index in Draws
 };
 
@@ -191,8 +205,52 @@ void Footprint(Point pt, float scale, out vec3 conic, out float major, out float
   minor = sqrt(l2);
 }
 
-// The blob of `pt`; false when it is not drawn (outside the depth range).
+// A cluster's error bound E seen from the camera (docs/FORMAT.md section 4),
+// from its position and bound codes, its block's quantum and bases, and its
+// node's corner minus the camera. A cluster's draw and its children's
+// evaluate it from the same codes and floats, precisely (no fused or
+// reordered operations), so both find the same E and each particle is drawn
+// once.
+float ClusterError(vec3 code, float quantum, vec3 origin, vec3 bound, vec3 base) {
+  // code / 256 and its sum with an integer base are exact in float.
+  precise vec3 value = exp2(base + bound / 256.0);
+  value = mix(value, vec3(0.0), equal(bound, vec3(0.0)));
+  if (!(value.y > 0.0 && value.z > 0.0)) return 0.0;
+  precise vec3 x = (code + 0.5) * quantum + origin;
+  precise float gap = max(sqrt(dot(x, x)) - value.x, 0.0);
+  precise float error = value.y / (value.y / value.z + u_cut.y * gap * gap);
+  return error;
+}
+
+// Whether the cluster cut takes the point: its own error at most tau (not
+// asked where nothing below it is drawn), its parent's above tau (where it
+// has a parent).
+bool InCut(Point pt) {
+  uint flags = this_draw.cut.x;
+  if ((flags & kCutApplies) == 0u) return true;
+  float tau = u_cut.x;
+  if ((flags & kCutFinal) == 0u &&
+      ClusterError(pt.position, this_block.refine[0].w, this_draw.origin.xyz, pt.own_bound, this_block.refine[0].xyz) > tau) {
+    return false;
+  }
+  if ((flags & kCutHasParent) != 0u) {
+    vec3 code = vec3(pt.parent & 0xFFFFu), bound = vec3(pt.parent >> 16u);
+    if (!(ClusterError(code, this_block.refine[1].w, this_draw.parent_origin.xyz, bound, this_block.refine[1].xyz) > tau)) {
+      return false;
+    }
+  }
+  return true;
+}
+
+// The blob of `pt`; false when it is not drawn (not in the cluster cut, or
+// outside the depth range).
 bool MakeBlob(Point pt, out Blob blob) {
+  blob.center = vec2(0.0);
+  blob.conic = vec3(1.0, 0.0, 1.0);
+  blob.major = 1.0;
+  blob.value = vec4(0.0);
+  if (!InCut(pt)) return false;
+
   // Relative to the node's corner until the end of the move.
   vec3 p = (pt.position + 0.5) * b_node.x;
   vec3 velocity = b_columns1.x >= 0 ? Ranged(pt.velocity, b_velocity) : vec3(0.0);
@@ -220,10 +278,6 @@ bool MakeBlob(Point pt, out Blob blob) {
   }
   p += origin;
 
-  blob.center = vec2(0.0);
-  blob.conic = vec3(1.0, 0.0, 1.0);
-  blob.major = 1.0;
-  blob.value = vec4(0.0);
   float depth = dot(p, u_forward.xyz);
   if (!(depth >= u_limits.x && depth <= u_limits.y)) return false;
   vec2 image = u_viewport.xy;
@@ -256,6 +310,12 @@ bool MakeBlob(Point pt, out Blob blob) {
   if (u_modes.z == 1 && b_columns1.y >= 0) selected = IsSelected(ParticleId(pt)) ? 1.0 : 0.0;
 
   blob.center = center + margin;
+  // Counted as drawn where the raster path draws it: its centre in the
+  // framebuffer (the image and its guard margin).
+  if (u_cut.z != 0.0 && u_modes.z != 2 && all(greaterThanEqual(blob.center, vec2(0.0))) &&
+      all(lessThan(blob.center, image + 2.0 * margin))) {
+    atomicCounterIncrement(cut_points);
+  }
   blob.conic = conic;
   blob.major = major;
   blob.value = u_modes.z == 2 ? vec4(0.0, 0.0, 0.0, weight / normalization)

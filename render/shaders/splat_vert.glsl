@@ -16,6 +16,8 @@ layout(location = 10) in float a_velocity_dispersion;
 layout(location = 11) in vec3 a_shape_diagonal;
 layout(location = 12) in vec3 a_shape_off_diagonal;
 layout(location = 13) in uint a_draw;  // the draw's index in Draws: its base instance
+layout(location = 14) in vec3 a_own_bound;
+layout(location = 15) in uvec3 a_parent;
 
 flat out vec2 v_center;  // framebuffer coordinates
 flat out vec3 v_conic;
@@ -36,6 +38,8 @@ void main() {
   pt.velocity_dispersion = a_velocity_dispersion;
   pt.shape_diagonal = a_shape_diagonal;
   pt.shape_off_diagonal = a_shape_off_diagonal;
+  pt.own_bound = a_own_bound;
+  pt.parent = a_parent;
   pt.draw = a_draw;
   Blob blob;
   if (!MakeBlob(pt, blob)) {
