@@ -63,6 +63,7 @@ struct Flags {
   double box = 500;
   int width = 1280, height = 720;
   std::string thresholds = "8,4,2,1,0.5", budgets = "0,1e6,4e6", views = "overview,mid,deep";
+  std::string cluster_errors;  // the cut's thresholds (SceneOptions::cluster_error) on stores that link their clusters
   std::string coarse = "clusters,sample";  // inner nodes' representations to compare, a store each
   std::string snapshot;                    // an existing snapshot instead of a generated one
   std::size_t capacity = 0;                // points a node holds (0: ingest's default)
@@ -215,7 +216,7 @@ std::vector<Row> Measure(const Dataset& dataset, SceneOptions options, const Ren
 }
 
 void PrintRow(const Row& r) {
-  std::printf("%-9s %-6s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f %7.1f %7.1f %7.1f %8.1f %7.1f %7.1f %7.1f %-7s\n",
+  std::printf("%-9s %-12s %9.3g %10llu %11llu %7llu %10s %9.3f %9.3f %7.2f %7.4f %7.1f %7.1f %7.1f %8.1f %7.1f %7.1f %7.1f %-7s\n",
               r.view.c_str(), r.mode.c_str(), r.threshold, static_cast<unsigned long long>(r.budget),
               static_cast<unsigned long long>(r.points), static_cast<unsigned long long>(r.nodes),
               HumanBytes(static_cast<double>(r.bytes)).c_str(), r.cold, r.warm, r.psnr, r.ssim, r.select_ms, r.upload_ms,
@@ -418,7 +419,7 @@ std::vector<HdrImage> PrepareReferences(const Flags& f, const std::string& snaps
 std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, const std::vector<std::string>& representations,
                        const std::vector<NamedView>& views, const std::vector<RenderView>& render_views,
                        const std::vector<HdrImage>& references, HeadlessBackend backend) {
-  std::printf("\n%-9s %-6s %9s %10s %11s %7s %10s %9s %9s %7s %7s %7s %7s %7s %8s %7s %7s %7s %-7s\n", "view", "mode",
+  std::printf("\n%-9s %-12s %9s %10s %11s %7s %10s %9s %9s %7s %7s %7s %7s %7s %8s %7s %7s %7s %-7s\n", "view", "mode",
               "threshold", "budget", "points", "nodes", "read", "cold s", "warm s", "PSNR", "SSIM", "sel ms", "upl ms",
               "call ms", "gpu draw", "measure", "tone", "read ms", "path");
   std::vector<SplatPath> paths;
@@ -466,6 +467,30 @@ std::vector<Row> Sweep(const Flags& f, const std::vector<Dataset>& datasets, con
             row.view = views[v].name;
             row.mode = representations[r];
             row.threshold = options.lod.pixel_threshold;
+            row.budget = options.lod.point_budget;
+            rows.push_back(row);
+            PrintRow(row);
+          }
+        }
+      }
+      // Cluster by cluster: the mode "<representation>-cut", its threshold
+      // the cluster error.
+      const bool linked = (datasets[r].cluster_columns() & kClusterLinkColumns) == kClusterLinkColumns;
+      for (const std::string& e : linked ? Split(f.cluster_errors) : std::vector<std::string>{}) {
+        for (const std::string& b : budgets) {
+          SceneOptions options;
+          options.cluster_error = std::stod(e);
+          options.lod.point_budget = static_cast<std::uint64_t>(std::stod(b));
+          options.cluster_shapes = representations[r] != "round";
+          const std::string mode = representations[r] + "-cut";
+          const fs::path save_as = f.save_pictures ? fs::path(f.dir) / ("picture-" + views[v].name + "-" + mode + "-e" + e +
+                                                                        "-b" + b + ".pfm")
+                                                   : fs::path();
+          for (Row& row : Measure(datasets[r], options, render_views[v], backend, tone, reference, paths, f.compute_radius,
+                                  save_as)) {
+            row.view = views[v].name;
+            row.mode = mode;
+            row.threshold = options.cluster_error;
             row.budget = options.lod.point_budget;
             rows.push_back(row);
             PrintRow(row);
@@ -637,7 +662,11 @@ void Run(const Flags& f) {
   }
 
   const std::vector<Row> rows = Sweep(f, datasets, representations, views, render_views, references, backend);
-  if (f.reference) PrintTargets(rows, views, representations, reference_seconds);
+  std::vector<std::string> modes = representations;
+  for (const Row& r : rows) {
+    if (r.mode != "full" && std::find(modes.begin(), modes.end(), r.mode) == modes.end()) modes.push_back(r.mode);
+  }
+  if (f.reference) PrintTargets(rows, views, modes, reference_seconds);
   Plot(fs::path(f.dir), rows, views, f.reference);
   if (f.selection) MeasureSelection(datasets.front(), views[0], render_views[0], backend);
 }
@@ -655,6 +684,9 @@ int main(int argc, char** argv) {
   app.add_option("--height", f.height, "image height")->default_val(720);
   app.add_option("--thresholds", f.thresholds, "pixel thresholds of the sweep")->default_val("8,4,2,1,0.5");
   app.add_option("--budgets", f.budgets, "point budgets of the sweep (0: none)")->default_val("0,1e6,4e6");
+  app.add_option("--cluster-errors", f.cluster_errors,
+                 "also sweep the level of detail cluster by cluster with these cluster errors (mean particle masses; "
+                 "the mode <coarse>-cut, on stores that link their clusters)");
   app.add_option("--views", f.views, "views: overview, mid, deep")->default_val("overview,mid,deep");
   app.add_option("--coarse", f.coarse,
                  "inner nodes' representations to compare: clusters, round (the clusters drawn without their shapes), sample")
