@@ -425,8 +425,8 @@ class Store {
   // selected particles' share of it and the tone-mapped colours, row 0 at
   // the top (as in the PNG).
   py::dict Render(const py::object& camera, std::optional<double> epoch_time, std::optional<double> redshift,
-                  std::optional<double> scale_factor, int width, int height, double error, std::uint64_t budget,
-                  bool full, double exposure, const std::string& curve, const std::string& colormap,
+                  std::optional<double> scale_factor, int width, int height, double error, double cluster_error,
+                  std::uint64_t budget, bool full, double exposure, const std::string& curve, const std::string& colormap,
                   const std::string& color, const std::vector<std::uint64_t>& select, const std::string& backend) {
     const Dataset& d = *dataset_;
     if (epoch_time.has_value() + redshift.has_value() + scale_factor.has_value() > 1) {
@@ -439,6 +439,11 @@ class Store {
       throw Error::InvalidArgument("time must be in [0, " + std::to_string(d.epoch_count() - 1) + "] (epochs)");
     }
     if (!full && !(error > 0)) throw Error::InvalidArgument("error must be > 0 pixels");
+    if (!(cluster_error >= 0) || !std::isfinite(cluster_error)) throw Error::InvalidArgument("cluster_error must be finite and >= 0");
+    if (cluster_error > 0 && (d.cluster_columns() & kClusterLinkColumns) != kClusterLinkColumns) {
+      throw Error::InvalidArgument("cluster_error: the store " + d.store().directory() +
+                                   " does not link its clusters to their children's points; use error instead");
+    }
     if (width < 1 || height < 1) throw Error::InvalidArgument("width and height must be >= 1");
     const Cube& cube = d.cube(static_cast<std::uint32_t>(std::lround(time)));
     const RenderView view(CameraFrom(camera, cube, static_cast<double>(width) / height), width, height);
@@ -459,6 +464,8 @@ class Store {
       py::gil_scoped_release release;
       OffscreenRenderer& renderer = Renderer(headless);
       renderer.scene().SetLod(lod);
+      // Every particle: the cut with the threshold ~0 (as --full does).
+      renderer.scene().SetClusterError(full && cluster_error > 0 ? 1e-300 : cluster_error);
       renderer.scene().SetColorMode(mode);
       renderer.scene().SetSelection(select);
       picture = renderer.Render(view, time, tone, true);
@@ -653,7 +660,8 @@ PYBIND11_MODULE(octocosm, m) {
            "position (m, 3) and velocity (m, 3) when stored, one row per (id, epoch) found.")
       .def("render", &Store::Render, py::arg("camera") = py::none(), py::arg("time") = py::none(),
            py::arg("redshift") = py::none(), py::arg("scale_factor") = py::none(), py::arg("width") = 640,
-           py::arg("height") = 360, py::arg("error") = 1.0, py::arg("budget") = 0, py::arg("full") = false,
+           py::arg("height") = 360, py::arg("error") = 1.0, py::arg("cluster_error") = 0.0, py::arg("budget") = 0,
+           py::arg("full") = false,
            py::arg("exposure") = 0.0, py::arg("curve") = "log", py::arg("colormap") = "magma",
            py::arg("color") = "density", py::arg("select") = std::vector<std::uint64_t>{},
            py::arg("backend") = "osmesa",
@@ -662,7 +670,8 @@ PYBIND11_MODULE(octocosm, m) {
            "(height, width) float64, the mass per pixel; selected_mass, the part of it of the particles\n"
            "whose IDs select lists (highlighted, drawn at full detail); rgb (height, width, 3) uint8, row 0\n"
            "at the top; time (the fractional epoch), exposure, points_drawn, nodes_selected, seconds.\n"
-           "error: the level of detail in pixels; full=True: every particle.");
+           "error: the level of detail in pixels; cluster_error > 0: cluster by cluster instead, where the\n"
+           "store links its clusters (as --cluster-error, in mean particle masses); full=True: every particle.");
 
   m.def(
       "open",

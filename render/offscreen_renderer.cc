@@ -34,6 +34,7 @@ Picture OffscreenRenderer::Render(const RenderView& view, double time, const Ton
   splat_->ToneMapToImage(picture.tone);
   splat_->Finish();
   const auto drawn = std::chrono::steady_clock::now();
+  if (picture.stats.cluster_cut) picture.stats.points_drawn = splat_->CutPointsCounted();  // finished: no wait
   picture.rgb = splat_->ReadDisplay();
   if (read_hdr) picture.hdr = splat_->ReadHdr();
   const auto end = std::chrono::steady_clock::now();

@@ -278,6 +278,7 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   std::vector<Copy> copies = PlanCopies(time, stats);
   if (!complete) StartLoadingNear(copies);
   stats.cluster_cut = cluster_cut();
+  cut_threshold_ = CutThreshold(copies[0].epoch);
   SelectFrontiers(view, copies, stats);
   UseColumns(ColumnsFor(stats.interpolation, complete));
   std::vector<NodeRef> needed = RequestBlocks(view, copies, complete, look_ahead);
@@ -318,15 +319,21 @@ bool SceneRenderer::cluster_cut() const {
   return options_.cluster_error > 0 && (dataset_.cluster_columns() & kClusterLinkColumns) == kClusterLinkColumns;
 }
 
+// The epochs of one interval share their particles: the first's mean mass
+// gives the frame's threshold.
+double SceneRenderer::CutThreshold(std::uint32_t epoch) const {
+  const EpochSummary& summary = dataset_.summary(epoch);
+  const double mean_mass = summary.points > 0 ? summary.mass.value_or(0) / static_cast<double>(summary.points) : 0;
+  return std::isfinite(mean_mass) ? options_.cluster_error * mean_mass : 0;
+}
+
 LodFrontier SceneRenderer::SelectFrontier(const RenderView& view, std::uint32_t epoch, const LodOptions& lod) {
   if (!cluster_cut()) {
     const ScreenErrorView error_view{view.camera(), static_cast<double>(view.height()), lod.pixel_threshold};
     return SelectLodFrontier(hierarchy(epoch), dataset_.cube(epoch), error_view, lod);
   }
   ClusterLodOptions cut;
-  const EpochSummary& summary = dataset_.summary(epoch);
-  const double mean_mass = summary.points > 0 ? summary.mass.value_or(0) / static_cast<double>(summary.points) : 0;
-  cut.threshold = options_.cluster_error * mean_mass;
+  cut.threshold = cut_threshold_;
   cut.focal_pixels = view.focal_pixels();
   cut.point_budget = lod.point_budget;
   cut.cull_margin = lod.cull_margin;
@@ -468,10 +475,7 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
   settings.mass_unit = mass_unit_;
   const bool cut = stats.cluster_cut;
   if (cut) {
-    // Every copy's epoch has its own mean mass; the threshold is the first's
-    // (the epochs of one interval share their particles).
-    const EpochSummary& summary = dataset_.summary(copies[0].epoch);
-    settings.cut_threshold = summary.points > 0 ? options_.cluster_error * summary.mass.value_or(0) / static_cast<double>(summary.points) : 0;
+    settings.cut_threshold = cut_threshold_;
     settings.count_cut = complete;
   }
   settings.interpolation = stats.interpolation;
@@ -521,7 +525,6 @@ void SceneRenderer::DrawCopies(const RenderView& view, const std::vector<Copy>& 
       stats.draws += overlays[copy]->blocks().size();
     }
   }
-  if (settings.count_cut) stats.points_drawn = splat_.CutPointsCounted();
 }
 
 ReadCounters SceneRenderer::disk_reads() const {

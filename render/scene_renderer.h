@@ -56,6 +56,12 @@
 
 namespace octocosm {
 
+// A cluster error that reaches about 40 dB against the reference in the
+// zoomed views of the render bench's 10^8 points from a tenth of their
+// full-detail points (docs/ACCURACY.md section 6): where the viewer's
+// overlay starts when cluster by cluster is switched on.
+inline constexpr double kDefaultClusterError = 30;
+
 struct SceneOptions {
   LodOptions lod;                       // pixel threshold, point budget
   // > 0, where the store links its clusters to their children's points
@@ -90,8 +96,9 @@ struct FrameStats {
   std::uint64_t nodes_selected = 0;
   std::uint64_t points_selected = 0;  // in the selected nodes
   // What was drawn (with stand-ins, while loading). Refining cluster by
-  // cluster: the points the cut took, counted on the GPU, in a complete
-  // frame; those of the draws (an upper bound) in a streamed one.
+  // cluster: the points of the draws, an upper bound of those the cut takes,
+  // which a complete frame counts on the GPU (SplatRenderer::CutPointsCounted,
+  // read by OffscreenRenderer::Render once the frame is finished).
   std::uint64_t points_drawn = 0;
   bool cluster_cut = false;           // the frame refined cluster by cluster
   std::uint64_t draws = 0;
@@ -179,6 +186,7 @@ class SceneRenderer {
   std::vector<Copy> PlanCopies(double time, FrameStats& stats) const;
   void SelectFrontiers(const RenderView& view, std::vector<Copy>& copies, FrameStats& stats);
   LodFrontier SelectFrontier(const RenderView& view, std::uint32_t epoch, const LodOptions& lod);
+  double CutThreshold(std::uint32_t epoch) const;
   // Submits the blocks wanted to the prefetcher and starts the selection
   // overlays; returns the blocks this frame draws.
   std::vector<NodeRef> RequestBlocks(const RenderView& view, const std::vector<Copy>& copies, bool complete,
@@ -237,6 +245,7 @@ class SceneRenderer {
   std::size_t gpu_blocks_ = 0;
   std::size_t gpu_bytes_ = 0;
   std::uint64_t frame_ = 0;
+  double cut_threshold_ = 0;  // this frame's, refining cluster by cluster
   std::string last_error_;
 };
 

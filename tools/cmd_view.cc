@@ -221,6 +221,7 @@ OverlayReport MakeOverlayReport(const ViewerWindow& window, const FrameStats& st
   report.selection_running = state.selection_job.running();
   report.store_has_ids = (dataset.columns() & ColumnBit(ColumnId::kId)) != 0;
   report.store_has_velocity = (dataset.columns() & ColumnBit(ColumnId::kVelocity)) != 0;
+  report.store_links_clusters = (dataset.cluster_columns() & kClusterLinkColumns) == kClusterLinkColumns;
   report.camera_mode = state.controller.mode();
   report.camera_position = camera.position;
   report.fly_speed = state.controller.fly_speed();
@@ -238,7 +239,7 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
   if (f.fps_cap < 0) throw Error::InvalidArgument("--fps-cap must be >= 0 (0: no cap)");
   if (!(f.settle_timeout > 0)) throw Error::InvalidArgument("--settle-timeout must be > 0 seconds");
   const SceneOptions scene_options = SceneOptionsFrom(f.scene);
-  ViewerSettings settings{ToneSettingsFrom(f.scene), scene_options.lod, !f.hide_overlay};
+  ViewerSettings settings{ToneSettingsFrom(f.scene), scene_options.lod, !f.hide_overlay, scene_options.cluster_error};
   const Cube& start_cube = dataset.cube(NearestEpoch(f.scene.time));
   const Camera start_camera = CameraFromFlags(f.scene.camera, start_cube, static_cast<double>(f.width) / f.height,
                                               OverviewPosition(start_cube, f.scene.camera.fov));
@@ -304,6 +305,7 @@ void RunView(ViewFlags f) {  // a copy: the time flags resolve into it
     // a block has failed to stream: Complete() waits for every block and
     // throws the failed read's Error, or draws the whole view if it now reads.
     scene.SetLod(settings.lod);
+    scene.SetClusterError(settings.cluster_error);
     scene.SetColorMode(settings.tone.color);
     const FrameStats stats = script.settling() && !scene.last_error().empty()
                                  ? scene.Complete(view, time)

@@ -63,6 +63,11 @@ void ResolveSceneFlags(SceneFlags& f, const Dataset& dataset) {
                                  std::to_string(dataset.epoch_count() - 1));
   }
   if (!(f.error > 0)) throw Error::InvalidArgument("--error must be > 0 pixels");
+  if (f.cluster_error > 0 && (dataset.cluster_columns() & kClusterLinkColumns) != kClusterLinkColumns) {
+    throw Error::InvalidArgument("--cluster-error: the store " + dataset.store().directory() +
+                                 " does not link its clusters to their children's points (ingested with --coarse "
+                                 "sample, or before octocosm wrote the links); use --error, or ingest it again");
+  }
 }
 
 std::uint32_t NearestEpoch(double time) { return static_cast<std::uint32_t>(std::lround(time)); }

@@ -147,6 +147,15 @@ def test_errors_are_exceptions_of_their_kind(store, tmp_path):
     pages.write_bytes(bytes(data))
     with pytest.raises(octocosm.CorruptionError, match="epoch-00000.pages"):
         octocosm.open(str(damaged)).query(level=21)
+    # Cluster by cluster needs a store whose clusters are linked: a sampled one's are not.
+    sampled = tmp_path / "sampled"
+    snapshot = sorted((store.parent / "sim").glob("snap_*"))[0]
+    run("ingest", snapshot, "-o", sampled, "--capacity", 300, "--neighbours", 8, "--coarse", "sample")
+    with pytest.raises(octocosm.InvalidArgumentError, match="does not link its clusters"):
+        octocosm.open(str(sampled)).render(width=48, height=32, cluster_error=30)
+    failed = subprocess.run([PROGRAM, "render", str(sampled), "--cluster-error", "30", "-o", str(tmp_path / "x.png")],
+                            capture_output=True, text=True)
+    assert failed.returncode != 0 and "does not link its clusters" in failed.stderr
 
 
 def test_a_picture_is_what_the_program_draws(store, tmp_path):
@@ -166,6 +175,14 @@ def test_a_picture_is_what_the_program_draws(store, tmp_path):
     coarse = s.render(camera=camera, time=1, width=96, height=64, error=16)
     assert coarse["points_drawn"] < full["points_drawn"]
     assert coarse["mass"].sum() == pytest.approx(full["mass"].sum(), rel=1e-3)
+    # Cluster by cluster: as the program draws it, fewer points, the same mass.
+    cut = s.render(camera=camera, time=1, width=96, height=64, cluster_error=30)
+    assert 0 < cut["points_drawn"] < full["points_drawn"]
+    assert cut["mass"].sum() == pytest.approx(full["mass"].sum(), rel=1e-3)
+    run("render", store, "--camera", "20000,30000,260000", "--look-at", "50000,50000,50000", "--time", 1,
+        "--width", 96, "--height", 64, "--cluster-error", 30, "-o", tmp_path / "cut.png")
+    png = np.round(matplotlib.image.imread(tmp_path / "cut.png")[:, :, :3] * 255).astype(np.uint8)
+    np.testing.assert_array_equal(cut["rgb"], png)
 
 
 def test_a_picture_at_a_redshift_with_particles_highlighted(store):

@@ -78,8 +78,17 @@ void TimeControls(Playback& playback) {
   if (SliderDouble("epochs/s", &speed, 0.02, 20, "%.2f", true)) playback.set_speed(speed);
 }
 
-void DetailControls(LodOptions& lod) {
-  SliderDouble("error (pixels)", &lod.pixel_threshold, 0.25, 64, "%.2f", true);
+void DetailControls(const OverlayReport& r, ViewerSettings& settings) {
+  LodOptions& lod = settings.lod;
+  if (r.store_links_clusters) {
+    bool by_clusters = settings.cluster_error > 0;
+    if (ImGui::Checkbox("cluster by cluster", &by_clusters)) settings.cluster_error = by_clusters ? kDefaultClusterError : 0;
+  }
+  if (settings.cluster_error > 0) {
+    SliderDouble("cluster error (particle masses)", &settings.cluster_error, 0.1, 10000, "%.3g", true);
+  } else {
+    SliderDouble("error (pixels)", &lod.pixel_threshold, 0.25, 64, "%.2f", true);
+  }
   const std::uint64_t step = 100000, step_fast = 1000000;
   ImGui::InputScalar("point budget (0: none)", ImGuiDataType_U64, &lod.point_budget, &step, &step_fast);
 }
@@ -157,7 +166,7 @@ OverlayRequests Overlay::Draw(const OverlayReport& r, ViewerSettings& settings, 
   if (ImGui::Button("screenshot")) requests.screenshot = true;
 
   if (ImGui::CollapsingHeader("time", ImGuiTreeNodeFlags_DefaultOpen)) TimeControls(playback);
-  if (ImGui::CollapsingHeader("level of detail")) DetailControls(settings.lod);
+  if (ImGui::CollapsingHeader("level of detail")) DetailControls(r, settings);
   if (ImGui::CollapsingHeader("colour")) ColourControls(r, settings.tone);
   if (ImGui::CollapsingHeader("selection", ImGuiTreeNodeFlags_DefaultOpen)) SelectionControls(r, id_file_, requests);
   if (ImGui::CollapsingHeader("controls")) {

@@ -27,6 +27,7 @@ struct ViewerSettings {
   ToneMapSettings tone;
   LodOptions lod;
   bool show_overlay = true;
+  double cluster_error = 0;  // SceneOptions::cluster_error
 };
 
 // What it shows, from the frame just drawn.
@@ -44,6 +45,7 @@ struct OverlayReport {
   bool selection_running = false;
   bool store_has_ids = false;
   bool store_has_velocity = false;
+  bool store_links_clusters = false;  // the level of detail can refine cluster by cluster
   CameraMode camera_mode = CameraMode::kOrbit;
   std::array<double, 3> camera_position{};
   double fly_speed = 0;

@@ -1,0 +1,183 @@
+// The cluster-by-cluster frontier (query/cluster_frontier.h) on trees built
+// in memory, with octant bounds made up for them.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <set>
+
+#include "base/error.h"
+#include "query/cluster_frontier.h"
+
+namespace octocosm {
+namespace {
+
+// A full tree of `depth` levels below the root over the unit cube, every
+// node holding 100 points.
+NodeHierarchy FullTree(int depth) {
+  std::vector<IndexEntry> entries;
+  std::vector<NodeKey> frontier = {NodeKey::Root()};
+  while (!frontier.empty()) {
+    const NodeKey key = frontier.back();
+    frontier.pop_back();
+    if (key.level() < depth) {
+      for (int o = 0; o < 8; ++o) frontier.push_back(key.Child(o));
+    }
+    entries.push_back({key.value(), 1, 100, 100, 0, 1});
+  }
+  return NodeHierarchy::FromEntries(entries, "test");
+}
+
+Camera LookingAtTheCube(const std::array<double, 3>& position) {
+  Camera c;
+  c.position = position;
+  c.look_at = {0.5, 0.5, 0.5};
+  c.near = 1e-4;
+  c.far = 100;
+  return c;
+}
+
+// Each octant's sphere about its cube's centre, of the octant's half
+// diagonal, with bounds that shrink by `shrink` a level (as a store's do).
+OctantRefineBounds BoundsOf(const NodeCube& node, double shrink) {
+  OctantRefineBounds b;
+  for (int o = 0; o < 8; ++o) {
+    OctantRefineBound& octant = b[static_cast<std::size_t>(o)];
+    for (int a = 0; a < 3; ++a) {
+      octant.centre[static_cast<std::size_t>(a)] = node.origin[static_cast<std::size_t>(a)] + node.size * (((o >> a) & 1) ? 0.75 : 0.25);
+    }
+    octant.radius = node.size * std::sqrt(3.0) / 4;
+    octant.mass = node.size * node.size * node.size * shrink;
+    octant.mass_variance = octant.mass * node.size * node.size;
+  }
+  return b;
+}
+
+// E = a / (a / r + q D^2) of any cluster inside the octant's sphere (its own
+// sphere inside it, its bounds at most the octant's) is at most the bound.
+TEST(ClusterFrontierTest, TheOctantBoundHoldsEveryClusterInside) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> unit(0, 1);
+  const double q = std::pow(0.5 / 600, 2);
+  for (int trial = 0; trial < 2000; ++trial) {
+    OctantRefineBound bound;
+    bound.centre = {unit(rng), unit(rng), unit(rng)};
+    bound.radius = 0.2 * unit(rng);
+    bound.mass = unit(rng);
+    bound.mass_variance = unit(rng) * 1e-3;
+    const std::array<double, 3> camera = {3 * unit(rng) - 1, 3 * unit(rng) - 1, 3 * unit(rng) - 1};
+    // A cluster: its own sphere (R) inside the octant's.
+    const double R = bound.radius * unit(rng);
+    std::array<double, 3> x;
+    double norm = 0;
+    for (double& v : x) {
+      v = unit(rng) - 0.5;
+      norm += v * v;
+    }
+    const double along = (bound.radius - R) * unit(rng) / std::sqrt(norm);
+    double distance2 = 0;
+    for (std::size_t a = 0; a < 3; ++a) {
+      x[a] = bound.centre[a] + along * x[a];
+      distance2 += (x[a] - camera[a]) * (x[a] - camera[a]);
+    }
+    const double a = bound.mass_variance * unit(rng), r = bound.mass * unit(rng);
+    const double gap = std::max(0.0, std::sqrt(distance2) - R);
+    const double error = a / (a / r + q * gap * gap);
+    EXPECT_LE(error, LargestClusterError(bound, camera, q) * (1 + 1e-12));
+  }
+  EXPECT_EQ(LargestClusterError(OctantRefineBound{}, {0, 0, 0}, q), 0) << "an octant without clusters";
+}
+
+// Nodes are reached through loaded parents only, parents before children,
+// where the bound exceeds the threshold: the root alone at a threshold above
+// every bound, every node at threshold 0, fewer the higher it is.
+TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThreshold) {
+  const NodeHierarchy h = FullTree(3);
+  const Cube cube{{0, 0, 0}, 1, false};
+  std::vector<OctantRefineBounds> bounds(h.nodes().size());
+  for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n] = BoundsOf(cube.NodeCubeOf(h.nodes()[n].key), 1);
+  const auto all_loaded = [&](std::int32_t n) -> const OctantRefineBounds* {
+    return h.node(n).is_leaf() ? nullptr : &bounds[static_cast<std::size_t>(n)];
+  };
+  ClusterLodOptions o;
+  o.focal_pixels = 600;
+  const Camera camera = LookingAtTheCube({0.4, 0.5, -2});  // the whole cube in view
+  o.threshold = 0;
+  LodFrontier everything = SelectClusterFrontier(h, cube, camera, o, all_loaded);
+  EXPECT_EQ(everything.selected.size(), h.nodes().size());
+  std::set<std::int32_t> seen;
+  for (std::int32_t n : everything.selected) {
+    if (h.node(n).parent >= 0) {
+      EXPECT_TRUE(seen.count(h.node(n).parent)) << "parents come first";
+    }
+    seen.insert(n);
+  }
+  EXPECT_EQ(everything.points, 100 * h.nodes().size());
+
+  o.threshold = 1e9;
+  EXPECT_EQ(SelectClusterFrontier(h, cube, camera, o, all_loaded).selected.size(), 1u) << "the root alone";
+
+  // Only the root loaded: its children are reached, nothing below them.
+  const auto root_loaded = [&](std::int32_t n) -> const OctantRefineBounds* { return n == 0 ? &bounds[0] : nullptr; };
+  o.threshold = 0;
+  EXPECT_EQ(SelectClusterFrontier(h, cube, camera, o, root_loaded).selected.size(), 9u);
+
+  // Between: fewer nodes the higher the threshold, each reached where its
+  // parent's bound exceeds the threshold.
+  std::size_t previous = h.nodes().size() + 1;
+  for (const double threshold : {1e-3, 0.01, 0.05, 0.5}) {
+    o.threshold = threshold;
+    const LodFrontier f = SelectClusterFrontier(h, cube, camera, o, all_loaded);
+    EXPECT_LE(f.selected.size(), previous);
+    previous = f.selected.size();
+    for (std::int32_t n : f.selected) {
+      const std::int32_t parent = h.node(n).parent;
+      if (parent < 0) continue;
+      const int octant = static_cast<int>(h.node(n).key.value() & 7);
+      const double q = std::pow(0.5 / o.focal_pixels, 2);
+      EXPECT_GT(LargestClusterError(bounds[static_cast<std::size_t>(parent)][static_cast<std::size_t>(octant)],
+                                    camera.position, q) * (1 + 1e-4), threshold);
+    }
+  }
+  EXPECT_LT(previous, h.nodes().size());
+  EXPECT_GT(previous, 1u);
+}
+
+// Out of view, nothing is reached; within the budget, the points of the
+// nodes reached stay within it.
+TEST(ClusterFrontierTest, CullsAndKeepsTheBudget) {
+  const NodeHierarchy h = FullTree(3);
+  const Cube cube{{0, 0, 0}, 1, false};
+  std::vector<OctantRefineBounds> bounds(h.nodes().size());
+  for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n] = BoundsOf(cube.NodeCubeOf(h.nodes()[n].key), 1);
+  const auto loaded = [&](std::int32_t n) -> const OctantRefineBounds* {
+    return h.node(n).is_leaf() ? nullptr : &bounds[static_cast<std::size_t>(n)];
+  };
+  ClusterLodOptions o;
+  o.focal_pixels = 600;
+  Camera away = LookingAtTheCube({0.5, 0.5, -1});
+  away.look_at = {0.5, 0.5, -2};
+  EXPECT_TRUE(SelectClusterFrontier(h, cube, away, o, loaded).selected.empty());
+
+  // Inside, looking along +x: the nodes behind the camera are culled.
+  Camera inside = LookingAtTheCube({0.05, 0.5, 0.5});
+  inside.look_at = {1, 0.5, 0.5};
+  const LodFrontier f = SelectClusterFrontier(h, cube, inside, o, loaded);
+  EXPECT_GT(f.nodes_culled, 0u);
+  EXPECT_LT(f.selected.size(), h.nodes().size());
+
+  o.point_budget = 1000;
+  const LodFrontier budgeted = SelectClusterFrontier(h, cube, LookingAtTheCube({0.5, 0.5, -1}), o, loaded);
+  EXPECT_TRUE(budgeted.budget_reached);
+  EXPECT_LE(budgeted.points, 1000u);
+  EXPECT_EQ(budgeted.points, 100 * budgeted.selected.size());
+
+  o.threshold = -1;
+  EXPECT_THROW(SelectClusterFrontier(h, cube, inside, o, loaded), Error);
+  o.threshold = 0;
+  o.focal_pixels = 0;
+  EXPECT_THROW(SelectClusterFrontier(h, cube, inside, o, loaded), Error);
+}
+
+}  // namespace
+}  // namespace octocosm
