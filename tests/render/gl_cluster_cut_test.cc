@@ -11,72 +11,27 @@
 
 #include "index/block_codec.h"
 #include "index/node_hierarchy.h"
-#include "ingest/ingest.h"
 #include "render/offscreen_renderer.h"
-#include "synth/scale_generator.h"
 #include "tests/support/hdr_compare.h"
-#include "tests/support/temp_dir.h"
-#include "tools/camera_flags.h"
+#include "tests/support/render_scene.h"
 
 namespace octocosm {
 namespace {
 
-namespace fs = std::filesystem;
+using testing_support::RenderScene;
 
-struct Scene {
-  testing_support::TempDir dir{"gl-cluster-cut-test"};
-  std::string store;
-  std::uint64_t particles = 0;
-};
-
-Scene* scene = nullptr;
+RenderScene* scene = nullptr;
 
 class GlClusterCutTest : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    scene = new Scene;
-    synth::ScaleOptions s;
-    s.output_directory = (scene->dir.path() / "snap").string();
-    s.particle_count = 150000;
-    s.box_size_mpc_h = 20;
-    s.seed = 5;
-    s.threads = 2;
-    const synth::ScaleResult generated = synth::RunScaleGenerator(s);
-    scene->particles = generated.particle_count;
-    IngestOptions o;
-    o.inputs = {(fs::path(s.output_directory) / s.snapshot_prefix).string()};
-    o.output = (scene->dir.path() / "store").string();
-    o.tree.capacity = 2000;
-    o.page_size = 16384;
-    o.quiet = true;
-    Ingest(o);
-    scene->store = o.output;
-  }
+  static void SetUpTestSuite() { scene = testing_support::MakeRenderScene("gl-cluster-cut-test", 150000, 1, 5, 2000); }
   static void TearDownTestSuite() {
     delete scene;
     scene = nullptr;
   }
 
-  // Outside the box, all of it in view.
-  static RenderView Overview(const Dataset& d) {
-    Camera c;
-    c.position = OverviewPosition(d.cube(0), 60);
-    c.look_at = {d.cube(0).size / 2, d.cube(0).size / 2, d.cube(0).size / 2};
-    c.near = 1;
-    c.far = 1e6;
-    return RenderView(c, 320, 180);
-  }
-  // Inside the box, looking at part of it.
-  static RenderView Inside(const Dataset& d) {
-    const double L = d.cube(0).size;
-    Camera c;
-    c.position = {0.3 * L, 0.45 * L, 0.5 * L};
-    c.look_at = {0.8 * L, 0.6 * L, 0.3 * L};
-    c.near = 1e-3 * L;
-    c.far = 2 * L;
-    c.fov_y_degrees = 50;
-    return RenderView(c, 320, 180);
-  }
+  static RenderView Overview(const Dataset& d) { return testing_support::OverviewOf(d); }
+  static RenderView Inside(const Dataset& d) { return testing_support::InsideOf(d); }
   static SceneOptions Cut(double cluster_error) {
     SceneOptions o;
     o.cluster_error = cluster_error;

@@ -18,6 +18,7 @@
 #include "render/selection_set.h"
 #include "synth/scale_generator.h"
 #include "tests/support/hdr_compare.h"
+#include "tests/support/render_scene.h"
 #include "tests/support/temp_dir.h"
 #include "tools/camera_flags.h"
 #include "tools/reference_render.h"
@@ -25,63 +26,23 @@
 namespace octocosm {
 namespace {
 
-namespace fs = std::filesystem;
+using testing_support::RenderScene;
 
-struct Scene {
-  testing_support::TempDir dir{"gl-render-test"};
-  std::string snapshot, store;
-  std::uint64_t particles = 0;
-};
-
-Scene* scene = nullptr;
+RenderScene* scene = nullptr;
 
 class GlRenderTest : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    scene = new Scene;
-    synth::ScaleOptions s;
-    s.output_directory = (scene->dir.path() / "snap").string();
-    s.particle_count = 200000;
-    s.box_size_mpc_h = 20;
-    s.files = 2;
-    s.seed = 3;
-    s.threads = 2;
-    const synth::ScaleResult generated = synth::RunScaleGenerator(s);
-    scene->particles = generated.particle_count;
-    scene->snapshot = (fs::path(s.output_directory) / s.snapshot_prefix).string();
-    IngestOptions o;
-    o.inputs = {scene->snapshot};
-    o.output = (scene->dir.path() / "store").string();
-    o.tree.capacity = 4000;
-    o.page_size = 16384;
-    o.quiet = true;
-    Ingest(o);
-    scene->store = o.output;
-  }
+  static void SetUpTestSuite() { scene = testing_support::MakeRenderScene("gl-render-test", 200000, 2, 3, 4000); }
   static void TearDownTestSuite() {
     delete scene;
     scene = nullptr;
   }
 
-  // Outside the box, all of it in view.
   static RenderView Overview(const Dataset& d, int width = 320, int height = 180) {
-    Camera c;
-    c.position = OverviewPosition(d.cube(0), 60);
-    c.look_at = {d.cube(0).size / 2, d.cube(0).size / 2, d.cube(0).size / 2};
-    c.near = 1;
-    c.far = 1e6;
-    return RenderView(c, width, height);
+    return testing_support::OverviewOf(d, width, height);
   }
-  // Inside the box, looking at part of it.
   static RenderView Inside(const Dataset& d, int width = 320, int height = 180) {
-    const double L = d.cube(0).size;
-    Camera c;
-    c.position = {0.3 * L, 0.45 * L, 0.5 * L};
-    c.look_at = {0.8 * L, 0.6 * L, 0.3 * L};
-    c.near = 1;
-    c.far = 2 * L;
-    c.fov_y_degrees = 50;
-    return RenderView(c, width, height);
+    return testing_support::InsideOf(d, width, height);
   }
 
   static SceneOptions Full() {
