@@ -317,8 +317,10 @@ def store_cut_tree(store, view, width, height):
     gap = np.maximum(distance - tree["bound"][:, 0], 0.0)
     a, r = tree["bound"][:, 1], tree["bound"][:, 2]
     q = (PIXEL / focal) ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        error = np.where(tree["inner"] & (a > 0), a / (a / np.maximum(r, 1e-300) + q * gap * gap), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        spread = a / (q * gap * gap)
+        bounded = spread / np.sqrt(1 + spread / np.maximum(r, 1e-300))
+        error = np.where(tree["inner"] & (a > 0) & (r > 0), np.where(np.isfinite(spread), bounded, np.inf), 0.0)
     tree["error"] = error
     has_parent = parent >= 0
     tree["parent_error"] = np.where(has_parent, error[np.maximum(parent, 0)], np.inf)
@@ -332,7 +334,8 @@ def store_cut(tree, tau):
 
 def store_cut_with_count(tree, target, in_view):
     """The cut whose points in view come nearest `target` from below."""
-    tau = threshold_for_count(lambda t: int((store_cut(tree, t) & in_view).sum()), tree["error"].max(), target)
+    finite = tree["error"][np.isfinite(tree["error"])]  # infinite where the camera is inside a cluster's sphere
+    tau = threshold_for_count(lambda t: int((store_cut(tree, t) & in_view).sum()), finite.max(initial=0.0), target)
     return store_cut(tree, tau)
 
 

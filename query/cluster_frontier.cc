@@ -21,7 +21,9 @@ double LargestClusterError(const OctantRefineBound& bound, const std::array<doub
   if (bound.radius < 0 || !(bound.mass_variance > 0) || !(bound.mass > 0)) return 0;
   const double dx = bound.centre[0] - camera[0], dy = bound.centre[1] - camera[1], dz = bound.centre[2] - camera[2];
   const double gap = std::max(0.0, std::sqrt(dx * dx + dy * dy + dz * dz) - bound.radius);
-  return bound.mass_variance / (bound.mass_variance / bound.mass + q * gap * gap);
+  if (!(gap > 0)) return INFINITY;
+  const double spread = bound.mass_variance / (q * gap * gap);
+  return std::isfinite(spread) ? spread / std::sqrt(1 + spread / bound.mass) : INFINITY;
 }
 
 LodFrontier SelectClusterFrontier(const NodeHierarchy& hierarchy, const Cube& cube, const Camera& camera,

@@ -45,9 +45,10 @@ struct OctantRefineBound {
 };
 using OctantRefineBounds = std::array<OctantRefineBound, 8>;
 
-// The largest error E = a / (a / r + q D^2) that a cluster of the octant may
-// have seen from `camera`, with q = (half a pixel / focal length)^2: the
-// bounds' a and r, and the distance from the camera to the octant's sphere.
+// The largest error E = s / sqrt(1 + s / r), s = a / (q D^2), that a cluster
+// of the octant may have seen from `camera`, with q = (half a pixel / focal
+// length)^2 (docs/FORMAT.md section 4): the bounds' a and r, and the
+// distance D from the camera to the octant's sphere (infinite at 0).
 double LargestClusterError(const OctantRefineBound& bound, const std::array<double, 3>& camera, double q);
 
 struct ClusterLodOptions {

@@ -205,9 +205,9 @@ void Footprint(Point pt, float scale, out vec3 conic, out float major, out float
   minor = sqrt(l2);
 }
 
-// A cluster's error bound E seen from the camera (docs/FORMAT.md section 4),
-// from its position and bound codes, its block's quantum and bases, and its
-// node's corner minus the camera. A cluster's draw and its children's
+// A cluster's error bound E = s / sqrt(1 + s / r), s = a / (q D^2), seen from
+// the camera (docs/FORMAT.md section 4), from its position and bound codes,
+// its block's quantum and bases, and its node's corner minus the camera. A cluster's draw and its children's
 // evaluate it from the same codes and floats, precisely (no fused or
 // reordered operations), so both find the same E and each particle is drawn
 // once.
@@ -218,7 +218,12 @@ float ClusterError(vec3 code, float quantum, vec3 origin, vec3 bound, vec3 base)
   if (!(value.y > 0.0 && value.z > 0.0)) return 0.0;
   precise vec3 x = (code + 0.5) * quantum + origin;
   precise float gap = max(sqrt(dot(x, x)) - value.x, 0.0);
-  precise float error = value.y / (value.y / value.z + u_cut.y * gap * gap);
+  // At the sphere, or so near that the spread leaves the float range: infinite.
+  float infinity = uintBitsToFloat(0x7F800000u);
+  if (!(gap > 0.0)) return infinity;
+  precise float spread = value.y / (u_cut.y * gap * gap);
+  if (isinf(spread)) return infinity;
+  precise float error = spread / sqrt(1.0 + spread / value.z);
   return error;
 }
 

@@ -85,8 +85,10 @@ FlatTree Flatten(const std::map<NodeKey, NodePoints>& nodes) {
   return t;
 }
 
-// E = a / (a / r + (p D / f)^2) in float, D the distance from the camera to
-// the point's sphere, p half a pixel, f a focal length of 600 pixels.
+// E = s / sqrt(1 + s / r), s = a / (p D / f)^2, in float (the renderer's,
+// render/shaders/splat_point.glsl), D the distance from the camera to the
+// point's sphere (E infinite at 0), p half a pixel, f a focal length of 600
+// pixels.
 std::vector<float> ErrorBounds(const FlatTree& t, const std::array<double, 3>& camera) {
   constexpr float kPixelOverFocal = 0.5f / 600.0f;
   std::vector<float> error(t.mass.size(), 0.0f);
@@ -100,7 +102,8 @@ std::vector<float> ErrorBounds(const FlatTree& t, const std::array<double, 3>& c
     const float gap = std::max(0.0f, std::sqrt(d2) - t.bound[3 * i]);
     const float a = t.bound[3 * i + 1], r = t.bound[3 * i + 2];
     const float q = kPixelOverFocal * gap;
-    error[i] = a / (a / r + q * q);
+    const float spread = a / (q * q);
+    error[i] = gap > 0 && std::isfinite(spread) ? spread / std::sqrt(1 + spread / r) : INFINITY;
   }
   return error;
 }
@@ -126,7 +129,11 @@ TEST(ClusterCut, EveryCameraAndThresholdDrawsEachParticleOnce) {
     const std::array<double, 3> camera = c % 2 == 0 ? std::array<double, 3>{inside(rng), inside(rng), inside(rng)}
                                                     : std::array<double, 3>{outside(rng), outside(rng), outside(rng)};
     const std::vector<float> error = ErrorBounds(tree, camera);
-    const float highest = *std::max_element(error.begin(), error.end());
+    // The largest finite E (it is infinite for clusters whose spheres hold the camera).
+    float highest = 0;
+    for (const float e : error) {
+      if (std::isfinite(e)) highest = std::max(highest, e);
+    }
     std::vector<float> thresholds = {0.0f, std::numeric_limits<float>::infinity()};
     for (int k = 0; k <= 24; ++k) thresholds.push_back(highest * std::pow(10.0f, -0.25f * static_cast<float>(k)));
     // Each threshold also just at a point's own E, where ties decide.

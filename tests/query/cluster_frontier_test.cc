@@ -53,8 +53,9 @@ OctantRefineBounds BoundsOf(const NodeCube& node, double shrink) {
   return b;
 }
 
-// E = a / (a / r + q D^2) of any cluster inside the octant's sphere (its own
-// sphere inside it, its bounds at most the octant's) is at most the bound.
+// E = s / sqrt(1 + s / r), s = a / (q D^2), of any cluster inside the
+// octant's sphere (its own sphere inside it, its bounds at most the
+// octant's) is at most the bound.
 TEST(ClusterFrontierTest, TheOctantBoundHoldsEveryClusterInside) {
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> unit(0, 1);
@@ -82,7 +83,8 @@ TEST(ClusterFrontierTest, TheOctantBoundHoldsEveryClusterInside) {
     }
     const double a = bound.mass_variance * unit(rng), r = bound.mass * unit(rng);
     const double gap = std::max(0.0, std::sqrt(distance2) - R);
-    const double error = a / (a / r + q * gap * gap);
+    const double spread = a / (q * gap * gap);
+    const double error = gap > 0 ? spread / std::sqrt(1 + spread / r) : INFINITY;
     EXPECT_LE(error, LargestClusterError(bound, camera, q) * (1 + 1e-12));
   }
   EXPECT_EQ(LargestClusterError(OctantRefineBound{}, {0, 0, 0}, q), 0) << "an octant without clusters";
@@ -125,7 +127,7 @@ TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThre
   // Between: fewer nodes the higher the threshold, each reached where its
   // parent's bound exceeds the threshold.
   std::size_t previous = h.nodes().size() + 1;
-  for (const double threshold : {1e-3, 0.01, 0.05, 0.5}) {
+  for (const double threshold : {0.1, 1.0, 5.0, 50.0, 300.0}) {
     o.threshold = threshold;
     const LodFrontier f = SelectClusterFrontier(h, cube, camera, o, all_loaded);
     EXPECT_LE(f.selected.size(), previous);

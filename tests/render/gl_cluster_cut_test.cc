@@ -79,7 +79,8 @@ std::uint64_t CutOnTheCpu(const Dataset& d, const RenderView& view, double tau) 
       }
       const double gap = std::max(0.0, std::sqrt(distance2) - p.refine_bound[3 * i]);
       const double a = p.refine_bound[3 * i + 1], r = p.refine_bound[3 * i + 2];
-      error[i] = a > 0 && r > 0 ? a / (a / r + q * gap * gap) : 0;
+      const double spread = a / (q * gap * gap);
+      error[i] = !(a > 0 && r > 0) ? 0 : gap > 0 ? spread / std::sqrt(1 + spread / r) : INFINITY;
     }
     links[n] = p.child_cluster;
     // The parent's error of each point: its cluster's, by the parent's links.
