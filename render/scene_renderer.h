@@ -60,7 +60,7 @@ namespace octocosm {
 // zoomed views of the render bench's 10^8 points from a tenth of their
 // full-detail points (docs/ACCURACY.md section 6): where the viewer's
 // overlay starts when cluster by cluster is switched on.
-inline constexpr double kDefaultClusterError = 30;
+inline constexpr double kDefaultClusterError = 100;
 
 struct SceneOptions {
   LodOptions lod;                       // pixel threshold, point budget
