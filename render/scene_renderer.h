@@ -57,7 +57,7 @@
 namespace octocosm {
 
 // A cluster error that reaches about 40 dB against the reference in the
-// zoomed views of the render bench's 10^8 points from a tenth of their
+// zoomed views of the render bench's 10^8 points from an eighth of their
 // full-detail points (docs/ACCURACY.md section 6): where the viewer's
 // overlay starts when cluster by cluster is switched on.
 inline constexpr double kDefaultClusterError = 100;
