@@ -90,15 +90,9 @@ void ClusterLinks::GatherParents(std::uint64_t first, std::span<ClusterCutEntry>
   }
 }
 
-void SetOwnBounds(std::span<const std::uint8_t> bytes, const BlockHeader& header, std::span<ClusterCutEntry> out) {
-  const BlockColumn* bounds = header.Find(ColumnId::kRefineBound);
-  const bool present = bounds != nullptr && bounds->offset <= bytes.size() &&
-                       bounds->length <= bytes.size() - bounds->offset && bounds->length >= 6 * out.size();
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    for (std::size_t k = 0; k < 3; ++k) {
-      out[i].own[k] = present ? GetU16(bytes.data() + bounds->offset + 6 * i + 2 * k) : 0;
-    }
-    out[i].unused = 0;
+void ClusterLinks::SetOwnBounds(std::span<ClusterCutEntry> out) const {
+  for (std::size_t i = 0; i < out.size() && i < cluster_count(); ++i) {
+    for (std::size_t k = 0; k < 3; ++k) out[i].own[k] = codes_[3 * i + k];
   }
 }
 

@@ -57,6 +57,9 @@ class ClusterLinks {
   std::uint32_t cluster_count() const { return static_cast<std::uint32_t>(codes_.size() / 3); }
   // Entries of the child_cluster column: the children's points.
   std::uint64_t entry_count() const { return child_cluster_.size(); }
+  // Sets the own words of out[i] from cluster i, for i < out.size() (at most
+  // cluster_count()).
+  void SetOwnBounds(std::span<ClusterCutEntry> out) const;
   // Sets the parent words of out[i] from entry first + i, for i < out.size().
   // Throws Error::Corruption naming `where` (the child) when the entries run
   // past the column: the child holds points its parent does not link.
@@ -71,9 +74,5 @@ class ClusterLinks {
   std::array<std::int32_t, 3> bases_{};
   OctantRefineBounds octants_{};
 };
-
-// The own words of the cut entries of a block: its bound codes, or zeros
-// when it has none (a leaf). `bytes` and `header` as for FromBlock.
-void SetOwnBounds(std::span<const std::uint8_t> bytes, const BlockHeader& header, std::span<ClusterCutEntry> out);
 
 }  // namespace octocosm

@@ -147,8 +147,8 @@ GpuBlock GpuBlock::Upload(GpuBlockArena& arena, std::span<const std::uint8_t> by
   block.links_ = ClusterLinks::FromBlock(bytes, header, node, where);
   std::vector<ClusterCutEntry> cut_entries;
   if (cut != nullptr) {
-    cut_entries.resize(header.point_count);
-    SetOwnBounds(bytes, header, cut_entries);
+    cut_entries.resize(header.point_count);  // zeros: a leaf's particles have no bounds
+    if (block.links_) block.links_->SetOwnBounds(cut_entries);
     if (cut->parent != nullptr) cut->parent->GatherParents(cut->first_entry, cut_entries, where);
     block.has_cut_ = true;
     block.has_parent_ = cut->parent != nullptr;
