@@ -125,5 +125,41 @@ TEST(DrawPlanTest, ParentsStandInForMissingChildrenWithoutHolesOrOverlap) {
   }
 }
 
+// The cluster cut's plan (PlanClusterDraws): every loaded node reached whose
+// parent is drawn draws its octants, with the cut where the octant's child is
+// drawn too and whatever their error where it is not; a node whose parent is
+// not drawn is not drawn either.
+TEST(DrawPlanTest, TheClusterCutDrawsReachedNodesWithTheirRoles) {
+  const NodeHierarchy h = FullTree(2);
+  const std::int32_t root = 0;
+  const std::int32_t a = h.node(root).children[0], b = h.node(root).children[5];
+  const std::int32_t a_child = h.node(a).children[2], b_child = h.node(b).children[7];
+  LodFrontier f;
+  f.selected = {root, a, b, a_child, b_child};
+  // b is reached but not loaded: its octant of the root is final, and its
+  // child, though loaded, is not drawn.
+  const auto loaded = [&](std::int32_t n) { return n != b; };
+  const DrawPlan plan = PlanClusterDraws(h, f, loaded, Offsets);
+  std::map<std::pair<std::int32_t, std::uint32_t>, CutRole> roles;  // (node, first point) -> role
+  std::uint64_t points = 0;
+  for (const DrawRange& r : plan.ranges) {
+    for (std::uint32_t first = r.first; first < r.first + r.count; first += 100) roles[{r.node, first}] = r.cut;
+    points += r.count;
+  }
+  EXPECT_EQ(points, plan.points);
+  EXPECT_EQ(points, 3u * 800) << "the root, a and a's child";
+  EXPECT_EQ(roles.at({root, 0}), CutRole::kCut) << "a is drawn";
+  EXPECT_EQ(roles.at({root, 500}), CutRole::kCutFinal) << "b is not loaded";
+  EXPECT_EQ(roles.at({root, 300}), CutRole::kCutFinal) << "not reached";
+  EXPECT_EQ(roles.at({a, 200}), CutRole::kCut);
+  EXPECT_EQ(roles.at({a, 0}), CutRole::kCutFinal);
+  EXPECT_EQ(roles.at({a_child, 0}), CutRole::kCutFinal) << "a leaf";
+  EXPECT_FALSE(roles.count({b_child, 0})) << "its parent is not drawn";
+  EXPECT_EQ(plan.stand_ins, 1u) << "the root's octant of b";
+  // Adjacent octants of one role are one draw: the root's octant 0 (kCut),
+  // then octants 1 to 7 (kCutFinal).
+  EXPECT_EQ(std::count_if(plan.ranges.begin(), plan.ranges.end(), [&](const DrawRange& r) { return r.node == root; }), 2);
+}
+
 }  // namespace
 }  // namespace octocosm
