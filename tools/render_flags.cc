@@ -27,8 +27,9 @@ void AddSceneFlags(CLI::App& cmd, SceneFlags& f) {
   cmd.add_option("--error", f.error, "level of detail: refine while points are more than this many pixels apart")->default_val(1);
   cmd.add_option("--cluster-error", f.cluster_error,
                  "level of detail cluster by cluster, where the store links its clusters: draw a cluster where its "
-                 "error bound (the mass its blob spreads over more than a pixel) is at most this many mean particle "
-                 "masses, instead of refining by --error (0: by --error)")
+                 "error bound (its mass times its blob's area on screen, times its radius once larger than a pixel) "
+                 "is at most this many mean particle masses (about 100 for 40 dB), instead of refining by --error "
+                 "(0: by --error)")
       ->default_val(0);
   cmd.add_option("--budget", f.budget, "most points to draw (0: no limit)")->default_val(0);
   cmd.add_flag("--full", f.full, "draw every particle (every leaf in view), ignoring --error and --budget");
