@@ -53,6 +53,20 @@ OctantRefineBounds BoundsOf(const NodeCube& node, double shrink) {
   return b;
 }
 
+// A full tree of 3 levels over the unit cube, every inner node loaded with
+// its octants' bounds.
+struct BoundedTree {
+  BoundedTree() : hierarchy(FullTree(3)), bounds(hierarchy.nodes().size()) {
+    for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n] = BoundsOf(cube.NodeCubeOf(hierarchy.nodes()[n].key), 1);
+  }
+  const OctantRefineBounds* Loaded(std::int32_t n) const {
+    return hierarchy.node(n).is_leaf() ? nullptr : &bounds[static_cast<std::size_t>(n)];
+  }
+  NodeHierarchy hierarchy;
+  Cube cube{{0, 0, 0}, 1, false};
+  std::vector<OctantRefineBounds> bounds;
+};
+
 // E = s / sqrt(1 + s / r), s = a / (q D^2), of any cluster inside the
 // octant's sphere (its own sphere inside it, its bounds at most the
 // octant's) is at most the bound.
@@ -94,13 +108,11 @@ TEST(ClusterFrontierTest, TheOctantBoundHoldsEveryClusterInside) {
 // where the bound exceeds the threshold: the root alone at a threshold above
 // every bound, every node at threshold 0, fewer the higher it is.
 TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThreshold) {
-  const NodeHierarchy h = FullTree(3);
-  const Cube cube{{0, 0, 0}, 1, false};
-  std::vector<OctantRefineBounds> bounds(h.nodes().size());
-  for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n] = BoundsOf(cube.NodeCubeOf(h.nodes()[n].key), 1);
-  const auto all_loaded = [&](std::int32_t n) -> const OctantRefineBounds* {
-    return h.node(n).is_leaf() ? nullptr : &bounds[static_cast<std::size_t>(n)];
-  };
+  const BoundedTree tree;
+  const NodeHierarchy& h = tree.hierarchy;
+  const Cube& cube = tree.cube;
+  const std::vector<OctantRefineBounds>& bounds = tree.bounds;
+  const auto all_loaded = [&](std::int32_t n) { return tree.Loaded(n); };
   ClusterLodOptions o;
   o.focal_pixels = 600;
   const Camera camera = LookingAtTheCube({0.4, 0.5, -2});  // the whole cube in view
@@ -148,13 +160,10 @@ TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThre
 // Out of view, nothing is reached; within the budget, the points of the
 // nodes reached stay within it.
 TEST(ClusterFrontierTest, CullsAndKeepsTheBudget) {
-  const NodeHierarchy h = FullTree(3);
-  const Cube cube{{0, 0, 0}, 1, false};
-  std::vector<OctantRefineBounds> bounds(h.nodes().size());
-  for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n] = BoundsOf(cube.NodeCubeOf(h.nodes()[n].key), 1);
-  const auto loaded = [&](std::int32_t n) -> const OctantRefineBounds* {
-    return h.node(n).is_leaf() ? nullptr : &bounds[static_cast<std::size_t>(n)];
-  };
+  const BoundedTree tree;
+  const NodeHierarchy& h = tree.hierarchy;
+  const Cube& cube = tree.cube;
+  const auto loaded = [&](std::int32_t n) { return tree.Loaded(n); };
   ClusterLodOptions o;
   o.focal_pixels = 600;
   Camera away = LookingAtTheCube({0.5, 0.5, -1});
