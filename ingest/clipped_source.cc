@@ -1,6 +1,8 @@
 #include "ingest/clipped_source.h"
 
 #include <algorithm>
+#include <bit>
+#include <span>
 
 #include "base/error.h"
 
@@ -8,7 +10,7 @@ namespace octocosm {
 namespace {
 
 template <typename T>
-void KeepValues(const std::vector<T>& in, const std::vector<std::size_t>& kept, std::size_t width, std::vector<T>& out) {
+void KeepValues(const std::vector<T>& in, const std::vector<std::uint64_t>& kept, std::size_t width, std::vector<T>& out) {
   out.clear();
   if (in.empty()) return;
   out.reserve(kept.size() * width);
@@ -18,19 +20,11 @@ void KeepValues(const std::vector<T>& in, const std::vector<std::size_t>& kept, 
 
 }  // namespace
 
-ClippedSource::ClippedSource(std::unique_ptr<ParticleSource> inner, const PositionBox& box, const std::string& reason)
+ClippedSource::ClippedSource(std::unique_ptr<ParticleSource> inner, const PositionBox& box, const std::string& reason,
+                             RankGroup* group)
     : inner_(std::move(inner)), box_(box), header_(inner_->header()) {
   const std::uint64_t read_count = header_.total_count;
-  std::fill(header_.count_per_type.begin(), header_.count_per_type.end(), 0);
-  header_.total_count = 0;
-  ParticleChunk kept;
-  while (Next(kept)) {
-    survey_.Add(kept);
-    for (std::uint8_t type : kept.type) {
-      if (type < header_.count_per_type.size()) ++header_.count_per_type[type];
-    }
-    header_.total_count += kept.size();
-  }
+  Count(group);
   counting_ = false;
   inner_->Rewind();
   if (header_.total_count == 0) {
@@ -47,6 +41,49 @@ ClippedSource::ClippedSource(std::unique_ptr<ParticleSource> inner, const Positi
                      {"kept", header_.total_count}});
 }
 
+void ClippedSource::Count(RankGroup* group) {
+  const std::uint64_t ranks = group != nullptr ? static_cast<std::uint64_t>(group->size()) : 1;
+  const std::uint64_t rank = group != nullptr ? static_cast<std::uint64_t>(group->rank()) : 0;
+  std::fill(header_.count_per_type.begin(), header_.count_per_type.end(), 0);
+  header_.total_count = 0;
+  inner_->Rewind();
+  ParticleChunk kept;
+  std::vector<std::uint64_t> indices;
+  std::uint64_t index = 0;  // of the batch's first particle in the inner source
+  for (std::uint64_t batch = 0;; ++batch) {
+    if (batch % ranks != rank) {
+      const std::uint64_t skipped = inner_->Skip();
+      if (skipped == 0) break;
+      index += skipped;
+      continue;
+    }
+    if (!inner_->Next(read_)) break;
+    Keep(read_, kept);
+    indices.resize(kept_.size());
+    for (std::size_t i = 0; i < kept_.size(); ++i) indices[i] = index + kept_[i];
+    index += read_.size();
+    survey_.Add(kept, indices);
+    for (std::uint8_t type : kept.type) {
+      if (type < header_.count_per_type.size()) ++header_.count_per_type[type];
+    }
+    header_.total_count += kept.size();
+  }
+  if (group == nullptr) return;
+  std::vector<std::uint64_t> counts = header_.count_per_type;
+  counts.push_back(header_.total_count);
+  counts.push_back(dropped_);
+  group->Sum(counts);
+  dropped_ = counts.back();
+  header_.total_count = counts[counts.size() - 2];
+  std::copy(counts.begin(), counts.begin() + static_cast<std::ptrdiff_t>(header_.count_per_type.size()),
+            header_.count_per_type.begin());
+  // Distances are >= 0, whose bit patterns order as the values do.
+  std::uint64_t farthest = std::bit_cast<std::uint64_t>(farthest_dropped_);
+  group->Max(std::span<std::uint64_t>(&farthest, 1));
+  farthest_dropped_ = std::bit_cast<double>(farthest);
+  MergeAcrossRanks(survey_, *group);
+}
+
 bool ClippedSource::Next(ParticleChunk& chunk) {
   while (inner_->Next(read_)) {
     Keep(read_, chunk);
@@ -57,8 +94,8 @@ bool ClippedSource::Next(ParticleChunk& chunk) {
 }
 
 void ClippedSource::Keep(const ParticleChunk& in, ParticleChunk& out) {
-  std::vector<std::size_t> kept;
-  kept.reserve(in.size());
+  std::vector<std::uint64_t>& kept = kept_;
+  kept.clear();
   std::uint64_t dropped = 0;
   for (std::size_t i = 0; i < in.size(); ++i) {
     const double* p = &in.position[3 * i];

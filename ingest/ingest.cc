@@ -248,13 +248,16 @@ struct ScreenedEpoch {
 // refuses the epoch for them, or drops them with --drop-outliers. A given
 // cube or a periodic box needs no look: particles outside a periodic box are
 // the reader's error, and a given cube is the user's choice of resolution.
-ScreenedEpoch Screen(std::unique_ptr<ParticleSource> raw, const IngestOptions& options, const std::string& label) {
+// With a group (an epoch spread over ranks), each rank reads its share of
+// the batches for these passes and every rank comes to the same verdict.
+ScreenedEpoch Screen(std::unique_ptr<ParticleSource> raw, const IngestOptions& options, const std::string& label,
+                     RankGroup* group = nullptr) {
   ScreenedEpoch out;
   const SnapshotHeader header = raw->header();
   out.read = header.total_count;
   std::optional<PositionSurvey> survey;
   if (options.clip_box) {
-    auto clipped = std::make_unique<ClippedSource>(std::move(raw), *options.clip_box, "--clip-box");
+    auto clipped = std::make_unique<ClippedSource>(std::move(raw), *options.clip_box, "--clip-box", group);
     out.dropped += clipped->dropped();
     out.passes = true;
     survey = clipped->survey();
@@ -264,7 +267,7 @@ ScreenedEpoch Screen(std::unique_ptr<ParticleSource> raw, const IngestOptions& o
     out.source = std::move(raw);
     return out;
   }
-  if (!survey) survey = SurveyPositions(*raw, label + ": bounds");
+  if (!survey) survey = SurveyPositions(*raw, label + ": bounds", group);
   out.passes = true;
   const OutlierVerdict verdict = JudgeOutliers(*survey);
   if (!verdict.outliers) {
@@ -272,7 +275,7 @@ ScreenedEpoch Screen(std::unique_ptr<ParticleSource> raw, const IngestOptions& o
     out.source = std::move(raw);
     return out;
   }
-  auto kept = std::make_unique<ClippedSource>(std::move(raw), verdict.bulk, "--drop-outliers");
+  auto kept = std::make_unique<ClippedSource>(std::move(raw), verdict.bulk, "--drop-outliers", group);
   if (!options.drop_outliers) RefuseOutliers(header, verdict, kept->dropped(), kept->farthest_dropped());
   out.dropped += kept->dropped();
   out.bounds = kept->survey().bounds();
@@ -754,7 +757,7 @@ std::unique_ptr<ParticleSource> IngestRun::Smooth(std::unique_ptr<ParticleSource
 // Each epoch screened (Screen) before anything else reads it; the smoothing
 // pass then sees only the particles kept.
 std::unique_ptr<ParticleSource> IngestRun::Prepare(std::unique_ptr<ParticleSource> raw, std::size_t e, PhaseClock* clock) {
-  ScreenedEpoch s = Screen(std::move(raw), options_, "epoch " + std::to_string(e));
+  ScreenedEpoch s = Screen(std::move(raw), options_, "epoch " + std::to_string(e), group_);
   if (clock != nullptr && s.passes) clock->Lap("bounds");
   std::unique_ptr<ParticleSource> prepared = Smooth(std::move(s.source));
   screened_[e] = std::move(s);

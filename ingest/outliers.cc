@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
 
 #include "base/error.h"
 #include "base/hash.h"
 #include "base/progress.h"
 #include "index/cube.h"
+#include "storage/coding.h"
 
 namespace octocosm {
 namespace {
@@ -55,26 +57,115 @@ void PositionBox::Validate(const std::string& flag) const {
   }
 }
 
-PositionSurvey::PositionSurvey(std::size_t sample_points)
-    : capacity_(std::max<std::size_t>(sample_points, 1)), random_state_(0x6f63746f636f736dull) {
+PositionSurvey::PositionSurvey(std::size_t sample_points) : capacity_(std::max<std::size_t>(sample_points, 1)) {
   sample_.reserve(std::min<std::size_t>(capacity_, 4096));
 }
 
-void PositionSurvey::Add(const ParticleChunk& chunk) {
-  const std::uint64_t seen_before = bounds_.count;
-  bounds_.Add(chunk);
-  for (std::size_t i = 0; i < chunk.size(); ++i) {
-    const std::array<double, 3> p{chunk.position[3 * i], chunk.position[3 * i + 1], chunk.position[3 * i + 2]};
-    const std::uint64_t seen = seen_before + i;  // particles before this one
-    if (sample_.size() < capacity_) {
-      sample_.push_back(p);
-      continue;
-    }
-    // Reservoir sampling (Vitter's algorithm R): each particle stays in the
-    // sample with probability capacity / (seen + 1).
-    const std::uint64_t slot = SplitMix64(random_state_) % (seen + 1);
-    if (slot < capacity_) sample_[slot] = p;
+namespace {
+
+// A particle's sampling key: its index, hashed (a bijection, so no two
+// particles share a key).
+constexpr std::uint64_t kSampleSeed = 0x6f63746f636f736dull;
+std::uint64_t SampleKey(std::uint64_t index) { return MixBits64(index ^ kSampleSeed); }
+
+}  // namespace
+
+void PositionSurvey::Offer(std::uint64_t key, const double* position) {
+  const auto by_key = [](const Sampled& a, const Sampled& b) { return a.key < b.key; };
+  if (sample_.size() < capacity_) {
+    sample_.push_back({key, {position[0], position[1], position[2]}});
+    if (sample_.size() == capacity_) std::make_heap(sample_.begin(), sample_.end(), by_key);
+    return;
   }
+  if (key >= sample_.front().key) return;
+  std::pop_heap(sample_.begin(), sample_.end(), by_key);
+  sample_.back() = {key, {position[0], position[1], position[2]}};
+  std::push_heap(sample_.begin(), sample_.end(), by_key);
+}
+
+void PositionSurvey::Add(const ParticleChunk& chunk, std::uint64_t first_index) {
+  bounds_.Add(chunk);
+  for (std::size_t i = 0; i < chunk.size(); ++i) Offer(SampleKey(first_index + i), &chunk.position[3 * i]);
+}
+
+void PositionSurvey::Add(const ParticleChunk& chunk, std::span<const std::uint64_t> indices) {
+  if (indices.size() != chunk.size()) {
+    throw std::logic_error("PositionSurvey::Add: " + std::to_string(indices.size()) + " indices for " +
+                           std::to_string(chunk.size()) + " particles");
+  }
+  bounds_.Add(chunk);
+  for (std::size_t i = 0; i < chunk.size(); ++i) Offer(SampleKey(indices[i]), &chunk.position[3 * i]);
+}
+
+void PositionSurvey::Merge(const PositionSurvey& other) {
+  if (other.bounds_.empty()) return;
+  for (int a = 0; a < 3; ++a) {
+    bounds_.lo[a] = std::min(bounds_.lo[a], other.bounds_.lo[a]);
+    bounds_.hi[a] = std::max(bounds_.hi[a], other.bounds_.hi[a]);
+  }
+  bounds_.count += other.bounds_.count;
+  bounds_.mass += other.bounds_.mass;
+  for (const Sampled& s : other.sample_) Offer(s.key, s.position.data());
+}
+
+Bytes PositionSurvey::Encode() const {
+  constexpr std::size_t kHeader = 8 * 10, kEntry = 8 * 4;
+  Bytes out(kHeader + kEntry * sample_.size());
+  std::uint8_t* p = out.data();
+  PutU64(p, capacity_);
+  PutU64(p + 8, bounds_.count);
+  PutF64(p + 16, bounds_.mass);
+  for (int a = 0; a < 3; ++a) {
+    PutF64(p + 24 + 8 * a, bounds_.lo[a]);
+    PutF64(p + 48 + 8 * a, bounds_.hi[a]);
+  }
+  PutU64(p + 72, sample_.size());
+  p += kHeader;
+  // In key order, so that equal surveys are equal bytes.
+  std::vector<Sampled> sorted = sample_;
+  std::sort(sorted.begin(), sorted.end(), [](const Sampled& a, const Sampled& b) { return a.key < b.key; });
+  for (const Sampled& s : sorted) {
+    PutU64(p, s.key);
+    for (int a = 0; a < 3; ++a) PutF64(p + 8 + 8 * a, s.position[a]);
+    p += kEntry;
+  }
+  return out;
+}
+
+PositionSurvey PositionSurvey::Decode(const Bytes& bytes) {
+  constexpr std::size_t kHeader = 8 * 10, kEntry = 8 * 4;
+  const std::uint8_t* p = bytes.data();
+  if (bytes.size() < kHeader || GetU64(p) == 0 || (bytes.size() - kHeader) / kEntry != GetU64(p + 72) ||
+      (bytes.size() - kHeader) % kEntry != 0 || GetU64(p + 72) > GetU64(p)) {
+    throw Error::Corruption("a position survey sent between ranks",
+                            std::to_string(bytes.size()) + " bytes are not a whole survey");
+  }
+  PositionSurvey survey(GetU64(p));
+  survey.bounds_.count = GetU64(p + 8);
+  survey.bounds_.mass = GetF64(p + 16);
+  for (int a = 0; a < 3; ++a) {
+    survey.bounds_.lo[a] = GetF64(p + 24 + 8 * a);
+    survey.bounds_.hi[a] = GetF64(p + 48 + 8 * a);
+  }
+  const std::size_t n = GetU64(p + 72);
+  p += kHeader;
+  for (std::size_t i = 0; i < n; ++i, p += kEntry) {
+    const double position[3] = {GetF64(p + 8), GetF64(p + 16), GetF64(p + 24)};
+    survey.Offer(GetU64(p), position);
+  }
+  return survey;
+}
+
+void MergeAcrossRanks(PositionSurvey& survey, RankGroup& group) {
+  if (group.size() == 1) return;
+  if (group.rank() != 0) {
+    group.Send(0, survey.Encode());
+    survey = PositionSurvey::Decode(group.Receive(0));
+    return;
+  }
+  for (int r = 1; r < group.size(); ++r) survey.Merge(PositionSurvey::Decode(group.Receive(r)));
+  const Bytes merged = survey.Encode();
+  for (int r = 1; r < group.size(); ++r) group.Send(r, merged);
 }
 
 PositionBox PositionSurvey::Core() const {
@@ -84,7 +175,7 @@ PositionBox PositionSurvey::Core() const {
   const std::size_t k = std::min(std::max<std::size_t>(m / 1000, 4), (m - 1) / 2);
   std::vector<double> axis(m);
   for (int a = 0; a < 3; ++a) {
-    for (std::size_t i = 0; i < m; ++i) axis[i] = sample_[i][static_cast<std::size_t>(a)];
+    for (std::size_t i = 0; i < m; ++i) axis[i] = sample_[i].position[static_cast<std::size_t>(a)];
     std::nth_element(axis.begin(), axis.begin() + static_cast<std::ptrdiff_t>(k), axis.end());
     core.lo[static_cast<std::size_t>(a)] = axis[k];
     std::nth_element(axis.begin(), axis.begin() + static_cast<std::ptrdiff_t>(m - 1 - k), axis.end());
@@ -93,18 +184,30 @@ PositionBox PositionSurvey::Core() const {
   return core;
 }
 
-PositionSurvey SurveyPositions(ParticleSource& source, const std::string& progress_label) {
+PositionSurvey SurveyPositions(ParticleSource& source, const std::string& progress_label, RankGroup* group) {
+  const std::uint64_t ranks = group != nullptr ? static_cast<std::uint64_t>(group->size()) : 1;
+  const std::uint64_t rank = group != nullptr ? static_cast<std::uint64_t>(group->rank()) : 0;
   PositionSurvey survey;
-  Progress progress(progress_label, source.header().total_count, "points");
+  Progress progress(progress_label, source.header().total_count / ranks, "points");
   const PositionsOnlyReads positions_only(source);
   source.Rewind();
   ParticleChunk chunk;
-  while (source.Next(chunk)) {
-    survey.Add(chunk);
+  std::uint64_t index = 0;  // of the batch's first particle in the snapshot
+  for (std::uint64_t batch = 0;; ++batch) {
+    if (batch % ranks != rank) {
+      const std::uint64_t skipped = source.Skip();
+      if (skipped == 0) break;
+      index += skipped;
+      continue;
+    }
+    if (!source.Next(chunk)) break;
+    survey.Add(chunk, index);
+    index += chunk.size();
     progress.Add(chunk.size());
   }
   progress.Finish();
   source.Rewind();
+  if (group != nullptr) MergeAcrossRanks(survey, *group);
   return survey;
 }
 

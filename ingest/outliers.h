@@ -14,11 +14,13 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "index/particle_chunk.h"
 #include "ingest/epoch_join.h"
+#include "ingest/rank_group.h"
 #include "ingest/snapshot/snapshot_source.h"
 
 namespace octocosm {
@@ -38,18 +40,27 @@ struct PositionBox {
   void Validate(const std::string& flag) const;
 };
 
-// The sample that finds the bulk: 2^16 positions (1.5 MiB) place the 0.1 %
+// The sample that finds the bulk: 2^16 positions (2 MiB with their keys) place the 0.1 %
 // quantiles to within about 0.01 % of the particles, whatever their number.
 inline constexpr std::size_t kSurveySamplePoints = std::size_t{1} << 16;
 
-// Positions seen in one streaming pass: their exact bounds (and count and
-// mass, as Bounds) and a uniform sample of at most `sample_points` of them
-// (reservoir sampling with a fixed seed, so that the same input in the same
-// order always gives the same sample).
+// Positions seen in streaming passes: their exact bounds (and count and
+// mass, as Bounds) and a uniform sample of at most `sample_points` of them.
+// A particle is sampled by its index in the snapshot's reading order: the
+// `sample_points` particles whose indices hash lowest (bottom-k sampling), so
+// that the sample depends on which particles were seen and never on who saw
+// them or in what order. Ranks that each survey a share of a snapshot and
+// then Merge their surveys hold what one survey of the whole would: the same
+// bounds, count and sample (the mass, a float sum, to rounding).
 class PositionSurvey {
  public:
   explicit PositionSurvey(std::size_t sample_points = kSurveySamplePoints);
-  void Add(const ParticleChunk& chunk);
+  // The particles of `chunk`, particle i at index first_index + i.
+  void Add(const ParticleChunk& chunk, std::uint64_t first_index);
+  // The particles of `chunk`, particle i at index indices[i].
+  void Add(const ParticleChunk& chunk, std::span<const std::uint64_t> indices);
+  // Adds what `other` surveyed (particles this survey has not seen).
+  void Merge(const PositionSurvey& other);
   const Bounds& bounds() const { return bounds_; }
   // The core: per axis, from the sample's k-th smallest to its k-th largest
   // coordinate, k a thousandth of the sample but at least 4 (while the
@@ -57,15 +68,33 @@ class PositionSurvey {
   // sets at least the four most extreme particles per side left out.
   PositionBox Core() const;
 
+  // The survey as bytes (equal surveys, equal bytes), and back (for ranks
+  // to send one another).
+  Bytes Encode() const;
+  static PositionSurvey Decode(const Bytes& bytes);
+
  private:
+  struct Sampled {
+    std::uint64_t key;  // the hash of the particle's index
+    std::array<double, 3> position;
+  };
+  void Offer(std::uint64_t key, const double* position);
+
   std::size_t capacity_;
-  std::vector<std::array<double, 3>> sample_;
+  std::vector<Sampled> sample_;  // a max-heap by key once full
   Bounds bounds_;
-  std::uint64_t random_state_;
 };
 
-// Reads `source` once, from the start, into a survey.
-PositionSurvey SurveyPositions(ParticleSource& source, const std::string& progress_label);
+// Every rank's survey merged, on every rank (rank 0 merges and sends the
+// result back, so no rank holds more than two surveys at once).
+void MergeAcrossRanks(PositionSurvey& survey, RankGroup& group);
+
+// Reads `source` once, from the start, into a survey. With a group, this
+// rank reads only its share of the batches (every size()-th from the
+// rank()-th, skipping the others) and the ranks' surveys are merged: every
+// rank then holds the survey of the whole snapshot.
+PositionSurvey SurveyPositions(ParticleSource& source, const std::string& progress_label,
+                               RankGroup* group = nullptr);
 
 // Finest cells of the full bounding cube below which the bulk's typical
 // spacing may not fall: 2^10, so that positions in the bulk keep ten bits

@@ -22,6 +22,7 @@
 #include "index/store_verify.h"
 #include "tests/ingest/ingest_fixture.h"
 #include "tests/ingest/store_check.h"
+#include "tests/support/thread_rank_group.h"
 
 namespace octocosm {
 namespace {
@@ -49,7 +50,7 @@ PositionSurvey Survey(const std::vector<Particle>& particles) {
     chunk.type.push_back(0);
   }
   PositionSurvey survey;
-  survey.Add(chunk);
+  survey.Add(chunk, 0);
   return survey;
 }
 
@@ -118,15 +119,100 @@ class BatchSource : public ParticleSource {
       return false;
     }
     chunk = batches_[next_++];
+    ++reads_;
     return true;
   }
+  std::uint64_t Skip() override { return next_ == batches_.size() ? 0 : batches_[next_++].size(); }
   void Rewind() override { next_ = 0; }
+  // Batches handed out by Next (not skipped).
+  std::size_t reads() const { return reads_; }
 
  private:
   std::vector<ParticleChunk> batches_;
   SnapshotHeader header_;
   std::size_t next_ = 0;
+  std::size_t reads_ = 0;
 };
+
+// 13 batches of 6,000 to 8,400 particles (more than a survey samples), with
+// masses whose sums are exact in any order.
+std::vector<ParticleChunk> ManyBatches() {
+  std::mt19937_64 random(11);
+  std::normal_distribution<double> bulk(0, 10);
+  std::vector<ParticleChunk> batches(13);
+  for (std::size_t b = 0; b < batches.size(); ++b) {
+    for (std::size_t i = 0; i < 6000 + 200 * b; ++i) {
+      const bool far = i == 17 && b % 4 == 1;
+      for (int a = 0; a < 3; ++a) batches[b].position.push_back(far ? 1e9 * static_cast<double>(b) : bulk(random));
+      batches[b].mass.push_back(static_cast<double>(1 + i % 3));
+      batches[b].id.push_back(b * 100000 + i);
+      batches[b].type.push_back(static_cast<std::uint8_t>(i % 2));
+      batches[b].smoothing.push_back(1);
+      batches[b].velocity.insert(batches[b].velocity.end(), {0, 0, 0});
+    }
+  }
+  return batches;
+}
+
+TEST(PositionSurvey, SurveysOfSharesMergedAreTheSurveyOfTheWholeInAnyOrder) {
+  const std::vector<ParticleChunk> batches = ManyBatches();
+  BatchSource whole_source(batches);
+  const PositionSurvey whole = SurveyPositions(whole_source, "survey");
+  ASSERT_GT(whole.bounds().count, kSurveySamplePoints);
+  const Bytes want = whole.Encode();
+  EXPECT_EQ(PositionSurvey::Decode(want).Encode(), want);
+  // Two halves, merged either way round.
+  std::uint64_t index = 0;
+  PositionSurvey first, second;
+  for (std::size_t b = 0; b < batches.size(); ++b) {
+    (b < 5 ? first : second).Add(batches[b], index);
+    index += batches[b].size();
+  }
+  PositionSurvey first_then_second = first, second_then_first = second;
+  first_then_second.Merge(second);
+  second_then_first.Merge(first);
+  EXPECT_EQ(first_then_second.Encode(), want);
+  EXPECT_EQ(second_then_first.Encode(), want);
+  // Ranks that each read their share of the batches, and skip the others.
+  for (const int ranks : {2, 3, 5}) {
+    SCOPED_TRACE(std::to_string(ranks) + " ranks");
+    std::vector<Bytes> got(static_cast<std::size_t>(ranks));
+    std::vector<std::size_t> reads(static_cast<std::size_t>(ranks));
+    testing_support::RunRanks(ranks, [&](RankGroup& group) {
+      BatchSource share(batches);
+      got[static_cast<std::size_t>(group.rank())] = SurveyPositions(share, "survey", &group).Encode();
+      reads[static_cast<std::size_t>(group.rank())] = share.reads();
+    });
+    for (int r = 0; r < ranks; ++r) {
+      EXPECT_EQ(got[static_cast<std::size_t>(r)], want) << "rank " << r;
+      EXPECT_EQ(reads[static_cast<std::size_t>(r)], (batches.size() - static_cast<std::size_t>(r) + ranks - 1) / ranks)
+          << "rank " << r << " read batches beyond its share";
+    }
+  }
+}
+
+TEST(ClippedSource, RanksCountingSharesHoldTheCountsOfTheWhole) {
+  const std::vector<ParticleChunk> batches = ManyBatches();
+  const PositionBox box{{-100, -100, -100}, {100, 100, 100}};  // drops the far particles
+  const ClippedSource whole(std::make_unique<BatchSource>(batches), box, "test");
+  ASSERT_EQ(whole.dropped(), 3u);
+  ASSERT_GT(whole.farthest_dropped(), 1e9);
+  for (const int ranks : {2, 3}) {
+    SCOPED_TRACE(std::to_string(ranks) + " ranks");
+    testing_support::RunRanks(ranks, [&](RankGroup& group) {
+      auto share = std::make_unique<BatchSource>(batches);
+      const BatchSource* counted = share.get();
+      const ClippedSource clipped(std::move(share), box, "test", &group);
+      EXPECT_LT(counted->reads(), batches.size());
+      EXPECT_EQ(clipped.dropped(), whole.dropped());
+      EXPECT_EQ(clipped.farthest_dropped(), whole.farthest_dropped());
+      EXPECT_EQ(clipped.header().total_count, whole.header().total_count);
+      EXPECT_EQ(clipped.header().count_per_type, whole.header().count_per_type);
+      EXPECT_EQ(clipped.header().extra, whole.header().extra);
+      EXPECT_EQ(clipped.survey().Encode(), whole.survey().Encode());
+    });
+  }
+}
 
 TEST(ClippedSource, KeepsEveryColumnOfTheParticlesInsideAndCountsTheRest) {
   std::vector<ParticleChunk> batches(3);
