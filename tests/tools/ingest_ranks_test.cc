@@ -183,7 +183,8 @@ TEST_F(IngestRanksTest, OneEpochSpreadOverTwoAndFourRanksIsTheStoreOneProcessWri
 }
 
 // 12,000 particles in two clumps and a background, without a box, as CSV;
-// particle `repeat.to` (if any) is given the ID of particle `repeat.from`.
+// particle `repeat.to` (if any) is given the ID of particle `repeat.from`;
+// the `far` particles read last lie 10^12 and more away.
 struct Repeat {
   int from = -1, to = -1;
 };
@@ -194,7 +195,7 @@ std::uint64_t ClumpsId(int i, Ids ids = Ids::kCompact) {
   const std::uint64_t n = static_cast<std::uint64_t>(i);
   return ids == Ids::kCompact ? 100 + 3 * n : (n + 1) * 0x9E3779B97F4A7C15ull;
 }
-void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}, Ids ids = Ids::kCompact) {
+void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}, Ids ids = Ids::kCompact, int far = 0) {
   std::mt19937_64 random(5);
   std::normal_distribution<double> clump(0, 0.3);
   std::uniform_real_distribution<double> background(-20, 35);
@@ -203,17 +204,21 @@ void WriteClumpsCsv(const std::string& csv, Repeat repeat = {}, Ids ids = Ids::k
   for (int i = 0; i < 12000; ++i) {
     const bool in_clump = i % 3 != 0;
     const double c = in_clump ? (i % 2 ? 4.0 : -7.0) : 0;
-    for (int k = 0; k < 3; ++k) out << (in_clump ? c + clump(random) : background(random)) << ",";
+    for (int k = 0; k < 3; ++k) {
+      const double x = in_clump ? c + clump(random) : background(random);
+      out << (i >= 12000 - far ? 1e12 * (12001 - i) + x : x) << ",";
+    }
     out << 1 + (i % 5) << "," << ClumpsId(i == repeat.to ? repeat.from : i, ids) << "\n";
   }
 }
 
 // octocosm ingest of a CSV file in batches of 500 particles, on `ranks` MPI
 // ranks (0: no mpirun).
-std::string SpreadCsvCommand(const std::string& csv, const std::string& store, int ranks) {
+std::string SpreadCsvCommand(const std::string& csv, const std::string& store, int ranks,
+                             const std::string& flags = "") {
   std::string command = ranks > 0 ? std::string(MPIEXEC) + " -n " + std::to_string(ranks) + " " : std::string();
-  return command + OCTOCOSM_BINARY + " ingest -q -n 150 --chunk-particles 500 --memory 64M --neighbours 0 -o " +
-         store + " " + csv;
+  return command + OCTOCOSM_BINARY + " ingest -q -n 150 --chunk-particles 500 --memory 64M --neighbours 0 " + flags +
+         " -o " + store + " " + csv;
 }
 
 // Without a periodic box every rank finds the same bounding cube; a CSV
@@ -250,6 +255,41 @@ TEST_F(IngestRanksTest, ASpreadSnapshotWithoutABoxIsTheStoreOneProcessWrites) {
       EXPECT_EQ(verify.status, 0) << verify.Describe();
     }
   }
+}
+
+// Far outliers dropped (--drop-outliers) or a box clipped (--clip-box) over
+// ranks: each rank surveys and counts its share of the batches, and the
+// ranks agree on one verdict, the bulk's cube and the counts a single
+// process finds; the store is that process's.
+TEST_F(IngestRanksTest, OutliersDroppedOrABoxClippedOverRanksGiveTheStoreOneProcessWrites) {
+  const std::string csv = (dir_.path() / "far.csv").string();
+  WriteClumpsCsv(csv, {}, Ids::kCompact, 3);
+  for (const std::string flags : {"--drop-outliers", "--clip-box -10,-10,-10,10,10,10"}) {
+    SCOPED_TRACE(flags);
+    const std::string single = (dir_.path() / "single").string();
+    fs::remove_all(single);
+    const ProgramRun one = Run(SpreadCsvCommand(csv, single, 0, flags));
+    ASSERT_EQ(one.status, 0) << one.Describe();
+    const Dataset expected = Dataset::Open(single);
+    ASSERT_LE(expected.store().dataset().at("epochs").at(0).at("points").get<std::uint64_t>(), 12000u - 3);
+    for (int ranks : {2, 3}) {
+      SCOPED_TRACE(std::to_string(ranks) + " ranks");
+      const std::string store = (dir_.path() / ("spread-" + std::to_string(ranks))).string();
+      fs::remove_all(store);
+      const ProgramRun run = Run(SpreadCsvCommand(csv, store, ranks, flags), kMpiEnvironment);
+      ASSERT_EQ(run.status, 0) << run.Describe();
+      const Dataset got = Dataset::Open(store);
+      EXPECT_EQ(got.store().dataset(), expected.store().dataset());
+      EXPECT_TRUE(EpochBlocks(got, 0) == EpochBlocks(expected, 0)) << "the blocks differ";
+    }
+  }
+  // Without a way out, every rank refuses the far particles as one process does.
+  const std::string store = (dir_.path() / "refused").string();
+  const ProgramRun refused = Run(SpreadCsvCommand(csv, store, 2), kMpiEnvironment);
+  EXPECT_NE(refused.status, 0) << refused.Describe();
+  EXPECT_NE(refused.output.find("3 particles lie"), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find("far.csv"), std::string::npos) << refused.output;
+  EXPECT_FALSE(fs::exists(store)) << "left behind: " << store;
 }
 
 // Two particles with one ID that different ranks read (each rank reads
