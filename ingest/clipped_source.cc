@@ -46,28 +46,18 @@ void ClippedSource::Count(RankGroup* group) {
   const std::uint64_t rank = group != nullptr ? static_cast<std::uint64_t>(group->rank()) : 0;
   std::fill(header_.count_per_type.begin(), header_.count_per_type.end(), 0);
   header_.total_count = 0;
-  inner_->Rewind();
   ParticleChunk kept;
   std::vector<std::uint64_t> indices;
-  std::uint64_t index = 0;  // of the batch's first particle in the inner source
-  for (std::uint64_t batch = 0;; ++batch) {
-    if (batch % ranks != rank) {
-      const std::uint64_t skipped = inner_->Skip();
-      if (skipped == 0) break;
-      index += skipped;
-      continue;
-    }
-    if (!inner_->Next(read_)) break;
-    Keep(read_, kept);
+  ReadShare(*inner_, ranks, rank, read_, [&](const ParticleChunk& batch, std::uint64_t first_index) {
+    Keep(batch, kept);
     indices.resize(kept_.size());
-    for (std::size_t i = 0; i < kept_.size(); ++i) indices[i] = index + kept_[i];
-    index += read_.size();
+    for (std::size_t i = 0; i < kept_.size(); ++i) indices[i] = first_index + kept_[i];
     survey_.Add(kept, indices);
     for (std::uint8_t type : kept.type) {
       if (type < header_.count_per_type.size()) ++header_.count_per_type[type];
     }
     header_.total_count += kept.size();
-  }
+  });
   if (group == nullptr) return;
   std::vector<std::uint64_t> counts = header_.count_per_type;
   counts.push_back(header_.total_count);

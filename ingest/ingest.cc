@@ -526,19 +526,11 @@ struct EpochPoints {
   // only where the source cannot seek); returns how many batches the epoch
   // has. Not for a joined pass, which has no batches of the source's.
   std::uint64_t PassShare(std::uint64_t every, std::uint64_t first, const std::function<void(const ParticleChunk&)>& consume) {
-    source->Rewind();
     ParticleChunk chunk;
-    std::uint64_t batch = 0;
-    for (;; ++batch) {
-      if (batch % every != first) {
-        if (source->Skip() == 0) break;
-        continue;
-      }
-      if (!source->Next(chunk)) break;
-      if (cube.periodic && !InsideBox(chunk, cube)) WrapIntoBox(chunk, cube);
-      consume(chunk);
-    }
-    return batch;
+    return ReadShare(*source, every, first, chunk, [&](ParticleChunk& batch, std::uint64_t) {
+      if (cube.periodic && !InsideBox(batch, cube)) WrapIntoBox(batch, cube);
+      consume(batch);
+    });
   }
 
   void Pass(const std::function<void(const ParticleChunk&)>& consume) {

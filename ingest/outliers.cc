@@ -190,21 +190,11 @@ PositionSurvey SurveyPositions(ParticleSource& source, const std::string& progre
   PositionSurvey survey;
   Progress progress(progress_label, source.header().total_count / ranks, "points");
   const PositionsOnlyReads positions_only(source);
-  source.Rewind();
   ParticleChunk chunk;
-  std::uint64_t index = 0;  // of the batch's first particle in the snapshot
-  for (std::uint64_t batch = 0;; ++batch) {
-    if (batch % ranks != rank) {
-      const std::uint64_t skipped = source.Skip();
-      if (skipped == 0) break;
-      index += skipped;
-      continue;
-    }
-    if (!source.Next(chunk)) break;
-    survey.Add(chunk, index);
-    index += chunk.size();
-    progress.Add(chunk.size());
-  }
+  ReadShare(source, ranks, rank, chunk, [&](const ParticleChunk& batch, std::uint64_t first_index) {
+    survey.Add(batch, first_index);
+    progress.Add(batch.size());
+  });
   progress.Finish();
   source.Rewind();
   if (group != nullptr) MergeAcrossRanks(survey, *group);

@@ -189,6 +189,32 @@ class PositionsOnlyReads {
   ParticleSource& source_;
 };
 
+// Reads `source` from its start, handing `consume(batch, first_index)` the
+// batches of one reader's share among `every` readers: batches first,
+// first + every, first + 2 every, ..., the others skipped
+// (ParticleSource::Skip); `first_index` is the index of the batch's first
+// particle in the source's order, whoever reads it. `batch` is `chunk`,
+// which `consume` may change. Returns the batches passed in all.
+template <typename Consume>
+std::uint64_t ReadShare(ParticleSource& source, std::uint64_t every, std::uint64_t first, ParticleChunk& chunk,
+                        Consume&& consume) {
+  source.Rewind();
+  std::uint64_t index = 0, batch = 0;
+  for (;; ++batch) {
+    if (batch % every != first) {
+      const std::uint64_t skipped = source.Skip();
+      if (skipped == 0) break;
+      index += skipped;
+      continue;
+    }
+    if (!source.Next(chunk)) break;
+    const std::uint64_t size = chunk.size();
+    consume(chunk, index);
+    index += size;
+  }
+  return batch;
+}
+
 // Opens a snapshot. `path` is a single file, any one file of a multi-file set
 // (snap.1, snap.2.hdf5), or the base name of a set (snap -> snap.0, snap.1, ...
 // or snap.0.hdf5, ...).
