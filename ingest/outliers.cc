@@ -68,6 +68,10 @@ namespace {
 constexpr std::uint64_t kSampleSeed = 0x6f63746f636f736dull;
 std::uint64_t SampleKey(std::uint64_t index) { return MixBits64(index ^ kSampleSeed); }
 
+// An encoded survey: u64 capacity, u64 count, f64 mass, f64 lo[3], f64
+// hi[3], u64 entries; then each entry's u64 key and f64 position[3].
+constexpr std::size_t kEncodedHeader = 8 * 10, kEncodedEntry = 8 * 4;
+
 }  // namespace
 
 void PositionSurvey::Offer(std::uint64_t key, const double* position) {
@@ -109,8 +113,7 @@ void PositionSurvey::Merge(const PositionSurvey& other) {
 }
 
 Bytes PositionSurvey::Encode() const {
-  constexpr std::size_t kHeader = 8 * 10, kEntry = 8 * 4;
-  Bytes out(kHeader + kEntry * sample_.size());
+  Bytes out(kEncodedHeader + kEncodedEntry * sample_.size());
   std::uint8_t* p = out.data();
   PutU64(p, capacity_);
   PutU64(p + 8, bounds_.count);
@@ -120,23 +123,23 @@ Bytes PositionSurvey::Encode() const {
     PutF64(p + 48 + 8 * a, bounds_.hi[a]);
   }
   PutU64(p + 72, sample_.size());
-  p += kHeader;
+  p += kEncodedHeader;
   // In key order, so that equal surveys are equal bytes.
   std::vector<Sampled> sorted = sample_;
   std::sort(sorted.begin(), sorted.end(), [](const Sampled& a, const Sampled& b) { return a.key < b.key; });
   for (const Sampled& s : sorted) {
     PutU64(p, s.key);
     for (int a = 0; a < 3; ++a) PutF64(p + 8 + 8 * a, s.position[a]);
-    p += kEntry;
+    p += kEncodedEntry;
   }
   return out;
 }
 
 PositionSurvey PositionSurvey::Decode(const Bytes& bytes) {
-  constexpr std::size_t kHeader = 8 * 10, kEntry = 8 * 4;
   const std::uint8_t* p = bytes.data();
-  if (bytes.size() < kHeader || GetU64(p) == 0 || (bytes.size() - kHeader) / kEntry != GetU64(p + 72) ||
-      (bytes.size() - kHeader) % kEntry != 0 || GetU64(p + 72) > GetU64(p)) {
+  const bool whole = bytes.size() >= kEncodedHeader && (bytes.size() - kEncodedHeader) % kEncodedEntry == 0;
+  if (!whole || GetU64(p) == 0 || (bytes.size() - kEncodedHeader) / kEncodedEntry != GetU64(p + 72) ||
+      GetU64(p + 72) > GetU64(p)) {
     throw Error::Corruption("a position survey sent between ranks",
                             std::to_string(bytes.size()) + " bytes are not a whole survey");
   }
@@ -148,8 +151,8 @@ PositionSurvey PositionSurvey::Decode(const Bytes& bytes) {
     survey.bounds_.hi[a] = GetF64(p + 48 + 8 * a);
   }
   const std::size_t n = GetU64(p + 72);
-  p += kHeader;
-  for (std::size_t i = 0; i < n; ++i, p += kEntry) {
+  p += kEncodedHeader;
+  for (std::size_t i = 0; i < n; ++i, p += kEncodedEntry) {
     const double position[3] = {GetF64(p + 8), GetF64(p + 16), GetF64(p + 24)};
     survey.Offer(GetU64(p), position);
   }
