@@ -7,10 +7,11 @@
 //
 // A node's clusters tell, once its block is loaded, how far below them the
 // cut can reach: for each child octant, a sphere holding the spheres of the
-// octant's clusters and the largest of their bounds (OctantRefineBound).
-// From them the largest E any of the octant's clusters may have follows
-// (E grows with a and r and shrinks with the distance D), and the child is
-// needed only where that exceeds tau. Starting from the root, nodes are
+// octant's clusters and the largest of their bounds (OctantRefineBound),
+// and a tree of such spheres down to each cluster's (NodeRefineBounds).
+// From a sphere the largest E any cluster inside may have follows (E grows
+// with a and r and shrinks with the distance D), and the child is needed
+// only where one of the octant's clusters may exceed tau. Starting from the root, nodes are
 // reached in order of that bound (largest first) through loaded parents, so
 // a frame reaches one level further for each level whose blocks have
 // arrived; a renderer that waits for its blocks selects again until nothing
@@ -26,6 +27,8 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <span>
+#include <vector>
 
 #include "index/cube.h"
 #include "index/node_hierarchy.h"
@@ -44,6 +47,38 @@ struct OctantRefineBound {
   double mass = 0;
 };
 using OctantRefineBounds = std::array<OctantRefineBound, 8>;
+
+// What a loaded node's clusters tell the frontier: for each child octant, a
+// tree of bounds over its clusters (QSplat's bounding spheres): level 0 each
+// cluster's own sphere and bounds, ordered along a Morton curve; each entry
+// of level k + 1 the bound of up to kFanOut consecutive entries of level k;
+// the last level a few entries. Where an octant's bound exceeds the
+// threshold the frontier descends it, so that a child is reached only where
+// one of its clusters needs it, not wherever the heaviest cluster's bound
+// meets the nearest one's distance. Without trees the octants' bounds alone
+// decide.
+struct NodeRefineBounds {
+  static constexpr std::size_t kFanOut = 8;
+  // A bound of the tree: its sphere's centre relative to the node's corner,
+  // in floats, the radius grown and the bounds rounded up to hold what they
+  // stand for (24 bytes a cluster instead of 48).
+  struct Sphere {
+    std::array<float, 3> centre{};
+    float radius = -1;
+    float mass_variance = 0;
+    float mass = 0;
+  };
+  using Tree = std::vector<std::vector<Sphere>>;
+  OctantRefineBounds octants;
+  std::array<double, 3> corner{};  // the node's, world units
+  std::array<Tree, 8> trees;
+
+  // The bounds of a node's clusters, `clusters` each as its own bound (a
+  // sphere about its position), the clusters of child octant o from
+  // octant_first[o] to octant_first[o + 1] (clamped to the clusters).
+  static NodeRefineBounds Of(const NodeCube& node, std::span<const OctantRefineBound> clusters,
+                             const std::array<std::uint32_t, 9>& octant_first);
+};
 
 // The largest error E = s / sqrt(1 + s / r), s = a / (q D^2), that a cluster
 // of the octant may have seen from `camera`, with q = (half a pixel / focal
@@ -67,6 +102,6 @@ struct ClusterLodOptions {
 // a focal length that is not > 0, or a negative margin.
 LodFrontier SelectClusterFrontier(const NodeHierarchy& hierarchy, const Cube& cube, const Camera& camera,
                                   const ClusterLodOptions& options,
-                                  const std::function<const OctantRefineBounds*(std::int32_t)>& bounds);
+                                  const std::function<const NodeRefineBounds*(std::int32_t)>& bounds);
 
 }  // namespace octocosm

@@ -52,27 +52,18 @@ std::unique_ptr<const ClusterLinks> ClusterLinks::FromBlock(std::span<const std:
   }
   for (int k = 0; k < 3; ++k) l->bases_[static_cast<std::size_t>(k)] = static_cast<std::int32_t>(GetU32(bounds->params.data() + 4 * k));
 
-  // Each octant's sphere about its cube's centre.
-  const double quantum = node.size / 65536.0, half = node.size / 4;
-  for (int o = 0; o < 8; ++o) {
-    OctantRefineBound& b = l->octants_[static_cast<std::size_t>(o)];
-    for (int a = 0; a < 3; ++a) {
-      b.centre[static_cast<std::size_t>(a)] = node.origin[static_cast<std::size_t>(a)] + half * (((o >> a) & 1) ? 3 : 1);
-    }
-    const std::uint32_t end = std::min<std::uint32_t>(header.octant_offsets[static_cast<std::size_t>(o) + 1], header.point_count);
-    for (std::uint32_t i = header.octant_offsets[static_cast<std::size_t>(o)]; i < end; ++i) {
-      double d2 = 0;
-      for (int a = 0; a < 3; ++a) {
-        const double x = node.origin[static_cast<std::size_t>(a)] + (l->position_[3 * i + a] + 0.5) * quantum;
-        const double d = x - b.centre[static_cast<std::size_t>(a)];
-        d2 += d * d;
-      }
-      const float* v = decoded.refine_bound.data() + 3 * std::size_t{i};
-      b.radius = std::max(b.radius, std::sqrt(d2) + v[0]);
-      b.mass_variance = std::max(b.mass_variance, double{v[1]});
-      b.mass = std::max(b.mass, double{v[2]});
-    }
+  // Each cluster's sphere about its position, and its bounds.
+  const double quantum = node.size / 65536.0;
+  std::vector<OctantRefineBound> clusters(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    OctantRefineBound& cluster = clusters[i];
+    for (std::size_t a = 0; a < 3; ++a) cluster.centre[a] = node.origin[a] + (l->position_[3 * i + a] + 0.5) * quantum;
+    const float* v = decoded.refine_bound.data() + 3 * i;
+    cluster.radius = v[0];
+    cluster.mass_variance = v[1];
+    cluster.mass = v[2];
   }
+  l->bounds_ = NodeRefineBounds::Of(node, clusters, header.octant_offsets);
   return l;
 }
 

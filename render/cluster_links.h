@@ -2,8 +2,8 @@
 // linked to its children's points (index/block_codec.h, columns 13 and 14),
 // for the level of detail that refines cluster by cluster
 // (query/cluster_frontier.h, docs/RENDERING.md):
-// - the bounds of each child octant's clusters, from which the frontier
-//   tells whether the child is needed;
+// - the bounds of each child octant's clusters, and each cluster's, from
+//   which the frontier tells whether the child is needed;
 // - each cluster's position and bound codes as stored, and the link from
 //   each child point to its cluster, from which a child's upload gathers,
 //   for each of its points, its parent cluster's position and bounds. With
@@ -52,7 +52,7 @@ class ClusterLinks {
   static std::unique_ptr<const ClusterLinks> FromBlock(std::span<const std::uint8_t> bytes, const BlockHeader& header,
                                                        const NodeCube& node, const std::string& where);
 
-  const OctantRefineBounds& octant_bounds() const { return octants_; }
+  const NodeRefineBounds& refine_bounds() const { return bounds_; }
   const std::array<std::int32_t, 3>& bases() const { return bases_; }
   std::uint32_t cluster_count() const { return static_cast<std::uint32_t>(codes_.size() / 3); }
   // Entries of the child_cluster column: the children's points.
@@ -72,7 +72,7 @@ class ClusterLinks {
   std::vector<std::uint16_t> codes_;     // 3 bound codes per cluster, as stored
   std::vector<std::uint32_t> child_cluster_;
   std::array<std::int32_t, 3> bases_{};
-  OctantRefineBounds octants_{};
+  NodeRefineBounds bounds_;
 };
 
 }  // namespace octocosm

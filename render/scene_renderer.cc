@@ -338,10 +338,10 @@ LodFrontier SceneRenderer::SelectFrontier(const RenderView& view, std::uint32_t 
   cut.point_budget = lod.point_budget;
   cut.cull_margin = lod.cull_margin;
   return SelectClusterFrontier(hierarchy(epoch), dataset_.cube(epoch), view.camera(), cut,
-                               [&](std::int32_t node) -> const OctantRefineBounds* {
+                               [&](std::int32_t node) -> const NodeRefineBounds* {
                                  const Resident* r = FindResident({epoch, node});
                                  if (r == nullptr || !r->block.has_cut() || r->block.links() == nullptr) return nullptr;
-                                 return &r->block.links()->octant_bounds();
+                                 return &r->block.links()->refine_bounds();
                                });
 }
 

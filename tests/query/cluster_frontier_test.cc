@@ -2,6 +2,7 @@
 // in memory, with octant bounds made up for them.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <set>
@@ -57,14 +58,14 @@ OctantRefineBounds BoundsOf(const NodeCube& node, double shrink) {
 // its octants' bounds.
 struct BoundedTree {
   BoundedTree() : hierarchy(FullTree(3)), bounds(hierarchy.nodes().size()) {
-    for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n] = BoundsOf(cube.NodeCubeOf(hierarchy.nodes()[n].key), 1);
+    for (std::size_t n = 0; n < bounds.size(); ++n) bounds[n].octants = BoundsOf(cube.NodeCubeOf(hierarchy.nodes()[n].key), 1);
   }
-  const OctantRefineBounds* Loaded(std::int32_t n) const {
+  const NodeRefineBounds* Loaded(std::int32_t n) const {
     return hierarchy.node(n).is_leaf() ? nullptr : &bounds[static_cast<std::size_t>(n)];
   }
   NodeHierarchy hierarchy;
   Cube cube{{0, 0, 0}, 1, false};
-  std::vector<OctantRefineBounds> bounds;
+  std::vector<NodeRefineBounds> bounds;  // the octants' bounds alone
 };
 
 // E = s / sqrt(1 + s / r), s = a / (q D^2), of any cluster inside the
@@ -111,7 +112,7 @@ TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThre
   const BoundedTree tree;
   const NodeHierarchy& h = tree.hierarchy;
   const Cube& cube = tree.cube;
-  const std::vector<OctantRefineBounds>& bounds = tree.bounds;
+  const std::vector<NodeRefineBounds>& bounds = tree.bounds;
   const auto all_loaded = [&](std::int32_t n) { return tree.Loaded(n); };
   ClusterLodOptions o;
   o.focal_pixels = 600;
@@ -132,7 +133,7 @@ TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThre
   EXPECT_EQ(SelectClusterFrontier(h, cube, camera, o, all_loaded).selected.size(), 1u) << "the root alone";
 
   // Only the root loaded: its children are reached, nothing below them.
-  const auto root_loaded = [&](std::int32_t n) -> const OctantRefineBounds* { return n == 0 ? &bounds[0] : nullptr; };
+  const auto root_loaded = [&](std::int32_t n) -> const NodeRefineBounds* { return n == 0 ? &bounds[0] : nullptr; };
   o.threshold = 0;
   EXPECT_EQ(SelectClusterFrontier(h, cube, camera, o, root_loaded).selected.size(), 9u);
 
@@ -149,12 +150,93 @@ TEST(ClusterFrontierTest, ReachesThroughLoadedParentsWhereTheBoundExceedsTheThre
       if (parent < 0) continue;
       const int octant = static_cast<int>(h.node(n).key.value() & 7);
       const double q = std::pow(0.5 / o.focal_pixels, 2);
-      EXPECT_GT(LargestClusterError(bounds[static_cast<std::size_t>(parent)][static_cast<std::size_t>(octant)],
+      EXPECT_GT(LargestClusterError(bounds[static_cast<std::size_t>(parent)].octants[static_cast<std::size_t>(octant)],
                                     camera.position, q) * (1 + 1e-4), threshold);
     }
   }
   EXPECT_LT(previous, h.nodes().size());
   EXPECT_GT(previous, 1u);
+}
+
+// A node's clusters in its child octants, each in its octant's cube with a
+// small sphere of its own, bounds spread over decades (a few heavy ones).
+struct ClusteredNode {
+  explicit ClusteredNode(std::uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> unit(0, 1);
+    for (std::uint32_t o = 0; o < 8; ++o) {
+      octant_first[o] = static_cast<std::uint32_t>(clusters.size());
+      const std::size_t count = o == 5 ? 0 : 50 + rng() % 400;  // octant 5 holds none
+      for (std::size_t i = 0; i < count; ++i) {
+        OctantRefineBound c;
+        for (std::size_t a = 0; a < 3; ++a) c.centre[a] = 0.5 * (((o >> a) & 1) + unit(rng));
+        c.radius = 0.01 * unit(rng);
+        c.mass = std::pow(10.0, -3 * unit(rng));
+        c.mass_variance = c.mass * 1e-4 * std::pow(10.0, -2 * unit(rng));
+        clusters.push_back(c);
+      }
+    }
+    octant_first[8] = static_cast<std::uint32_t>(clusters.size());
+    bounds = NodeRefineBounds::Of(NodeCube{{0, 0, 0}, 1}, clusters, octant_first);
+  }
+  // The largest error of the clusters of octant o, one by one.
+  double LargestError(std::uint32_t o, const std::array<double, 3>& camera, double q) const {
+    double largest = 0;
+    for (std::uint32_t i = octant_first[o]; i < octant_first[o + 1]; ++i) {
+      largest = std::max(largest, LargestClusterError(clusters[i], camera, q));
+    }
+    return largest;
+  }
+  std::vector<OctantRefineBound> clusters;
+  std::array<std::uint32_t, 9> octant_first{};
+  NodeRefineBounds bounds;
+};
+
+// With each cluster's bounds, a child is reached exactly where one of its
+// octant's clusters may exceed the threshold, however the heaviest and the
+// nearest lie; the octants' bounds alone reach more.
+TEST(ClusterFrontierTest, ReachesAChildExactlyWhereOneOfItsClustersNeedsIt) {
+  const NodeHierarchy h = FullTree(1);
+  const Cube cube{{0, 0, 0}, 1, false};
+  std::size_t exact_reached = 0, octants_reached = 0;
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+    const ClusteredNode node(seed);
+    NodeRefineBounds octants_alone;
+    octants_alone.octants = node.bounds.octants;
+    for (std::uint32_t o = 0; o < 8; ++o) {
+      const std::size_t members = node.octant_first[o + 1] - node.octant_first[o];
+      EXPECT_EQ(node.bounds.trees[o].empty() ? 0 : node.bounds.trees[o][0].size(), members);
+    }
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> unit(0, 1);
+    // The whole cube in view, from near and far.
+    const Camera camera = LookingAtTheCube({unit(rng), unit(rng), -2 - 3 * unit(rng)});
+    ClusterLodOptions o;
+    o.focal_pixels = 600;
+    const double q = std::pow(0.5 / o.focal_pixels, 2);
+    for (const double threshold : {0.03, 0.1, 0.3, 1.0, 3.0}) {
+      o.threshold = threshold;
+      const LodFrontier exact = SelectClusterFrontier(h, cube, camera, o, [&](std::int32_t n) {
+        return n == 0 ? &node.bounds : nullptr;
+      });
+      const LodFrontier coarse = SelectClusterFrontier(h, cube, camera, o, [&](std::int32_t n) {
+        return n == 0 ? &octants_alone : nullptr;
+      });
+      std::set<std::int32_t> expected = {0};
+      for (std::uint32_t octant = 0; octant < 8; ++octant) {
+        if (node.LargestError(octant, camera.position, q) * (1 + 1e-4) > threshold) {
+          expected.insert(h.node(0).children[octant]);
+        }
+      }
+      ASSERT_EQ(exact.nodes_culled, 0u);
+      EXPECT_EQ(std::set<std::int32_t>(exact.selected.begin(), exact.selected.end()), expected)
+          << "seed " << seed << ", threshold " << threshold;
+      EXPECT_LE(exact.selected.size(), coarse.selected.size());
+      exact_reached += exact.selected.size();
+      octants_reached += coarse.selected.size();
+    }
+  }
+  EXPECT_LT(exact_reached, octants_reached) << "the octants' bounds alone reach children no cluster needs";
 }
 
 // Out of view, nothing is reached; within the budget, the points of the
