@@ -288,9 +288,10 @@ FrameStats SceneRenderer::Render(const RenderView& view, double time, bool compl
   UploadArrived(needed, complete, stats);
   // The cluster frontier reaches a level further through each level of
   // blocks that arrives: select again until nothing new is reached (a
-  // streamed frame: nothing new has arrived).
+  // streamed frame: nothing new has arrived). Where nothing was uploaded
+  // (a warm frame) the same blocks would give the same frontier.
   double reselect_ms = 0;
-  while (stats.cluster_cut) {
+  while (stats.cluster_cut && stats.blocks_uploaded > 0) {
     const std::uint64_t reached = stats.nodes_selected, uploaded = stats.blocks_uploaded;
     const auto select_clock = std::chrono::steady_clock::now();
     SelectFrontiers(view, copies, stats);
