@@ -17,9 +17,12 @@ namespace {
 // picture, never break the cut).
 constexpr double kFloatSlack = 1e-4;
 
-// E = s / sqrt(1 + s / r), s = a / (q D^2), at the gap D between the camera
-// and a sphere (infinite at 0).
-double ErrorAtGap(double gap, double mass_variance, double mass, double q) {
+// The largest E = s / sqrt(1 + s / r), s = a / (q D^2), inside a sphere of
+// `radius` whose centre lies `distance` from the camera: D the gap between
+// them (E infinite at 0); 0 for an empty sphere (radius < 0).
+double LargestErrorInSphere(double distance, double radius, double mass_variance, double mass, double q) {
+  if (radius < 0 || !(mass_variance > 0) || !(mass > 0)) return 0;
+  const double gap = std::max(0.0, distance - radius);
   if (!(gap > 0)) return INFINITY;
   const double spread = mass_variance / (q * gap * gap);
   return std::isfinite(spread) ? spread / std::sqrt(1 + spread / mass) : INFINITY;
@@ -31,14 +34,13 @@ bool Exceeds(const OctantRefineBound& bound, const std::array<double, 3>& camera
 
 // `camera` relative to the node's corner.
 bool Exceeds(const NodeRefineBounds::Sphere& bound, const std::array<double, 3>& camera, double q, double threshold) {
-  if (bound.radius < 0 || !(bound.mass_variance > 0) || !(bound.mass > 0)) return false;
   double d2 = 0;
   for (std::size_t a = 0; a < 3; ++a) {
     const double d = double{bound.centre[a]} - camera[a];
     d2 += d * d;
   }
-  const double gap = std::max(0.0, std::sqrt(d2) - bound.radius);
-  return ErrorAtGap(gap, bound.mass_variance, bound.mass, q) * (1 + kFloatSlack) > threshold;
+  return LargestErrorInSphere(std::sqrt(d2), bound.radius, bound.mass_variance, bound.mass, q) * (1 + kFloatSlack) >
+         threshold;
 }
 
 // The float nearest above v (v finite and >= 0).
@@ -179,10 +181,8 @@ NodeRefineBounds NodeRefineBounds::Of(const NodeCube& node, std::span<const Octa
 }
 
 double LargestClusterError(const OctantRefineBound& bound, const std::array<double, 3>& camera, double q) {
-  if (bound.radius < 0 || !(bound.mass_variance > 0) || !(bound.mass > 0)) return 0;
   const double dx = bound.centre[0] - camera[0], dy = bound.centre[1] - camera[1], dz = bound.centre[2] - camera[2];
-  return ErrorAtGap(std::max(0.0, std::sqrt(dx * dx + dy * dy + dz * dz) - bound.radius), bound.mass_variance,
-                    bound.mass, q);
+  return LargestErrorInSphere(std::sqrt(dx * dx + dy * dy + dz * dz), bound.radius, bound.mass_variance, bound.mass, q);
 }
 
 LodFrontier SelectClusterFrontier(const NodeHierarchy& hierarchy, const Cube& cube, const Camera& camera,
