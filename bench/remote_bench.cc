@@ -49,6 +49,7 @@
 
 #include "base/error.h"
 #include "bench/throttled_proxy.h"
+#include "index/block_codec.h"
 #include "index/dataset.h"
 #include "index/node_hierarchy.h"
 #include "query/column_reader.h"
@@ -81,6 +82,7 @@ struct Flags {
   int clients = 8;
   int width = 640, height = 360;
   double error = 2;
+  double cluster_error = 0;  // > 0: the cut cluster by cluster (drawing only)
   std::string backend = "osmesa";
   int follow = 100;
   bool query = true;
@@ -139,8 +141,13 @@ PathRun TimePath(const Flags& f, int variant, Clock::time_point start, const Fra
 PathRun RenderPath(const std::string& store, const Flags& f, int variant, bool coalesce_reads = true) {
   const auto start = Clock::now();
   const Dataset dataset = Dataset::Open(store);
+  if (f.cluster_error > 0 && (dataset.cluster_columns() & kClusterLinkColumns) != kClusterLinkColumns) {
+    throw Error::InvalidArgument("--cluster-error: the store " + store + " does not link its clusters to their "
+                                 "children's points; use --error");
+  }
   SceneOptions options;
   options.lod.pixel_threshold = f.error;
+  options.cluster_error = f.cluster_error;
   options.coalesce_reads = coalesce_reads;
   OffscreenRenderer renderer(dataset, ParseHeadlessBackend(f.backend), options);
   const Cube& cube = dataset.cube(0);
@@ -205,7 +212,8 @@ std::vector<PathRun> RunClients(const Flags& f, int count, NginxServer& nginx, d
     std::ostringstream command;
     command << self << " --client " << StoreUrl(proxies.back()->port(), f) << " --variant " << c << " --frames "
             << f.frames << " --width " << f.width << " --height " << f.height << " --error " << f.error
-            << " --backend " << f.backend << (f.fetch_only ? " --fetch-only" : "") << " x";
+            << " --cluster-error " << f.cluster_error << " --backend " << f.backend
+            << (f.fetch_only ? " --fetch-only" : "") << " x";
     pipes.push_back(::popen(command.str().c_str(), "r"));
   }
   std::vector<PathRun> runs;
@@ -341,9 +349,9 @@ void Coordinate(const Flags& f) {
   } work_removed{work};
   NginxServer nginx(fs::absolute(f.store).parent_path(), work / "nginx");
   if (!nginx.started()) throw Error::Io("nginx", nginx.error());
-  std::printf("store %s, %d frames a path at %dx%d, threshold %g px; link: %.0f ms round trip, %s/s a client, "
-              "%s/s shared\n",
-              f.store.c_str(), f.frames, f.width, f.height, f.error, f.rtt_ms, f.rate.c_str(), f.shared_rate.c_str());
+  std::printf("store %s, %d frames a path at %dx%d, %s %g; link: %.0f ms round trip, %s/s a client, %s/s shared\n",
+              f.store.c_str(), f.frames, f.width, f.height, f.cluster_error > 0 ? "cluster error" : "threshold (px)",
+              f.cluster_error > 0 ? f.cluster_error : f.error, f.rtt_ms, f.rate.c_str(), f.shared_rate.c_str());
   std::printf("%-28s %10s %10s %10s %10s %14s %14s\n", "", "open+1st s", "pass 1 f/s", "warm f/s", "new view s",
               "bytes/frame", "requests/frame");
 
@@ -438,6 +446,11 @@ int main(int argc, char** argv) {
   app.add_option("--width", f.width, "image width")->default_val(640);
   app.add_option("--height", f.height, "image height")->default_val(360);
   app.add_option("--error", f.error, "screen-space error threshold, pixels")->default_val(2);
+  app.add_option("--cluster-error", f.cluster_error,
+                 "draw the cut cluster by cluster at this error (mean particle masses, as octocosm render's "
+                 "--cluster-error) instead of refining by --error; not with --fetch-only")
+      ->default_val(0)
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--backend", f.backend, "osmesa or egl (a GPU)")->default_val("osmesa");
   app.add_option("--follow", f.follow, "IDs to follow through the epochs (0: none; stores with IDs)")->default_val(100);
   app.add_flag("!--no-query", f.query, "skip the box query");
@@ -449,6 +462,10 @@ int main(int argc, char** argv) {
   app.add_option("--client", f.client_url, "(used by the bench itself) render this store URL's path and print figures");
   app.add_option("--variant", f.variant, "(with --client) which camera path")->default_val(0);
   CLI11_PARSE(app, argc, argv);
+  if (f.fetch_only && f.cluster_error > 0) {
+    std::fprintf(stderr, "octocosm-bench-remote: --fetch-only selects node by node; --cluster-error needs the renderer\n");
+    return 2;
+  }
   try {
     if (!f.client_url.empty()) {
       const octocosm::PathRun run = f.fetch_only ? octocosm::FetchPath(f.client_url, f, f.variant)
